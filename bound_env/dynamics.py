@@ -148,7 +148,7 @@ def leg_front(q, aux):
 
 @jit
 def rotational_inertia(th2, aux):
-    """Entries (M33, M34, M44) of the mass matrix at spine angle th2 (see `rotational_inertia_c2`)."""
+    """Entries (M33, M34, M44) of the mass matrix at spine angle th2."""
     return rotational_inertia_c2(np.cos(th2), aux)
 
 

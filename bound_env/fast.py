@@ -16,11 +16,9 @@ from ._dop853 import (
     INTERPOLATOR_POWER,
     N_STAGES_EXTENDED,
     dense_eval,
-    dense_prepare,
-    initial_step,
-    rk_step,
+    make_dop853,
     step_factor,
-)  # fmt: skip
+)
 from .dynamics import jit, rhs, total_energy
 from .hybrid import (
     APEX,
@@ -40,7 +38,10 @@ from .hybrid import (
     guard_values,
     phase_index,
     start_status,
-)  # fmt: skip
+)
+
+_ode = make_dop853(rhs)  # DOP853 compiled for the model's right-hand side
+rk_step, dense_prepare, initial_step = _ode.rk_step, _ode.dense_prepare, _ode.initial_step
 
 MAX_STEPS = 200_000  # accepted + rejected steps in one call; beyond that: integration_failed
 ROOT_ITERATIONS = 60  # bound on the root finder's iterations per guard
@@ -133,7 +134,7 @@ def advance(
         n_rec = _record(t, y, aux, rec_t, rec_y, rec_ph, rec_e, n_rec)
         t_next_rec = t + rec_dt
     if not h > 0.0:
-        h = initial_step(rhs, t, y, fy, aux, rtol, atol, 1.0, t_end - t, y_new, f_new)
+        h = initial_step(t, y, fy, aux, rtol, atol, 1.0, t_end - t, y_new, f_new)
 
     for _ in range(MAX_STEPS):
         if t >= t_end:
@@ -143,7 +144,7 @@ def advance(
             if t_end - t < H_MIN:  # reached t_end up to rounding
                 return TIME_UP, t_end, h, n_ev, n_apex, n_rec
             return F_INTEGRATION, t, h, n_ev, n_apex, n_rec
-        err = rk_step(rhs, t, y, fy, h_try, aux, rtol, atol, K, y_new, f_new)
+        err = rk_step(t, y, fy, h_try, aux, rtol, atol, K, y_new, f_new)
         if not err <= 1.0:  # rejected (or NaN)
             finite = True
             for i in range(n):
@@ -162,7 +163,7 @@ def advance(
             d = GUARD_DIRECTION[i]
             if d * g_old[i] < 0.0 and d * g_new[i] >= 0.0:
                 if not dense_ready:
-                    dense_prepare(rhs, t, y, y_new, h_try, aux, K, F)
+                    dense_prepare(t, y, y_new, h_try, aux, K, F)
                     dense_ready = True
                 ti = _locate(i, t, g_old[i], t + h_try, g_new[i], F, y, t, h_try, aux, flags,
                              ybuf, gbuf)
@@ -170,7 +171,7 @@ def advance(
                     t_star, first = ti, i
         if recording:
             if not dense_ready:
-                dense_prepare(rhs, t, y, y_new, h_try, aux, K, F)
+                dense_prepare(t, y, y_new, h_try, aux, K, F)
                 dense_ready = True
             while t_next_rec < t_star:
                 dense_eval(F, y, t, h_try, t_next_rec, ybuf)

@@ -75,7 +75,7 @@ FAILURES = (
     "integration_failed",
 )
 (F_GROUND_B, F_GROUND_J, F_GROUND_F, F_BACKWARD, F_SHORT_B, F_SHORT_F, F_EXT_B, F_EXT_F,
- F_NO_APEX, F_NON_FINITE, F_INTEGRATION) = range(FAIL_FIRST, FAIL_FIRST + len(FAILURES))  # fmt: skip
+ F_NO_APEX, F_NON_FINITE, F_INTEGRATION) = range(FAIL_FIRST, FAIL_FIRST + len(FAILURES))
 
 # Flags carried along a stride: has each leg touched down since the start?
 FL_TOUCHED_B, FL_TOUCHED_F, FL_STRICT = range(3)

@@ -71,7 +71,7 @@ PROBLEMS = [
 def test_integrate_vs_exact_and_scipy(name, rhs, y0, t_end, aux, exact,
                                       exact_tol):
     tol = 1e-12
-    y, t, n_steps, n_rej, status = d.integrate(rhs, 0.0, y0, t_end, aux,
+    y, t, n_steps, n_rej, status = d.make_dop853(rhs).integrate(0.0, y0, t_end, aux,
                                                tol, tol, 100_000)
     assert status == d.SUCCESS
     assert t == t_end
@@ -93,7 +93,7 @@ def test_integrate_vs_exact_and_scipy(name, rhs, y0, t_end, aux, exact,
 
 
 def test_backward_integration():
-    y, t, n_steps, _, status = d.integrate(oscillator, 3.0,
+    y, t, n_steps, _, status = d.make_dop853(oscillator).integrate(3.0,
                                            oscillator_exact(3.0), -2.0,
                                            NO_AUX, 1e-12, 1e-12, 100_000)
     assert status == d.SUCCESS and t == -2.0 and n_steps > 0
@@ -102,13 +102,13 @@ def test_backward_integration():
 
 def test_max_steps_and_step_too_small():
     y0 = np.array([1.0, 0.0])
-    _, t, n_steps, n_rej, status = d.integrate(oscillator, 0.0, y0, 1000.0,
+    _, t, n_steps, n_rej, status = d.make_dop853(oscillator).integrate(0.0, y0, 1000.0,
                                                NO_AUX, 1e-12, 1e-12, 20)
     assert status == d.MAX_STEPS_EXCEEDED
     assert n_steps + n_rej == 20 and 0.0 < t < 1000.0
 
     # A RHS that turns NaN makes every attempt fail -> h shrinks to the floor.
-    _, t, _, n_rej, status = d.integrate(nan_rhs, 0.0, np.zeros(1), 1.0,
+    _, t, _, n_rej, status = d.make_dop853(nan_rhs).integrate(0.0, np.zeros(1), 1.0,
                                          NO_AUX, 1e-8, 1e-8, 100_000)
     assert status == d.STEP_TOO_SMALL
     assert 0.4 < t <= 0.5 and n_rej > 0
@@ -129,7 +129,7 @@ def test_initial_step_matches_scipy():
     y0 = KEPLER_Y0
     fy = np.empty(4)
     kepler(0.0, y0, KEPLER_AUX, fy)
-    h0 = d.initial_step(kepler, 0.0, y0, fy, KEPLER_AUX, 1e-9, 1e-9, 1.0,
+    h0 = d.make_dop853(kepler).initial_step(0.0, y0, fy, KEPLER_AUX, 1e-9, 1e-9, 1.0,
                         10.0, np.empty(4), np.empty(4))
     ref = select_initial_step(scipy_rhs(kepler, KEPLER_AUX), 0.0, y0, 10.0,
                               np.inf, fy, 1.0, 7, 1e-9, 1e-9)
@@ -144,15 +144,15 @@ def _controlled_step(rhs, t, y, aux, tol):
     K = np.empty((d.N_STAGES_EXTENDED, n))
     y_new = np.empty(n)
     f_new = np.empty(n)
-    h = d.initial_step(rhs, t, y, fy, aux, tol, tol, 1.0, 100.0,
+    h = d.make_dop853(rhs).initial_step(t, y, fy, aux, tol, tol, 1.0, 100.0,
                        np.empty(n), np.empty(n))
     for _ in range(20):  # iterate the controller to its equilibrium step
-        err = d.rk_step(rhs, t, y, fy, h, aux, tol, tol, K, y_new, f_new)
+        err = d.make_dop853(rhs).rk_step(t, y, fy, h, aux, tol, tol, K, y_new, f_new)
         h *= min(d.step_factor(err), 1.0 if err >= 1.0 else 2.0)
-    err = d.rk_step(rhs, t, y, fy, h, aux, tol, tol, K, y_new, f_new)
+    err = d.make_dop853(rhs).rk_step(t, y, fy, h, aux, tol, tol, K, y_new, f_new)
     while err >= 1.0:
         h *= d.step_factor(err)
-        err = d.rk_step(rhs, t, y, fy, h, aux, tol, tol, K, y_new, f_new)
+        err = d.make_dop853(rhs).rk_step(t, y, fy, h, aux, tol, tol, K, y_new, f_new)
     return h, y_new, K, err
 
 
@@ -164,7 +164,7 @@ def test_dense_output_accuracy_and_endpoints():
     assert 0.1 < err < 1.0 and h > 0.3  # a genuinely large step
 
     F = np.empty((d.INTERPOLATOR_POWER, 2))
-    d.dense_prepare(oscillator, t0, y0, y_new, h, NO_AUX, K, F)
+    d.make_dop853(oscillator).dense_prepare(t0, y0, y_new, h, NO_AUX, K, F)
     out = np.empty(2)
 
     d.dense_eval(F, y0, t0, h, t0, out)
@@ -198,9 +198,9 @@ def test_dense_output_order():
     oscillator(0.0, y0, NO_AUX, fy)
     errs = []
     for h in (0.8, 0.4, 0.2):
-        d.rk_step(oscillator, 0.0, y0, fy, h, NO_AUX, 1e-6, 1e-6, K, y_new,
+        d.make_dop853(oscillator).rk_step(0.0, y0, fy, h, NO_AUX, 1e-6, 1e-6, K, y_new,
                   f_new)
-        d.dense_prepare(oscillator, 0.0, y0, y_new, h, NO_AUX, K, F)
+        d.make_dop853(oscillator).dense_prepare(0.0, y0, y_new, h, NO_AUX, K, F)
         d.dense_eval(F, y0, 0.0, h, 0.37 * h, out)
         errs.append(np.max(np.abs(out - oscillator_exact(0.37 * h))))
     orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
@@ -219,7 +219,7 @@ def _fixed_step_oscillator(n_steps, t_end):
     t = 0.0
     oscillator(t, y, aux, fy)
     for _ in range(n_steps):
-        d.rk_step(oscillator, t, y, fy, h, aux, 1e-6, 1e-6, K, y_new, f_new)
+        d.make_dop853(oscillator).rk_step(t, y, fy, h, aux, 1e-6, 1e-6, K, y_new, f_new)
         t += h
         y[:] = y_new
         fy[:] = f_new
@@ -248,7 +248,7 @@ def test_error_norm_matches_scipy():
     f_new = np.empty(n)
     rtol, atol = 1e-8, 1e-9
     for h in (0.05, 0.2, 0.5):
-        err = d.rk_step(kepler, 0.0, y0, fy, h, KEPLER_AUX, rtol, atol, K,
+        err = d.make_dop853(kepler).rk_step(0.0, y0, fy, h, KEPLER_AUX, rtol, atol, K,
                         y_new, f_new)
         solver = DOP853(scipy_rhs(kepler, KEPLER_AUX), 0.0, y0, 10.0,
                         first_step=h, rtol=rtol, atol=atol)

@@ -43,8 +43,7 @@ def _chain(z, params, n, **kw):
 @pytest.mark.parametrize("backend", ["fast", "reference"])
 def test_energy_conserved_without_damping_and_slope(gait, backend):
     params = gait.params.with_values(zeta=0.0, alpha_deg=0.0)
-    strides = _chain(gait.z0, params, 2, backend=backend, rtol=1e-12, atol=1e-12,
-                     record_dt=0.005)
+    strides = _chain(gait.z0, params, 2, backend=backend, rtol=1e-12, atol=1e-12, record_dt=0.005)
     assert all(r.ok for r in strides), [r.failure for r in strides]
     assert sum(r.t_end for r in strides) >= 1.0
     e0 = strides[0].energy0
@@ -136,20 +135,35 @@ def test_all_transitions_occur_somewhere(gait):
     seen = set()
     cases = [
         (gait.z0, gait.params),
-        (z_to_si([0.362, 12.6626, -16.7826, 2.8284, 93.0023, -323.8827]),
-         gait.params.with_values(gamma_b_deg=48.35, gamma_f_deg=34.94)),
-        (z_to_si([0.3715, -10.3309, 17.2631, 0.9727, 44.2587, 150.2781]),
-         gait.params.with_values(gamma_b_deg=23.95, gamma_f_deg=6.97)),
-        (np.array([0.3, 0.0, 0.0, 2.0, 0.0, 0.0]),
-         Params(gamma_b=math.radians(30), gamma_f=math.radians(30), zeta=0.0, alpha=0.0)),
+        (
+            z_to_si([0.362, 12.6626, -16.7826, 2.8284, 93.0023, -323.8827]),
+            gait.params.with_values(gamma_b_deg=48.35, gamma_f_deg=34.94),
+        ),
+        (
+            z_to_si([0.3715, -10.3309, 17.2631, 0.9727, 44.2587, 150.2781]),
+            gait.params.with_values(gamma_b_deg=23.95, gamma_f_deg=6.97),
+        ),
+        (
+            np.array([0.3, 0.0, 0.0, 2.0, 0.0, 0.0]),
+            Params(gamma_b=math.radians(30), gamma_f=math.radians(30), zeta=0.0, alpha=0.0),
+        ),
     ]
     for z, p in cases:
         for backend in ("fast", "reference"):
             r = simulate_stride(z, p, backend=backend)
             assert r.ok, r.failure
             seen |= {(a, b) for a, b in zip(r.phases, r.phases[1:], strict=False)}
-    expected = {("df", "bs"), ("bs", "df"), ("df", "fs"), ("fs", "df"), ("bs", "ds"),
-                ("fs", "ds"), ("ds", "bs"), ("ds", "fs"), ("df", "ds")}
+    expected = {
+        ("df", "bs"),
+        ("bs", "df"),
+        ("df", "fs"),
+        ("fs", "df"),
+        ("bs", "ds"),
+        ("fs", "ds"),
+        ("ds", "bs"),
+        ("ds", "fs"),
+        ("df", "ds"),
+    }
     assert expected <= seen, expected - seen
 
 
@@ -176,9 +190,7 @@ def test_remaining_failure_reasons(gait):
     back = z.copy()
     back[3] = -1.0
     assert simulate_stride(back, gait.params).failure == "moving_backwards"
-    assert simulate_stride(z, gait.params, rtol=1e-30, atol=1e-30).failure == (
-        "integration_failed"
-    )
+    assert simulate_stride(z, gait.params, rtol=1e-30, atol=1e-30).failure == ("integration_failed")
     stiff = gait.params.with_values(min_leg_frac=0.6)
     assert simulate_stride(z, stiff).failure == "leg_overcompressed_back"
 
