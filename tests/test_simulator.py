@@ -12,15 +12,43 @@ from bound_env.params import Params, load_gait, z_to_si
 # Apex states [paper units] and touchdown angles [deg] that end in each failure (found by a
 # random search over states and angles; the test checks the simulator still names them).
 FAILURE_CASES = {
-    "ground_contact_back_hip": ([0.2759, 8.7162, -7.6087, 0.6172, 826.3492, -278.2341], 70.87, 36.55),
-    "ground_contact_front_hip": ([0.2773, 3.4413, -1.5684, 3.7583, -139.035, -99.1045], 27.86, 40.19),
+    "ground_contact_back_hip": (
+        [0.2759, 8.7162, -7.6087, 0.6172, 826.3492, -278.2341],
+        70.87,
+        36.55,
+    ),
+    "ground_contact_front_hip": (
+        [0.2773, 3.4413, -1.5684, 3.7583, -139.035, -99.1045],
+        27.86,
+        40.19,
+    ),
     "moving_backwards": ([0.3186, 0.2994, 23.975, 2.297, 325.8121, -227.2007], 62.03, 71.52),
-    "leg_overcompressed_front": ([0.2356, 9.0214, -1.6786, 2.8533, -126.1729, -285.053], 40.39, 51.09),
-    "leg_overcompressed_back": ([0.1622, -3.8799, 3.1379, 2.2633, 327.3337, -60.8279], 61.82, 25.66),
-    "leg_extending_at_touchdown_front": ([0.3414, -10.7923, 10.1828, 1.5248, -585.4398, -429.6129], 10.37, 71.39),
-    "ground_contact_spine_joint": ([0.2765, -4.5757, -28.3011, 7.122, 472.4226, -639.2122], 47.62, 22.48),
-    "leg_extending_at_touchdown_back": ([0.3219, 3.295, 0.4046, 2.1516, -621.1153, 34.3238], 71.52, 22.22),
-}  # fmt: skip
+    "leg_overcompressed_front": (
+        [0.2356, 9.0214, -1.6786, 2.8533, -126.1729, -285.053],
+        40.39,
+        51.09,
+    ),
+    "leg_overcompressed_back": (
+        [0.1622, -3.8799, 3.1379, 2.2633, 327.3337, -60.8279],
+        61.82,
+        25.66,
+    ),
+    "leg_extending_at_touchdown_front": (
+        [0.3414, -10.7923, 10.1828, 1.5248, -585.4398, -429.6129],
+        10.37,
+        71.39,
+    ),
+    "ground_contact_spine_joint": (
+        [0.2765, -4.5757, -28.3011, 7.122, 472.4226, -639.2122],
+        47.62,
+        22.48,
+    ),
+    "leg_extending_at_touchdown_back": (
+        [0.3219, 3.295, 0.4046, 2.1516, -621.1153, 34.3238],
+        71.52,
+        22.22,
+    ),
+}
 
 
 @pytest.fixture(scope="module")
