@@ -149,9 +149,8 @@ class Params:
     def to_gait_dict(self) -> dict:
         """The gait-file keys (degrees for angles)."""
         d = {k: float(v) for k, v in asdict(self).items() if k in GAIT_KEYS}
-        d["alpha_deg"] = float(deg(self.alpha))
-        d["gamma_b_deg"] = float(deg(self.gamma_b))
-        d["gamma_f_deg"] = float(deg(self.gamma_f))
+        for k in ("alpha", "gamma_b", "gamma_f"):  # 13 digits undo the rad -> deg round trip
+            d[f"{k}_deg"] = float(f"{deg(getattr(self, k)):.13g}")
         return {k: d[k] for k in GAIT_KEYS}
 
     @classmethod
