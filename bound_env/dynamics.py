@@ -27,6 +27,8 @@ from .params import (
     P_ALPHA,
     P_CC,
     P_G,
+    P_GX,
+    P_GY,
     P_I1,
     P_I2,
     P_KB,
@@ -174,11 +176,10 @@ def generalized_forces(y, aux):
     mu1, mu2 = mass_fractions(aux)
     m = aux[P_M1] + aux[P_M2]
     l1, l2 = aux[P_L1], aux[P_L2]
-    g, alpha = aux[P_G], aux[P_ALPHA]
     s1, c1, sp, cp = trig(y)
     hbx, hby, _, _, hfx, hfy = body_points(y, aux, s1, c1, sp, cp)
-    qx = m * g * np.sin(alpha)
-    qy = -m * g * np.cos(alpha)
+    qx = m * aux[P_GX]  # gravity (g sin alpha, -g cos alpha), eq. (2)
+    qy = -m * aux[P_GY]
     q1 = 0.0
     q2 = -aux[P_KC] * y[3] - aux[P_CC] * y[7] + aux[P_TAU]
     if aux[A_CB] > 0.5:  # back leg spring, eqs. (10), (13)-(14): Q = -k_b (l_b - lb_bar) dl_b/dq

@@ -30,7 +30,8 @@ P_G, P_ALPHA, P_M1, P_M2, P_L1, P_L2, P_I1, P_I2 = range(8)
 P_LB, P_LF, P_KB, P_KF, P_KC, P_CC, P_GB, P_GF = range(8, 16)
 P_TAU = 16  # spine torque tau [N m], a generalized force on theta2
 P_MINLEG = 17  # shortest physical leg length as a fraction of the rest length
-N_PARAMS = 18
+P_GX, P_GY = 18, 19  # gravity along and normal to the slope, g sin(alpha), g cos(alpha) [m/s^2]
+N_PARAMS = 20
 
 # z on S_apex (eq. 17): [y_g, theta1, theta2, xdot_g, theta1dot, theta2dot].
 Z_NAMES = ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
@@ -144,6 +145,7 @@ class Params:
         )  # fmt: skip
         p[P_TAU] = tau
         p[P_MINLEG] = self.min_leg_frac
+        p[P_GX], p[P_GY] = self.g * math.sin(self.alpha), self.g * math.cos(self.alpha)  # eq. (2)
         return p
 
     def to_gait_dict(self) -> dict:
