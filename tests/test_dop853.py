@@ -207,6 +207,9 @@ def test_dense_output_order():
     assert np.all((orders > 7.0) & (orders < 9.0)), (errs, orders)
 
 
+_osc_rk_step = d.make_dop853(oscillator).rk_step
+
+
 @numba.njit
 def _fixed_step_oscillator(n_steps, t_end):
     y = np.array([1.0, 0.0])
@@ -219,7 +222,7 @@ def _fixed_step_oscillator(n_steps, t_end):
     t = 0.0
     oscillator(t, y, aux, fy)
     for _ in range(n_steps):
-        d.make_dop853(oscillator).rk_step(t, y, fy, h, aux, 1e-6, 1e-6, K, y_new, f_new)
+        _osc_rk_step(t, y, fy, h, aux, 1e-6, 1e-6, K, y_new, f_new)
         t += h
         y[:] = y_new
         fy[:] = f_new
