@@ -1,0 +1,524 @@
+"""The PassiveBound task: start state, observation, reward and termination around the passive gait.
+
+This is the task layer between the hybrid simulator (`bound_env.fast.advance`, which knows
+nothing of Gymnasium) and the Gymnasium adapters (`bound_env.env` for one robot,
+`bound_env.vector` for many). It decides
+
+- the **start** state: an apex state z on S_apex (eq. 17), the gait's z* plus seeded noise, or
+  one given by the caller;
+- the **action**: a normalized spine torque a in [-1, 1], tau = max_torque * a [N m], held
+  constant over one control interval dt and integrated event-accurately;
+- the **observation** (`OBS_NAMES`), the **reward** terms and the **termination** (every
+  simulator failure, plus no apex within `NO_APEX_TIME`).
+
+One control interval of a batch of robots is a single compiled call (`step_batch`, or
+`step_batch_parallel` with one thread per robot), so that one robot and many robots share the
+same code and give bit-identical results. The per-robot state lives in a `Batch` of arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from .dynamics import A_CB, A_CF, A_XB, A_XF, back_hip, front_hip, jit, make_aux, total_energy
+from .fast import advance
+from .hybrid import (
+    CONTINUE,
+    DEFAULT_T_MAX,
+    F_NO_APEX,
+    F_NON_FINITE,
+    FAIL_FIRST,
+    FAILURES,
+    FL_TOUCHED_B,
+    FL_TOUCHED_F,
+    G_APEX,
+    N_FLAGS,
+    PHASES,
+    TIME_UP,
+    failure_name,
+    phase_index,
+    start_status,
+    state_from_z,
+)
+from .params import P_GB, P_GF, P_LB, P_LF, P_TAU, Z_NAMES, Gait, load_gait
+
+# ---------------------------------------------------------------------------------------------
+# Defaults (constructor arguments of the environments).
+# ---------------------------------------------------------------------------------------------
+DEFAULT_DT = 0.01  # control interval [s]; the passive stride lasts 0.3906 s (~39 intervals)
+# Largest spine torque [N m]. On the default gait's passive cycle theta2 spans -3.30 .. +8.29 deg,
+# so the spine spring's torque k_c |theta2| peaks at 295 * 0.1448 = 42.7 N m (29.9 N m for the
+# half peak-to-peak swing); 40 N m held for one stride moves the next apex state by 0.4 to 1.8
+# `APEX_SCALES` per component.
+DEFAULT_MAX_TORQUE = 40.0
+DEFAULT_RESET_NOISE_SCALE = 0.5  # passive survival over 60 strides: 83 % of such starts
+DEFAULT_ALIVE_REWARD = 1.0  # per control interval in which nothing failed
+DEFAULT_TRACKING_COST_WEIGHT = 1.0  # per completed stride, times the normalized apex error
+DEFAULT_CTRL_COST_WEIGHT = 0.1  # per control interval, times a^2 = (tau / max_torque)^2
+DEFAULT_RTOL = 1e-8  # integrator tolerance (relative and absolute); apex error vs z* ~1e-9
+NO_APEX_TIME = DEFAULT_T_MAX  # no apex within this time [s] ends the episode ("no_apex"): 2 s
+
+# Unit of apex deviation per component of z = [y_g, th1, th2, xdot_g, th1dot, th2dot] (SI):
+# round numbers near the half-width of the passive basin of the default gait along each axis
+# (measured: 0.015-0.022 m, 0.09-0.10 rad, 0.19-0.22 rad, 0.057-0.092 m/s, 0.78-2.7 rad/s,
+# 1.2-1.4 rad/s). Used both for the start noise and for the tracking cost.
+APEX_SCALES = np.array([0.02, 0.1, 0.2, 0.1, 1.0, 1.0])
+
+# Observation layout (x_g first only when it is included).
+OBS_NAMES = (
+    "x_g", "y_g", "theta1", "theta2", "xdot_g", "ydot_g", "theta1dot", "theta2dot",
+    "contact_back", "contact_front", "leg_length_back", "leg_angle_back",
+    "leg_length_front", "leg_angle_front", "touched_back", "touched_front", "time_since_apex",
+)  # fmt: skip
+OBS_UNITS = (
+    "m", "m", "rad", "rad", "m/s", "m/s", "rad/s", "rad/s", "0/1", "0/1", "m", "rad", "m", "rad",
+    "0/1", "0/1", "s",
+)  # fmt: skip
+
+# Observation bounds (the observation is clipped to them; only a robot that has already failed,
+# or one flung far beyond anything a 20 kg robot on a slope reaches, could meet one).
+_X_BOUND = 1e5  # |x_g| [m]: ~10 h of bounding at 2.8 m/s
+_Y_BOUNDS = (-1.0, 10.0)  # y_g [m]; y_g > 0 whenever both hips and the spine joint are up
+_ANGLE_BOUND = 2.0 * math.pi  # |theta1|, |theta2| [rad]; a flip puts a hip into the ground first
+_SPEED_BOUND = 100.0  # |xdot_g|, |ydot_g| [m/s]
+_RATE_BOUND = 1000.0  # |theta1dot|, |theta2dot| [rad/s]
+# Leg lengths lie in [0, 2 l_bar] (a stance leg lifts off at l_bar), leg angles in [-pi, pi]
+# (atan2), the 0/1 entries in [0, 1], the time since the apex in [0, NO_APEX_TIME + dt].
+
+# Per-robot scalar state, columns of `Batch.s` (float64; counts and codes are exact integers).
+S_T = 0  # simulation time since reset [s]
+S_H = 1  # integrator step to carry into the next interval [s] (0: choose)
+S_T_APEX = 2  # time of the last apex, or 0 [s]
+S_STEPS = 3  # control intervals since reset
+S_STRIDES = 4  # strides completed since reset
+S_STATUS = 5  # CONTINUE or a failure code (bound_env.hybrid)
+S_NAPEX = 6  # strides completed in the last interval
+S_TAU = 7  # spine torque of the last interval [N m]
+S_ENERGY = 8  # total energy after the last interval [J]
+S_REWARD = 9  # reward of the last interval
+S_ALIVE = 10  # its terms: alive bonus, tracking (<= 0), control (<= 0)
+S_TRACKING = 11
+S_CTRL = 12
+S_X = 13  # x_g after the last interval [m] (a copy, for the info)
+S_PHASE = 14  # stance condition index after the last interval (PHASES)
+N_S = 15
+
+# Task constants, entries of the float64 vector `PassiveBoundTask.cfg` the kernel reads.
+C_DT, C_MAX_TORQUE, C_RTOL, C_ATOL, C_NO_APEX = 0, 1, 2, 3, 4
+C_ALIVE, C_TRACKING, C_CTRL, C_INCLUDE_X = 5, 6, 7, 8
+C_ZREF = 9  # 6 entries: the reference apex state z* (SI)
+C_ZSCALE = 15  # 6 entries: APEX_SCALES
+N_OBS_FULL = len(OBS_NAMES)
+C_OBS_LOW = 21  # N_OBS_FULL entries: lower bounds of the full observation (float32 values)
+C_OBS_HIGH = C_OBS_LOW + N_OBS_FULL  # N_OBS_FULL entries: upper bounds
+N_CFG = C_OBS_HIGH + N_OBS_FULL
+
+_Z_IN_Y = (1, 2, 3, 4, 6, 7)  # z = y[_Z_IN_Y] at an apex (eq. 17)
+_Z_IDX = np.array(_Z_IN_Y)
+_PHASE_OBJECTS = np.array(PHASES, dtype=object)
+# failure reason (None for success) by status code
+FAILURE_NAMES = tuple(failure_name(c) for c in range(FAIL_FIRST + len(FAILURES)))
+
+
+# ---------------------------------------------------------------------------------------------
+# Compiled kernels.
+# ---------------------------------------------------------------------------------------------
+
+
+@jit
+def observe(y, aux, flags, time_since_apex, cfg, out):
+    """Write the observation (layout `OBS_NAMES`, x_g only if included) into ``out``, clipped to
+    the bounds in ``cfg``.
+
+    A stance leg reports its length and its angle from the slope normal (toe ahead positive);
+    a leg in flight is held at its rest length and touchdown angle, as the model assumes, so
+    both are continuous at touchdown.
+    """
+    v = np.empty(N_OBS_FULL)
+    v[0] = y[0]
+    for j in range(1, 8):
+        v[j] = y[j]
+    v[8] = aux[A_CB]
+    v[9] = aux[A_CF]
+    if aux[A_CB] > 0.5:
+        hx, hy = back_hip(y, aux)
+        dx = aux[A_XB] - hx
+        v[10] = math.sqrt(dx * dx + hy * hy)
+        v[11] = math.atan2(dx, hy)
+    else:
+        v[10] = aux[P_LB]
+        v[11] = aux[P_GB]
+    if aux[A_CF] > 0.5:
+        hx, hy = front_hip(y, aux)
+        dx = aux[A_XF] - hx
+        v[12] = math.sqrt(dx * dx + hy * hy)
+        v[13] = math.atan2(dx, hy)
+    else:
+        v[12] = aux[P_LF]
+        v[13] = aux[P_GF]
+    v[14] = 1.0 if flags[FL_TOUCHED_B] else 0.0
+    v[15] = 1.0 if flags[FL_TOUCHED_F] else 0.0
+    v[16] = time_since_apex
+    k0 = 0 if cfg[C_INCLUDE_X] > 0.5 else 1
+    for j in range(k0, N_OBS_FULL):
+        lo, hi = cfg[C_OBS_LOW + j], cfg[C_OBS_HIGH + j]
+        x = v[j]
+        out[j - k0] = lo if not x >= lo else (hi if x > hi else x)  # NaN -> lo
+
+
+# Reward arithmetic is compiled without fast-math, so that it rounds the same in every caller
+# (fast-math lets the compiler reorder sums differently in the serial and the threaded kernel).
+strict_jit = nb.njit(cache=True, error_model="numpy")
+
+
+@strict_jit
+def tracking_cost(apex, n_apex, cfg):
+    """sum over the first ``n_apex`` apex states of sum_i ((z_i - z*_i) / scale_i)^2
+    (non-finite costs are skipped: they cannot arise from a located apex)."""
+    total = 0.0
+    for k in range(n_apex):
+        c = 0.0
+        for j in range(6):
+            d = (apex[k, _Z_IN_Y[j]] - cfg[C_ZREF + j]) / cfg[C_ZSCALE + j]
+            c += d * d
+        if math.isfinite(c):
+            total += c
+    return total
+
+
+@strict_jit
+def reward_terms(cfg, tracking, a, failed):
+    """(alive, tracking, ctrl, reward): the reward terms of one interval and their sum."""
+    alive = 0.0 if failed else cfg[C_ALIVE]
+    r_tracking = -(cfg[C_TRACKING] * tracking) if tracking != 0.0 else 0.0  # (never -0.0)
+    r_ctrl = -(cfg[C_CTRL] * (a * a)) if a != 0.0 else 0.0
+    return alive, r_tracking, r_ctrl, (alive + r_tracking) + r_ctrl
+
+
+@jit
+def step_env(y, aux, flags, s, apex, obs, cfg, action):
+    """One control interval of one robot: torque, integration, reward terms, observation.
+
+    ``action`` is the normalized torque (clipped here to [-1, 1]). Every apex passed on the
+    way ends a stride: its full state goes to ``apex`` (up to its capacity) and its cost to
+    the tracking term. Results go to ``s`` (columns ``S_*``) and ``obs``.
+    """
+    a = min(max(action, -1.0), 1.0)
+    tau = cfg[C_MAX_TORQUE] * a
+    aux[P_TAU] = tau
+    y_start = y.copy()
+    ev_t = np.empty(32)
+    ev_g = np.empty(32, dtype=np.int64)
+    ev_ph = np.empty(32, dtype=np.int64)
+    rec_t = np.empty(0)
+    rec_y = np.empty((0, 8))
+    rec_ph = np.empty(0, dtype=np.int64)
+    rec_e = np.empty(0)
+    steps = s[S_STEPS] + 1.0
+    t_end = steps * cfg[C_DT]  # not accumulated, so no drift over long episodes
+    status, t, h, n_ev, n_apex, _ = advance(
+        y, aux, flags, s[S_T], t_end, False, cfg[C_RTOL], cfg[C_ATOL], s[S_H],
+        ev_t, ev_g, ev_ph, apex, 0.0, rec_t, rec_y, rec_ph, rec_e,
+    )  # fmt: skip
+    if status == TIME_UP:
+        status = CONTINUE
+    tracking = tracking_cost(apex, min(n_apex, apex.shape[0]), cfg)
+    if n_apex > 0:
+        t_apex = t
+        for e in range(min(n_ev, ev_t.shape[0])):
+            if ev_g[e] == G_APEX:
+                t_apex = ev_t[e]
+        s[S_T_APEX] = t_apex
+    if status < FAIL_FIRST and t - s[S_T_APEX] >= cfg[C_NO_APEX]:
+        status = F_NO_APEX
+    finite = True
+    for j in range(8):
+        if not math.isfinite(y[j]):
+            finite = False
+    if not finite:  # report the last finite state
+        y[:] = y_start
+        if status < FAIL_FIRST:
+            status = F_NON_FINITE
+    alive, r_tracking, r_ctrl, reward = reward_terms(cfg, tracking, a, status >= FAIL_FIRST)
+    s[S_T] = t
+    s[S_H] = h
+    s[S_STEPS] = steps
+    s[S_STRIDES] += n_apex
+    s[S_NAPEX] = n_apex
+    s[S_STATUS] = status
+    s[S_TAU] = tau
+    s[S_ENERGY] = total_energy(y, aux)
+    s[S_X] = y[0]
+    s[S_PHASE] = phase_index(aux)
+    s[S_ALIVE] = alive
+    s[S_TRACKING] = r_tracking
+    s[S_CTRL] = r_ctrl
+    s[S_REWARD] = reward
+    observe(y, aux, flags, t - s[S_T_APEX], cfg, obs)
+
+
+@jit
+def step_batch(Y, AUX, FLAGS, S, APEX, OBS, cfg, actions, active):
+    """`step_env` for every robot i with ``active[i]``, one after the other."""
+    for i in range(Y.shape[0]):
+        if active[i]:
+            step_env(Y[i], AUX[i], FLAGS[i], S[i], APEX[i], OBS[i], cfg, actions[i])
+
+
+@nb.njit(cache=True, parallel=True, fastmath={"contract", "arcp", "nsz", "reassoc"},
+         error_model="numpy")  # fmt: skip
+def step_batch_parallel(Y, AUX, FLAGS, S, APEX, OBS, cfg, actions, active):
+    """`step_batch` with the robots spread over Numba's threads."""
+    for i in nb.prange(Y.shape[0]):
+        if active[i]:
+            step_env(Y[i], AUX[i], FLAGS[i], S[i], APEX[i], OBS[i], cfg, actions[i])
+
+
+# ---------------------------------------------------------------------------------------------
+# Python side: configuration, batches of robots, start states, info dictionaries.
+# ---------------------------------------------------------------------------------------------
+
+
+def _number(name, value, minimum, strict=False) -> float:
+    """``value`` as a finite float above (``strict``) or at least ``minimum``, else ValueError."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < minimum or (strict and v == minimum):
+        rel = "greater than" if strict else "at least"
+        raise ValueError(f"{name} must be finite and {rel} {minimum:g}, got {value!r}")
+    return v
+
+
+@dataclass
+class Batch:
+    """State of ``n`` robots (row i is robot i); the kernels update it in place."""
+
+    y: np.ndarray  # (n, 8) float64: [x_g, y_g, th1, th2, xdot_g, ydot_g, th1dot, th2dot]
+    aux: np.ndarray  # (n, N_AUX) float64: parameters, tau, contacts, toes
+    flags: np.ndarray  # (n, N_FLAGS) bool: legs touched down since the last apex
+    s: np.ndarray  # (n, N_S) float64: the `S_*` columns
+    apex: np.ndarray  # (n, cap, 8) float64: apex states passed in the last interval
+    obs: np.ndarray  # (n, obs_dim) float32
+    actions: np.ndarray  # (n,) float64: normalized torques of the next interval
+    active: np.ndarray  # (n,) bool: which robots the next kernel call steps
+
+    @property
+    def n(self) -> int:
+        return self.y.shape[0]
+
+
+class PassiveBoundTask:
+    """Spine control around the passive bounding gait: configuration and task logic.
+
+    Arguments are those of `bound_env.env.PassiveBoundEnv` (see its docstring); the reference
+    apex state ``z_ref`` is the gait's z* (its ``z_star``, else ``z_published``) and is not
+    changed by ``gait_overrides``.
+    """
+
+    def __init__(
+        self,
+        gait: str = "default",
+        gait_overrides: dict | None = None,
+        dt: float = DEFAULT_DT,
+        max_torque: float = DEFAULT_MAX_TORQUE,
+        reset_noise_scale: float = DEFAULT_RESET_NOISE_SCALE,
+        alive_reward: float = DEFAULT_ALIVE_REWARD,
+        tracking_cost_weight: float = DEFAULT_TRACKING_COST_WEIGHT,
+        ctrl_cost_weight: float = DEFAULT_CTRL_COST_WEIGHT,
+        apex_scales=None,
+        exclude_current_positions_from_observation: bool = True,
+        rtol: float = DEFAULT_RTOL,
+    ):
+        dt, max_torque, rtol = (_number(n, v, 0.0, strict=True) for n, v in (
+            ("dt", dt), ("max_torque", max_torque), ("rtol", rtol)))  # fmt: skip
+        reset_noise_scale, alive_reward, tracking_cost_weight, ctrl_cost_weight = (
+            _number(n, v, 0.0) for n, v in (
+                ("reset_noise_scale", reset_noise_scale), ("alive_reward", alive_reward),
+                ("tracking_cost_weight", tracking_cost_weight),
+                ("ctrl_cost_weight", ctrl_cost_weight),
+            )
+        )  # fmt: skip
+        scales = APEX_SCALES if apex_scales is None else np.asarray(apex_scales, dtype=float)
+        if scales.shape != (6,) or not np.all(np.isfinite(scales)) or np.any(scales <= 0):
+            raise ValueError(f"apex_scales must be 6 positive numbers, got {apex_scales!r}")
+        self.gait: Gait = load_gait(gait, gait_overrides)
+        self.params = self.gait.params
+        self.z_ref = self.gait.z0  # SI
+        self.dt = float(dt)
+        self.max_torque = float(max_torque)
+        self.reset_noise_scale = float(reset_noise_scale)
+        self.apex_scales = scales.copy()
+        self.include_x = not exclude_current_positions_from_observation
+        self.obs_names = OBS_NAMES if self.include_x else OBS_NAMES[1:]
+        self.obs_units = OBS_UNITS if self.include_x else OBS_UNITS[1:]
+        self.apex_capacity = 4 + int(self.dt / 0.05)  # strides last ~0.4 s
+        cfg = np.zeros(N_CFG)
+        cfg[[C_DT, C_MAX_TORQUE, C_RTOL, C_ATOL, C_NO_APEX]] = (
+            self.dt, self.max_torque, rtol, rtol, NO_APEX_TIME,
+        )  # fmt: skip
+        cfg[[C_ALIVE, C_TRACKING, C_CTRL]] = alive_reward, tracking_cost_weight, ctrl_cost_weight
+        cfg[C_INCLUDE_X] = float(self.include_x)
+        cfg[C_ZREF : C_ZREF + 6] = self.z_ref
+        cfg[C_ZSCALE : C_ZSCALE + 6] = self.apex_scales
+        p = self.params
+        leg, pi = 2.0 * max(p.lb_bar, p.lf_bar), math.pi
+        a, w, v = _ANGLE_BOUND, _RATE_BOUND, _SPEED_BOUND
+        bounds = [  # in the order of OBS_NAMES
+            (-_X_BOUND, _X_BOUND), _Y_BOUNDS,  # x_g, y_g
+            (-a, a), (-a, a), (-v, v), (-v, v), (-w, w), (-w, w),  # angles, speeds, rates
+            (0, 1), (0, 1), (0, leg), (-pi, pi), (0, leg), (-pi, pi),  # contacts, legs
+            (0, 1), (0, 1), (0, NO_APEX_TIME + self.dt),  # touched flags, time since apex
+        ]  # fmt: skip
+        self._obs_low = np.array([b[0] for b in bounds], dtype=np.float32)
+        self._obs_high = np.array([b[1] for b in bounds], dtype=np.float32)
+        cfg[C_OBS_LOW : C_OBS_LOW + N_OBS_FULL] = self._obs_low
+        cfg[C_OBS_HIGH : C_OBS_HIGH + N_OBS_FULL] = self._obs_high
+        self.cfg = cfg
+        self._aux0 = make_aux(self.params.to_array())
+
+    # -- spaces --------------------------------------------------------------------------------
+    @property
+    def obs_dim(self) -> int:
+        return len(self.obs_names)
+
+    def obs_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) of the observation, float32 (the kernel clips to exactly these)."""
+        k0 = 0 if self.include_x else 1
+        return self._obs_low[k0:].copy(), self._obs_high[k0:].copy()
+
+    # -- batches ---------------------------------------------------------------------------------
+    def new_batch(self, n: int) -> Batch:
+        """Arrays for ``n`` robots, each at z_ref (call `reset_robot` before stepping)."""
+        b = Batch(
+            y=np.zeros((n, 8)),
+            aux=np.tile(self._aux0, (n, 1)),
+            flags=np.zeros((n, N_FLAGS), dtype=np.bool_),
+            s=np.zeros((n, N_S)),
+            apex=np.zeros((n, self.apex_capacity, 8)),
+            obs=np.zeros((n, self.obs_dim), dtype=np.float32),
+            actions=np.zeros(n),
+            active=np.ones(n, dtype=np.bool_),
+        )
+        for i in range(n):
+            self.reset_robot(b, i, self.z_ref)
+        return b
+
+    def start_state(self, rng: np.random.Generator, options: dict | None = None) -> np.ndarray:
+        """The start apex state z (SI): ``options["apex_state"]`` if given, else
+        z_ref + reset_noise_scale * apex_scales * U(-1, 1) (one draw per component)."""
+        if options and options.get("apex_state") is not None:
+            return self.check_apex_state(options["apex_state"])
+        noise = rng.uniform(-1.0, 1.0, size=6)
+        return self.z_ref + self.reset_noise_scale * self.apex_scales * noise
+
+    @staticmethod
+    def check_apex_state(z) -> np.ndarray:
+        try:
+            z = np.array(z, dtype=float).reshape(6)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"apex_state must be 6 numbers {Z_NAMES} in SI units, got {z!r}"
+            ) from None
+        if not np.all(np.isfinite(z)):
+            raise ValueError(f"apex_state must be finite, got {z}")
+        return z
+
+    def reset_robot(self, b: Batch, i: int, z: np.ndarray) -> None:
+        """Put robot i at the apex state z (x_g = 0, both legs in flight, t = 0)."""
+        y = state_from_z(z)
+        b.y[i] = y
+        b.aux[i] = self._aux0
+        b.flags[i] = False
+        s = b.s[i]
+        s[:] = 0.0
+        s[S_STATUS] = start_status(y, b.aux[i])  # an impossible start fails at the first step
+        s[S_ENERGY] = total_energy(y, b.aux[i])
+        s[S_X] = y[0]
+        s[S_PHASE] = 0  # df
+        observe(y, b.aux[i], b.flags[i], 0.0, self.cfg, b.obs[i])
+
+    def step(self, b: Batch, parallel: bool = False) -> None:
+        """One control interval for the robots with ``b.active`` (torques in ``b.actions``)."""
+        kernel = step_batch_parallel if parallel else step_batch
+        kernel(b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.cfg, b.actions, b.active)
+
+    # -- info ----------------------------------------------------------------------------------
+    def info(self, b: Batch, i: int, reset: bool = False) -> dict:
+        """The info dictionary of robot i after a step (or, with ``reset``, after a reset)."""
+        s = b.s[i].tolist()  # Python floats in one call (this runs at every step)
+        status = int(s[S_STATUS])
+        info = {
+            "x_position": s[S_X],
+            "phase": PHASES[int(s[S_PHASE])],
+            "stride": int(s[S_STRIDES]),
+            "time": s[S_T],
+            "tau": s[S_TAU],
+            "energy": s[S_ENERGY],
+            "reward_alive": s[S_ALIVE],
+            "reward_tracking": s[S_TRACKING],
+            "reward_ctrl": s[S_CTRL],
+            "failure": FAILURE_NAMES[status],
+        }
+        if reset:
+            info["start_z"] = b.y[i][_Z_IDX]
+        elif s[S_NAPEX] > 0.0:
+            n = int(s[S_NAPEX])
+            info["apex_z"] = b.apex[i, min(n, b.apex.shape[1]) - 1][_Z_IDX]
+            info["apex_count"] = n
+        return info
+
+    def vector_info(self, b: Batch, rows=None, reset_rows=None) -> dict:
+        """Infos of the robots in ``rows`` (bool mask; None: all), batched as Gymnasium's vector
+        envs batch them: one array per key plus a ``_key`` mask, zeros (None) where the mask
+        is off. Robots in ``reset_rows`` (None: none) report their reset info, the others their
+        step info."""
+        s = b.s.T  # one row per S_* column
+        full = rows is None
+        if full:
+            rows = np.ones(b.n, dtype=np.bool_)
+        info = {}
+
+        def put(key, values, mask=rows, full=full):
+            if not full:
+                values = np.where(mask.reshape(-1, *([1] * (values.ndim - 1))), values, 0)
+                values = values.astype(values.dtype, copy=False)
+            info[key], info["_" + key] = values, mask.copy()
+
+        put("x_position", s[S_X].copy())
+        phase = _PHASE_OBJECTS[s[S_PHASE].astype(np.int64)]
+        if not full:
+            phase[~rows] = None
+        put("phase", phase, full=True)
+        put("stride", s[S_STRIDES].astype(np.int64))
+        put("time", s[S_T].copy())
+        put("tau", s[S_TAU].copy())
+        put("energy", s[S_ENERGY].copy())
+        put("reward_alive", s[S_ALIVE].copy())
+        put("reward_tracking", s[S_TRACKING].copy())
+        put("reward_ctrl", s[S_CTRL].copy())
+        failure = np.full(b.n, None, dtype=object)
+        if s[S_STATUS].max() >= FAIL_FIRST:
+            for i in np.flatnonzero(rows & (s[S_STATUS] >= FAIL_FIRST)):
+                failure[i] = FAILURE_NAMES[int(s[S_STATUS, i])]
+        put("failure", failure, full=True)
+        if s[S_NAPEX].max() > 0:
+            apex_rows = rows & (s[S_NAPEX] > 0)
+            if reset_rows is not None:
+                apex_rows &= ~reset_rows
+            if apex_rows.any():
+                napex = s[S_NAPEX].astype(np.int64)
+                last = np.clip(napex, 1, b.apex.shape[1]) - 1
+                z = b.apex[np.arange(b.n), last][:, _Z_IDX]
+                put("apex_z", z, apex_rows, full=False)
+                put("apex_count", napex, apex_rows, full=False)
+        if reset_rows is not None:
+            start_rows = rows & reset_rows
+            if start_rows.any():
+                put("start_z", b.y[:, _Z_IDX], start_rows, full=False)
+        return info
