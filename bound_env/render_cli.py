@@ -52,6 +52,14 @@ def register(sub) -> None:
     )
     p.set_defaults(func=cmd_animate)
 
+    p = sub.add_parser(
+        "demo", help="the main job: a zero-action episode of PassiveBound-v0 on the passive cycle"
+    )
+    p.add_argument("--gait", default="default", help="gait file or name (default: %(default)s)")
+    p.add_argument("--out", default="out/demo", help="folder for summary.json and bound.gif")
+    p.add_argument("--gif-strides", type=float, default=3.0, help="strides in the animation")
+    p.set_defaults(func=cmd_demo)
+
 
 def animation_frames(
     gait="default", overrides=None, strides=3.0, fps=50.0, slowdown=1.0, width=640, height=360
@@ -114,4 +122,55 @@ def cmd_animate(args) -> int:
         k = min(len(frames) - 1, round(0.3 * period / frame_dt))
         Image.fromarray(frames[k]).save(args.frame)
         print(f"wrote {args.frame}")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    """Zero action from z* for a whole episode; print a summary, write JSON and a GIF."""
+    import json
+    from pathlib import Path
+
+    import gymnasium as gym
+    import numpy as np
+
+    from .params import z_to_paper
+    from .render import save_gif
+
+    env = gym.make("PassiveBound-v0", gait=args.gait, reset_noise_scale=0.0)
+    _, info = env.reset(seed=0)
+    z_ref = env.unwrapped.task.z_ref
+    zero = np.zeros(1, dtype=np.float32)
+    apex_err, ret, steps, x0 = [], 0.0, 0, info["x_position"]
+    terminated = truncated = False
+    while not (terminated or truncated):
+        _, reward, terminated, truncated, info = env.step(zero)
+        ret += float(reward)
+        steps += 1
+        if "apex_z" in info:
+            apex_err.append(float(np.max(np.abs(np.asarray(info["apex_z"]) - z_ref))))
+    env.close()
+    summary = {
+        "gait": args.gait,
+        "z_star": [float(v) for v in z_to_paper(z_ref)],
+        "steps": steps,
+        "sim_time_s": steps * env.unwrapped.dt,
+        "strides": len(apex_err),
+        "distance_m": float(info["x_position"] - x0),
+        "max_apex_error_si": max(apex_err) if apex_err else None,
+        "return": ret,
+        "terminated": bool(terminated),
+        "truncated": bool(truncated),
+        "failure": info.get("failure"),
+    }
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    frames, period, frame_dt = animation_frames(args.gait, None, args.gif_strides)
+    gif = save_gif(frames, out / "bound.gif", fps=1.0 / frame_dt)
+    print(f"PassiveBound-v0, zero action from z* of gait {args.gait!r}:")
+    print(f"  {summary['strides']} strides in {summary['sim_time_s']:.2f} s, "
+          f"{summary['distance_m']:.2f} m down the slope, return {ret:.1f}")
+    print(f"  largest apex deviation from z*: {summary['max_apex_error_si']:.2e} (SI)")
+    print(f"  ended by {'truncation' if truncated else 'termination: ' + str(summary['failure'])}")
+    print(f"wrote {out / 'summary.json'} and {gif} ({len(frames)} frames, period {period:.4f} s)")
     return 0

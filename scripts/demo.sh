@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Set up .venv (if needed) and run the main job: the published gait, one stride from the
-# published apex state and one from the model's own fixed point.
+# Set up .venv (if needed) and run the main job: the published gait stride by stride, then a
+# zero-action episode of PassiveBound-v0 on the passive limit cycle, with an animation.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -9,3 +9,6 @@ echo "== One stride from the paper's published apex state (reproducing reading o
 echo
 echo "== One stride from the model's fixed point z* at the published parameters"
 .venv/bin/bound-env stride --gait default
+echo
+echo "== PassiveBound-v0 with zero action"
+.venv/bin/bound-env demo --out out/demo
