@@ -1,0 +1,282 @@
+"""``bound-env fixed-point``, ``bound-env continue`` and ``bound-env sweep``.
+
+Registered by `bound_env.cli` through `register`. Everything here is at the package's edge:
+states are read and printed in the paper's units [m, deg, deg, m/s, deg/s, deg/s] and
+parameters as gait-file keys (degrees for ``*_deg``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..params import (
+    GAIT_KEYS,
+    Z_NAMES,
+    Z_PAPER_UNITS,
+    load_gait,
+    parse_override,
+    save_gait,
+    z_to_paper,
+    z_to_si,
+)
+
+
+def register(sub) -> None:
+    p = sub.add_parser("fixed-point", help="find a fixed point of the Poincare map (Newton)")
+    _gait_args(p)
+    p.add_argument(
+        "--free",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar="NAME",
+        help="gait keys to solve for, e.g. alpha_deg (needs as many --pin; one "
+        "freed key without --pin pins the start's apex energy)",
+    )
+    p.add_argument(
+        "--method",
+        choices=("newton", "paper"),
+        default="newton",
+        help="newton: Newton-Raphson (with --free/--pin); paper: the paper's "
+        "search (slope secant, Newton updates, touchdown angles, leg stiffness)",
+    )
+    p.add_argument(
+        "--jacobian",
+        choices=("fd", "variational"),
+        default="fd",
+        help="how nabla P is computed for the eigenvalues (default: %(default)s)",
+    )
+    p.add_argument("--tol", type=float, default=1e-10, help="Newton tolerance on |P(z) - z|")
+    p.add_argument("--max-iter", type=int, default=50, help="Newton iterations")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--save", metavar="PATH", help="write a gait file with the fixed point")
+    p.set_defaults(func=cmd_fixed_point)
+
+    p = sub.add_parser("continue", help="continue a fixed point in kc or alpha_deg")
+    _gait_args(p)
+    p.add_argument(
+        "--param",
+        required=True,
+        choices=GAIT_KEYS,
+        metavar="NAME",
+        help="continuation parameter, usually kc or alpha_deg",
+    )
+    p.add_argument("--to", type=float, required=True, help="target value (gait units)")
+    p.add_argument("--step", type=float, help="parameter step (default: 1/10 of the range)")
+    p.add_argument("--method", choices=("natural", "arclength"), default="natural")
+    p.add_argument(
+        "--free",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar="NAME",
+        help="gait keys solved for along the branch (e.g. alpha_deg, as in Fig. 4)",
+    )
+    p.add_argument("--max-points", type=int, default=400)
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output directory: branch.csv, branch.json, branch.png",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=cmd_continue)
+
+    p = sub.add_parser("sweep", help="e_max against alpha_deg or kc, the paper's way "
+                       "(Figs. 7-8), and the stability windows")  # fmt: skip
+    _gait_args(p, z_and_pins=False)
+    p.add_argument("--param", required=True, choices=GAIT_KEYS, metavar="NAME")
+    p.add_argument("--from", dest="lo", type=float, required=True)
+    p.add_argument("--to", dest="hi", type=float, required=True)
+    p.add_argument("--step", type=float, required=True)
+    p.add_argument("--refine", type=int, default=6, help="bisections of each window edge")
+    p.add_argument("--out", required=True, metavar="DIR", help="sweep.csv and sweep.png")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_sweep)
+
+
+def _gait_args(p, z_and_pins=True):
+    p.add_argument(
+        "--gait",
+        default="default",
+        help="gait file path or name under configs/gaits/ (default: %(default)s)",
+    )
+    p.add_argument(
+        "--set", action="append", metavar="KEY=VALUE", help="override a gait key, e.g. --set kc=300"
+    )
+    p.add_argument(
+        "--z0",
+        help="start apex state v1,...,v6 in [m, deg, deg, m/s, deg/s, "
+        "deg/s] (default: the gait's z_star, else z_published); --z0=-1,...",
+    )
+    if z_and_pins:
+        p.add_argument(
+            "--pin",
+            action="append",
+            metavar="NAME[=VALUE]",
+            help=f"condition for a freed key: energy [J] or one of {Z_NAMES} "
+            "(paper units); without a value, the start's value",
+        )
+
+
+def parse_z(text):
+    """``"v1,...,v6"`` in paper units -> SI, or None."""
+    if text is None:
+        return None
+    parts = [s for s in text.replace(" ", "").split(",") if s]
+    if len(parts) != 6:
+        raise ValueError(f"--z0 needs 6 comma-separated numbers, got {len(parts)}: {text!r}")
+    try:
+        return z_to_si([float(s) for s in parts])
+    except ValueError:
+        raise ValueError(f"--z0 must be numbers, got {text!r}") from None
+
+
+def parse_pins(texts, z0, params) -> list[tuple[str, float]]:
+    """``NAME[=VALUE]`` -> (name, SI value); z components given in paper units."""
+    from .poincare import apex_energy
+
+    pins = []
+    for t in texts or []:
+        name, _, val = t.partition("=")
+        name = name.strip()
+        if name == "energy":
+            v = float(val) if val else apex_energy(z0, params)
+        elif name in Z_NAMES:
+            i = Z_NAMES.index(name)
+            if val:
+                zp = z_to_paper(z0)
+                zp[i] = float(val)
+                v = float(z_to_si(zp)[i])
+            else:
+                v = float(z0[i])
+        else:
+            raise ValueError(f"unknown pin {name!r}; use energy or one of {Z_NAMES}")
+        pins.append((name, v))
+    return pins
+
+
+def _setup(args):
+    overrides = dict(parse_override(s) for s in (args.set or []))
+    gait = load_gait(args.gait, overrides)
+    z = parse_z(args.z0)
+    return gait, (z if z is not None else gait.z0)
+
+
+def _default_pins(args, z0, params):
+    pins = parse_pins(getattr(args, "pin", None), z0, params)
+    if args.free and not pins and len(args.free) == 1:
+        pins = parse_pins(["energy"], z0, params)
+    return pins
+
+
+def cmd_fixed_point(args) -> int:
+    from .fixed_point import find_fixed_point, paper_search
+
+    gait, z0 = _setup(args)
+    if args.method == "paper":
+        if args.free or args.pin:
+            raise ValueError("--method paper frees alpha itself; drop --free/--pin")
+        res = paper_search(gait.params, z0)
+    else:
+        pins = _default_pins(args, z0, gait.params)
+        res = find_fixed_point(gait.params, z0, free=args.free, pin=pins or None,
+                               tol=args.tol, max_iter=args.max_iter,
+                               jacobian_method=args.jacobian)  # fmt: skip
+    out = res.summary()
+    out["gait"] = str(gait.path)
+    if args.save:
+        if not res.converged:
+            print(f"bound-env fixed-point: not saving, no fixed point ({res.reason})",
+                  file=sys.stderr)  # fmt: skip
+        else:
+            out["saved"] = str(_save(args.save, gait, res, z0))
+    if args.json:
+        print(json.dumps(out))
+    else:
+        _print_fixed_point(out, res)
+    return 0 if res.converged else 1
+
+
+def _save(path, gait, res, z0) -> Path:
+    meta = {k: v for k, v in (gait.meta or {}).items()
+            if k not in ("z_star", "z_published", "fixed_point")}  # fmt: skip
+    meta["fixed_point"] = {
+        "found_by": f"bound-env fixed-point ({res.method}) from {gait.path}",
+        "start_z": [float(v) for v in z_to_paper(z0)],
+        "residual": float(res.residual), "iterations": int(res.iterations),
+        "free": {k: float(v) for k, v in res.free.items()},
+        "eigenvalues": [[float(v.real), float(v.imag)] for v in res.eigenvalues]
+        if res.eigenvalues is not None else None,
+        "emax": float(res.emax) if math.isfinite(res.emax) else None,
+        "phases": list(res.phases), "durations": [float(d) for d in res.durations],
+        "strides_to_converge": res.strides_to_converge,
+    }  # fmt: skip
+    return save_gait(path, res.params, z_star=res.z, z_published=gait.z_published, **meta)
+
+
+def _print_fixed_point(out, res):
+    print(
+        f"gait {out['gait']}  method {out['method']}: {out['reason']} "
+        f"after {out['iterations']} iteration(s)"
+    )
+    for name, unit, v in zip(Z_NAMES, Z_PAPER_UNITS, out["z"], strict=True):
+        print(f"  {name:10s} = {v: .10g} {unit}")
+    for k, v in res.free.items():
+        print(f"  {k:10s} = {v: .10g} (freed)")
+    print(f"residual max|P(z) - z| = {out['residual']:.3e}")
+    if res.eigenvalues is not None:
+        print("eigenvalues: " + ", ".join(f"{v.real:.6f}{v.imag:+.6f}j" for v in res.eigenvalues))
+        print(f"e_max = {res.emax:.6f}  ({'stable' if res.emax < 1 else 'unstable'})")
+    print("phases " + " -> ".join(out["phases"]) + "  durations " +
+          ", ".join(f"{d * 1e3:.2f} ms" for d in out["durations"]))  # fmt: skip
+    print(f"strides to recover from +1 % on y_g: {out['strides_to_converge']}")
+    if "saved" in out:
+        print(f"saved {out['saved']}")
+
+
+def cmd_continue(args) -> int:
+    from .continuation import continue_branch, plot_branch
+
+    gait, z0 = _setup(args)
+    pins = _default_pins(args, z0, gait.params)
+    out = Path(args.out)
+    branch = continue_branch(
+        gait.params, z0, args.param, args.to, step=args.step, method=args.method,
+        free=args.free, pin=pins or None, max_points=args.max_points, out_dir=out,
+        progress=not args.quiet,
+    )  # fmt: skip
+    if branch.points:
+        plot_branch(branch, out / "branch.png")
+    flags = [(p.value, n) for p in branch.points for n in ("fold", "pd", "ns") if getattr(p, n)]
+    print(f"{len(branch.points)} points, {branch.reason}; wrote {out / 'branch.csv'}"
+          + (f" and {out / 'branch.png'}" if branch.points else ""))  # fmt: skip
+    for v, n in flags:
+        print(f"  {n} between the previous point and {args.param} = {v:.6g}")
+    return 0 if branch.reached else 1
+
+
+def cmd_sweep(args) -> int:
+    from .sweeps import plot_sweep, sweep, write_sweep_csv
+
+    gait, z0 = _setup(args)
+    if not args.step > 0:
+        raise ValueError("--step must be positive")
+    values = np.round(np.arange(args.lo, args.hi + 0.5 * args.step, args.step), 12)
+    res = sweep(gait.params, z0, args.param, values, refine=args.refine,
+                progress=not args.quiet)  # fmt: skip
+    out = Path(args.out)
+    write_sweep_csv(res, out / "sweep.csv")
+    plot_sweep(res, out / "sweep.png")
+    for kind in ("converged", "stable"):
+        w = res.window(kind)
+        label = "100-stride convergence" if kind == "converged" else "e_max < 1"
+        print(f"{label} window in {args.param}: " +
+              (f"{w[0]:.6g} .. {w[1]:.6g}" if w else "none"))  # fmt: skip
+    print(f"wrote {out / 'sweep.csv'} and {out / 'sweep.png'}")
+    return 0
