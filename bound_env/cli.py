@@ -45,7 +45,7 @@ def cmd_stride(args) -> int:
         raise ValueError("--repeat must be at least 1")
     t0 = time.perf_counter()
     for _ in range(args.repeat):
-        res = simulate_stride(z0, gait.params, backend=args.backend)
+        res = simulate_stride(z0, gait.params, backend=args.backend, strict=args.strict)
     elapsed = time.perf_counter() - t0
     out = res.summary()
     out["backend"] = args.backend
@@ -81,6 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: the gait's z_star, else z_published); use --z=-0.1,... for negatives")
     p.add_argument("--repeat", type=int, default=1, help="evaluate the stride N times (timing)")
     p.add_argument("--backend", choices=("fast", "reference"), default="fast")
+    p.add_argument("--strict", action="store_true",
+                   help="end the stride at the first apex after any touchdown")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_stride)
 

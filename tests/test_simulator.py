@@ -267,3 +267,19 @@ def test_spine_torque_is_a_generalized_force_on_theta2_only(gait):
     # tau does work but stores none: the energy function does not depend on it
     aux0 = make_aux(gait.params.to_array(0.0))
     assert total_energy(y, aux0) == total_energy(y, make_aux(gait.params.to_array(5.0)))
+
+
+def test_strict_rule_ends_at_the_first_apex_after_any_stance(gait):
+    """A state whose flight after back stance has an apex: the strict stride ends there, the
+    default stride goes on until both legs have been in stance."""
+    z = z_to_si([0.2322, 1.4326, -5.1367, 3.0061, 642.134, -542.4661])
+    p = gait.params.with_values(gamma_b_deg=47.73, gamma_f_deg=33.99)
+    strict = simulate_stride(z, p, strict=True)
+    full = simulate_stride(z, p)
+    assert strict.ok and full.ok
+    assert strict.phases == ["df", "bs", "df"]
+    assert "fs" in full.phases and full.t_end > strict.t_end
+    # on the published gait the flight between bs and fs has no apex: both rules agree
+    a = simulate_stride(gait.z0, gait.params, strict=True)
+    b = simulate_stride(gait.z0, gait.params)
+    assert a.phases == b.phases and np.allclose(a.z1, b.z1, atol=0)

@@ -1,0 +1,78 @@
+"""The `bound-env stride` command line (a contract)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bound_env.cli import main
+from bound_env.params import load_gait, z_to_paper
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _run(capsys, *argv):
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_stride_json_has_the_documented_keys(capsys):
+    code, out, _ = _run(capsys, "stride", "--gait", "configs/gaits/paper.yaml", "--json")
+    assert code == 0
+    d = json.loads(out)
+    for key in ("z0", "z1", "phases", "durations", "failure", "energy"):
+        assert key in d
+    assert d["failure"] is None
+    assert d["z0"] == pytest.approx([0.2536, 0.6303, -1.152, 2.840, 293.2, -143.7])
+    assert d["phases"] == ["df", "bs", "df", "fs", "df"]
+    assert len(d["durations"]) == len(d["phases"])
+    assert set(d["energy"]) == {"start", "end"}
+
+
+def test_stride_defaults_to_z_star_and_returns_to_it(capsys):
+    code, out, _ = _run(capsys, "stride", "--gait", "default", "--json")
+    d = json.loads(out)
+    z_star = z_to_paper(load_gait("default").z_star)
+    assert d["z0"] == pytest.approx(list(z_star), abs=1e-9)
+    assert d["z1"] == pytest.approx(list(z_star), abs=1e-6)
+
+
+def test_stride_overrides_z_backend_and_repeat(capsys):
+    code, out, _ = _run(
+        capsys, "stride", "--gait", "paper", "--set", "kc=300", "--set", "alpha_deg=2.0",
+        "--z=0.25,0.5,-1,2.83,294,-147", "--repeat", "3", "--backend", "reference", "--json",
+    )  # fmt: skip
+    d = json.loads(out)
+    assert code == 0 and d["repeat"] == 3 and d["backend"] == "reference"
+    assert d["z0"] == pytest.approx([0.25, 0.5, -1, 2.83, 294, -147])
+    code2, out2, _ = _run(capsys, "stride", "--gait", "paper", "--json")
+    assert json.loads(out2)["z1"] != d["z1"]
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["stride", "--gait", "nope"], "no gait file"),
+        (["stride", "--set", "kc=-3"], "kc"),
+        (["stride", "--set", "bogus=1"], "bogus"),
+        (["stride", "--z=1,2,3"], "6 comma-separated"),
+        (["stride", "--repeat", "0"], "repeat"),
+    ],
+)
+def test_bad_input_is_a_clear_error(capsys, argv, words):
+    code, _, err = _run(capsys, *argv)
+    assert code == 2
+    assert words in err
+
+
+def test_console_script_runs_from_the_venv():
+    exe = Path(sys.executable).parent / "bound-env"
+    if not exe.exists():
+        pytest.skip("console script not installed next to this interpreter")
+    res = subprocess.run([str(exe), "stride", "--gait", "paper", "--json"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["failure"] is None
