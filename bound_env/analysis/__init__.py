@@ -15,7 +15,10 @@ Modules, read top to bottom:
 - `continuation`: natural and pseudo-arclength continuation in kc or alpha with fold,
   period-doubling and Neimark-Sacker flags (Figs. 3-4).
 - `sweeps`: e_max against alpha and kc the paper's way, stability windows (Figs. 7-8).
-- `cli`: ``bound-env fixed-point``, ``bound-env continue``, ``bound-env sweep``.
+- `reproduce`, `reproduce_report`: ``bound-env reproduce``, every published number measured
+  again (Figs. 3-8, REPRODUCTION.md).
+- `cli`: ``bound-env fixed-point``, ``bound-env continue``, ``bound-env sweep``,
+  ``bound-env reproduce``.
 """
 
 import importlib

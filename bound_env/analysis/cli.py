@@ -1,4 +1,4 @@
-"""``bound-env fixed-point``, ``bound-env continue`` and ``bound-env sweep``.
+"""``bound-env fixed-point``, ``continue``, ``sweep`` and ``reproduce``.
 
 Registered by `bound_env.cli` through `register`. Everything here is at the package's edge:
 states are read and printed in the paper's units [m, deg, deg, m/s, deg/s, deg/s] and
@@ -98,6 +98,20 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="sweep.csv and sweep.png")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_sweep)
+
+    p = sub.add_parser("reproduce", help="measure every published number again: Figs. 3-8 "
+                       "(PNG + CSV) and REPRODUCTION.md")  # fmt: skip
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output directory (report, figures/, cache/, results.json)")
+    p.add_argument("--quick", action="store_true",
+                   help="small budgets (coarse sweeps, kc_stiff = 2000): a smoke test")
+    p.add_argument("--force", action="store_true", help="recompute every stage (ignore cache)")
+    p.add_argument("--write-gaits", action="store_true",
+                   help="also write configs/gaits/default.yaml and literal-cycle.yaml")
+    p.add_argument("--docs", metavar="DIR",
+                   help="copy REPRODUCTION.md and the PNG figures to DIR (e.g. docs)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=cmd_reproduce)
 
 
 def _gait_args(p, z_and_pins=True):
@@ -279,4 +293,15 @@ def cmd_sweep(args) -> int:
         print(f"{label} window in {args.param}: " +
               (f"{w[0]:.6g} .. {w[1]:.6g}" if w else "none"))  # fmt: skip
     print(f"wrote {out / 'sweep.csv'} and {out / 'sweep.png'}")
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from .reproduce import run
+
+    res = run(args.out, quick=args.quick, force=args.force, progress=not args.quiet,
+              write_gaits=args.write_gaits, docs_dir=args.docs)  # fmt: skip
+    hits = ", ".join(res["cache"]["hits"]) or "none"
+    print(f"wrote {res['report']} ({len(res['figures'])} figure files) in "
+          f"{res['wall_seconds']:.1f} s; cached stages: {hits}")
     return 0
