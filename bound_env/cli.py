@@ -8,18 +8,6 @@ import sys
 import time
 
 
-def _parse_z(text: str | None):
-    if text is None:
-        return None
-    parts = [p for p in text.replace(" ", "").split(",") if p]
-    if len(parts) != 6:
-        raise ValueError(f"--z needs 6 comma-separated numbers, got {len(parts)}: {text!r}")
-    try:
-        return [float(p) for p in parts]
-    except ValueError:
-        raise ValueError(f"--z must be numbers, got {text!r}") from None
-
-
 def _load(args):
     from .params import load_gait, parse_override
 
@@ -36,11 +24,12 @@ def _add_gait_args(p, default="paper"):
 
 def cmd_stride(args) -> int:
     from .hybrid import simulate_stride
-    from .params import z_to_si
+    from .params import parse_z
 
     gait = _load(args)
-    z_paper = _parse_z(args.z)
-    z0 = z_to_si(z_paper) if z_paper is not None else gait.z0
+    z0 = parse_z(args.z, "--z")
+    if z0 is None:
+        z0 = gait.z0
     if args.repeat < 1:
         raise ValueError("--repeat must be at least 1")
     t0 = time.perf_counter()

@@ -227,6 +227,19 @@ def parse_override(text: str) -> tuple[str, float]:
         raise ValueError(f"value of {k} must be a number, got {v!r}") from None
 
 
+def parse_z(text: str | None, flag: str = "--z") -> np.ndarray | None:
+    """``"v1,...,v6"`` in the paper's units -> apex state in SI (None for None), clear errors."""
+    if text is None:
+        return None
+    parts = [p for p in text.replace(" ", "").split(",") if p]
+    if len(parts) != 6:
+        raise ValueError(f"{flag} needs 6 comma-separated numbers, got {len(parts)}: {text!r}")
+    try:
+        return z_to_si([float(p) for p in parts])
+    except ValueError:
+        raise ValueError(f"{flag} must be numbers, got {text!r}") from None
+
+
 def load_gait(gait: str | Path, overrides: dict | None = None) -> Gait:
     """Read a gait file (path or name), apply ``overrides`` (gait-file keys), validate."""
     path = resolve_gait_path(gait)

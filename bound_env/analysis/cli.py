@@ -20,6 +20,7 @@ from ..params import (
     Z_PAPER_UNITS,
     load_gait,
     parse_override,
+    parse_z,
     save_gait,
     z_to_paper,
     z_to_si,
@@ -138,19 +139,6 @@ def _gait_args(p, z_and_pins=True):
         )
 
 
-def parse_z(text):
-    """``"v1,...,v6"`` in paper units -> SI, or None."""
-    if text is None:
-        return None
-    parts = [s for s in text.replace(" ", "").split(",") if s]
-    if len(parts) != 6:
-        raise ValueError(f"--z0 needs 6 comma-separated numbers, got {len(parts)}: {text!r}")
-    try:
-        return z_to_si([float(s) for s in parts])
-    except ValueError:
-        raise ValueError(f"--z0 must be numbers, got {text!r}") from None
-
-
 def parse_pins(texts, z0, params) -> list[tuple[str, float]]:
     """``NAME[=VALUE]`` -> (name, SI value); z components given in paper units."""
     from .poincare import apex_energy
@@ -178,7 +166,7 @@ def parse_pins(texts, z0, params) -> list[tuple[str, float]]:
 def _setup(args):
     overrides = dict(parse_override(s) for s in (args.set or []))
     gait = load_gait(args.gait, overrides)
-    z = parse_z(args.z0)
+    z = parse_z(args.z0, "--z0")
     return gait, (z if z is not None else gait.z0)
 
 
