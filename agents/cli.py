@@ -1,0 +1,130 @@
+"""``bound-env train | margins | compare`` (registered by `bound_env.cli`)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+
+# Files a shipped policy directory holds (copied from a run by ``train --export``).
+POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv",
+                "eval.png")
+
+
+def register(sub) -> None:
+    from .config import DEFAULT_CONFIG, DEFAULT_ENV_ID
+
+    p = sub.add_parser("train", help="train a PPO spine controller (runs/<name>/)")
+    p.add_argument("--config", default=str(DEFAULT_CONFIG),
+                   help="rl-zoo3-style hyperparameter file (default: %(default)s)")
+    p.add_argument("--env-id", default=DEFAULT_ENV_ID,
+                   help="section of the config and Gymnasium id (default: %(default)s)")
+    p.add_argument("--name", help="run name: runs/<name>/ (default: <env-id>_s<seed>)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-timesteps", type=float, help="override n_timesteps")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a hyperparameter (YAML value; dotted keys descend, e.g. "
+                        "env_kwargs.max_torque=20)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue runs/<name>/ from its last checkpoint")
+    p.add_argument("--runs-dir", default="runs")
+    p.add_argument("--vec-env", choices=("auto", "dummy", "subproc"), default="auto",
+                   help="auto: SubprocVecEnv when n_envs > 1 (default: %(default)s)")
+    p.add_argument("--eval-freq", type=int, default=100_000, help="timesteps between evaluations")
+    p.add_argument("--n-eval-episodes", type=int, default=10)
+    p.add_argument("--save-freq", type=int, default=200_000, help="timesteps between checkpoints")
+    p.add_argument("--export", metavar="DIR",
+                   help="afterwards copy the policy files to DIR (e.g. agents/policies/default)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("margins", help="stability margins of the passive gait or a policy")
+    p.add_argument("--policy", default="passive",
+                   help="'passive' or a policy: run/policy directory or model .zip")
+    p.add_argument("--budget", choices=("test", "quick", "full"), default="quick")
+    p.add_argument("--gait", default="default", help="gait name or path (default: %(default)s)")
+    p.add_argument("--workers", type=int, default=2, help="worker processes (default: 2)")
+    p.add_argument("--out", help="directory for margins.json, CSVs, PNGs and the task cache "
+                   "(default: out/margins/<policy name>)")
+    p.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
+    p.add_argument("--json", action="store_true", help="print the JSON result")
+    p.set_defaults(func=cmd_margins)
+
+    p = sub.add_parser("compare", help="passive vs learned margins -> docs/MARGINS.md")
+    p.add_argument("--policy", action="append", metavar="LABEL=PATH[@GAIT]",
+                   help="entries besides passive (default: the shipped policies)")
+    p.add_argument("--budget", choices=("test", "quick", "full"), default="full")
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--out", default="out/margins", help="per-entry results and caches")
+    p.add_argument("--docs", default=None, help="where MARGINS.md and its PNGs go (default: docs/)")
+    p.set_defaults(func=cmd_compare)
+
+
+def cmd_train(args) -> int:
+    from .train import train
+
+    t0 = time.perf_counter()
+    n = int(args.n_timesteps) if args.n_timesteps is not None else None
+    run = train(
+        config=args.config, env_id=args.env_id, name=args.name, seed=args.seed, n_timesteps=n,
+        sets=args.set, resume=args.resume, runs_dir=args.runs_dir, vec_env=args.vec_env,
+        eval_freq=args.eval_freq, n_eval_episodes=args.n_eval_episodes,
+        save_freq=args.save_freq, progress_bar=not args.no_progress,
+    )  # fmt: skip
+    print(f"run {run}  ({time.perf_counter() - t0:.0f} s)")
+    if args.export:
+        dest = export_policy(run, args.export)
+        print(f"exported to {dest}")
+    return 0
+
+
+def export_policy(run_dir, dest) -> Path:
+    """Copy a run's policy files to ``dest``: the model and its VecNormalize statistics (the
+    best-validation ones from ``best/`` when the run kept them, else the final ones), and the
+    config, run info, evaluation and validation curves."""
+    run_dir, dest = Path(run_dir), Path(dest)
+    if not (run_dir / "model.zip").is_file():
+        raise FileNotFoundError(f"no model.zip in {run_dir}")
+    dest.mkdir(parents=True, exist_ok=True)
+    src = run_dir / "best" if (run_dir / "best" / "model.zip").is_file() else run_dir
+    for name in ("model.zip", "vecnormalize.pkl"):
+        if (src / name).is_file():
+            shutil.copyfile(src / name, dest / name)
+    for name in POLICY_FILES[2:] + ("basin_validation.csv",):
+        if (run_dir / name).is_file():
+            shutil.copyfile(run_dir / name, dest / name)
+    info = {"exported_from": str(src)}
+    if (src / "best.json").is_file():
+        info.update(json.loads((src / "best.json").read_text()))
+    (dest / "exported.json").write_text(json.dumps(info, indent=2) + "\n")
+    return dest
+
+
+def cmd_margins(args) -> int:
+    from .margins import compute_margins, summary_text
+
+    name = "passive" if args.policy == "passive" else Path(args.policy).resolve().name
+    out = Path(args.out) if args.out else Path("out") / "margins" / name
+    progress = args.budget == "full" or sys.stderr.isatty()
+    r = compute_margins(args.policy, budget=args.budget, gait=args.gait, workers=args.workers,
+                        out=out, progress=progress, use_cache=not args.no_cache)
+    if args.json:
+        print(json.dumps(r))
+    else:
+        print(summary_text(r))
+        print(f"outputs in {out}")
+    return 0
+
+
+def cmd_compare(args) -> int:
+    from .compare import DEFAULT_DOCS, compare, default_entries, parse_entry
+
+    entries = default_entries()
+    if args.policy:
+        entries = [entries[0]] + [parse_entry(t) for t in args.policy]
+    path = compare(entries, budget=args.budget, workers=args.workers, out=args.out,
+                   docs=args.docs or DEFAULT_DOCS, progress=sys.stderr.isatty())
+    print(f"wrote {path}")
+    return 0

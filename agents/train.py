@@ -1,0 +1,536 @@
+"""Train spine-torque policies with Stable-Baselines3 PPO (``bound-env train``).
+
+A run is fully described by its config section and its seed, and keeps everything under
+``runs/<name>/``:
+
+=========================  ===========================================================
+``config.yaml``            the resolved section, keyed by env id (rl-zoo3 format), plus ``run:``
+``run.json``               seed, env id, timesteps, wall time, versions, command
+``model.zip``              the final model
+``vecnormalize.pkl``       its ``VecNormalize`` statistics (observation and reward)
+``eval.csv``, ``eval.png`` the evaluation curve (deterministic policy, curriculum's final noise)
+``tb/``                    TensorBoard logs
+``checkpoints/``           ``rl_model_<N>_steps.zip`` + ``rl_model_vecnormalize_<N>_steps.pkl``
+``monitor/``               SB3 ``Monitor`` files of the training environments
+``basin_validation.csv``   `BasinValidationCallback` scores; ``best/`` its best checkpoint
+=========================  ===========================================================
+
+``--export DIR`` (CLI) copies the policy files to DIR, taking the model from ``best/`` when
+the run kept one. ``--resume`` continues from the last checkpoint with its ``VecNormalize``
+statistics and its timestep count (the curriculum is a function of the timestep count, so it
+resumes too); it reads the run's own ``config.yaml`` and ignores ``--config``/``--set``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import platform
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
+
+from .config import (
+    DEFAULT_CONFIG,
+    DEFAULT_ENV_ID,
+    TrainSpec,
+    apply_sets,
+    load_hyperparams,
+    preprocess,
+)
+
+RUNS_DIR = Path("runs")
+EVAL_FIELDS = ("timesteps", "mean_reward", "std_reward", "mean_length", "mean_strides",
+               "fall_rate", "noise_scale", "wall_time_s")
+_CKPT = re.compile(r"rl_model_(\d+)_steps\.zip$")
+
+
+# --------------------------------------------------------------------------------------------
+# Environments
+# --------------------------------------------------------------------------------------------
+
+
+def make_env(env_id: str, env_kwargs: dict | None = None, spec: TrainSpec | None = None,
+             seed: int | None = None, monitor_file: str | None = None):
+    """One environment: ``gymnasium.make`` -> ``Monitor`` -> the config's ``env_wrapper``s.
+
+    Module-level (and importing ``bound_env``) so that `SubprocVecEnv` workers can rebuild it.
+    """
+    import gymnasium as gym
+    from stable_baselines3.common.monitor import Monitor
+
+    import bound_env
+
+    from . import register_envs
+
+    gym.register_envs(bound_env)
+    register_envs()
+    env = gym.make(env_id, **(env_kwargs or {}))
+    env = Monitor(env, filename=monitor_file, info_keywords=("stride",))
+    if spec is not None:
+        env = spec.wrap(env)
+    if seed is not None:
+        env.action_space.seed(seed)
+    return env
+
+
+def make_vec(env_id: str, spec: TrainSpec, n_envs: int, seed: int, vec_env: str = "auto",
+             monitor_dir: Path | None = None):
+    """``n_envs`` environments in a `SubprocVecEnv` (n_envs > 1) or a `DummyVecEnv`."""
+    from functools import partial
+
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    fns = []
+    for i in range(n_envs):
+        mon = str(monitor_dir / str(i)) if monitor_dir is not None else None
+        fns.append(partial(make_env, env_id, spec.env_kwargs, spec, seed + i, mon))
+    kind = vec_env if vec_env != "auto" else ("subproc" if n_envs > 1 else "dummy")
+    if kind == "subproc":
+        venv = SubprocVecEnv(fns)
+    elif kind == "dummy":
+        venv = DummyVecEnv(fns)
+    else:
+        raise ValueError(f"vec_env must be auto, dummy or subproc, got {vec_env!r}")
+    venv.seed(seed)
+    return venv
+
+
+# --------------------------------------------------------------------------------------------
+# Callbacks
+# --------------------------------------------------------------------------------------------
+
+
+class NoiseCurriculumCallback(BaseCallback):
+    """Raise the start perturbation of `agents.wrappers.PerturbedStarts` over training.
+
+    ``noise_scale`` goes linearly from ``start`` to ``end`` (apex_scales units; 1 is about the
+    edge of the passive basin) over the first ``ramp`` fraction of the run's timesteps and
+    then stays at ``end``. It is a function of the timestep count, so a resumed run
+    continues where it stopped. Logged as ``curriculum/noise_scale``.
+    """
+
+    def __init__(self, start: float = 0.5, end: float = 3.0, ramp: float = 0.6,
+                 verbose: int = 0):
+        super().__init__(verbose)
+        if not (0 <= start and 0 <= end and 0 < ramp <= 1):
+            raise ValueError(f"need start, end >= 0 and 0 < ramp <= 1, got {start}, {end}, {ramp}")
+        self.start, self.end, self.ramp = float(start), float(end), float(ramp)
+        self.value = float(start)
+
+    def value_at(self, timesteps: int, total: int) -> float:
+        frac = min(1.0, timesteps / max(1.0, self.ramp * total))
+        return self.start + (self.end - self.start) * frac
+
+    def _apply(self) -> None:
+        total = getattr(self.model, "_total_timesteps", 0) or 1
+        self.value = self.value_at(self.num_timesteps, total)
+        self.training_env.env_method("set_noise_scale", self.value)
+        self.logger.record("curriculum/noise_scale", self.value)
+
+    def _on_training_start(self) -> None:
+        self._apply()
+
+    def _on_rollout_start(self) -> None:
+        self._apply()
+
+    def _on_step(self) -> bool:
+        return True
+
+
+class BasinValidationCallback(BaseCallback):
+    """Keep the checkpoint with the widest basin along the passive gait's weakest directions.
+
+    Every ``eval_freq`` timesteps the current deterministic policy (with the training
+    ``VecNormalize`` statistics) is put in the closed loop of `agents.margins`: its
+    closed-loop fixed point is found, then the basin along ``directions`` (apex component,
+    sign; default forward speed and height, both signs: where the passive basin is
+    narrowest) by ``iters`` log-bisection steps with ``strides`` strides to return. The
+    smallest of them is the validation score, written to ``basin_validation.csv``; a new
+    best is saved as ``best/model.zip`` + ``best/vecnormalize.pkl``, which ``--export``
+    ships. (Like EvalCallback's best model, with a margin instead of the mean return.)
+    """
+
+    def __init__(self, eval_freq: int = 100_000, directions=((3, -1), (3, 1), (0, -1), (0, 1)),
+                 iters: int = 8, strides: int = 100, verbose: int = 0):
+        super().__init__(verbose)
+        self.eval_freq = int(eval_freq)
+        self.directions = [tuple(d) for d in directions]
+        self.iters, self.strides = int(iters), int(strides)
+        self.run_dir: Path | None = None  # set by `train`
+        self.env_kwargs: dict = {}
+        self.env_wrapper = None
+        self.best = -1.0
+        self._last = 0
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps - self._last >= self.eval_freq:
+            self._last = self.num_timesteps
+            self.validate()
+        return True
+
+    def controller(self):
+        import bound_env.task as task_mod
+
+        from .policy import DYNAMICS_KWARGS, MLPController, _extract_actor
+        from .wrappers import observation_index
+
+        layers, activation = _extract_actor(self.model, Path("(training)"))
+        kwargs = {k: v for k, v in self.env_kwargs.items() if k in DYNAMICS_KWARGS}
+        names = task_mod.PassiveBoundTask(**{k: v for k, v in kwargs.items()
+                                             if k != "apex_scales"}).obs_names
+        ctrl = MLPController(name="validation", layers=layers, activation=activation,
+                             env_kwargs=kwargs, obs_index=observation_index(self.env_wrapper,
+                                                                            names))
+        vn = self.model.get_vec_normalize_env()
+        if vn is not None and vn.norm_obs:
+            ctrl.obs_mean = np.array(vn.obs_rms.mean, dtype=np.float64)
+            ctrl.obs_var = np.array(vn.obs_rms.var, dtype=np.float64)
+            ctrl.epsilon, ctrl.clip_obs = float(vn.epsilon), float(vn.clip_obs)
+        return ctrl
+
+    def score(self, ctrl) -> float:
+        from bound_env.params import load_gait
+
+        from .margins import (
+            BASIN_HI,
+            BASIN_LO,
+            ClosedLoop,
+            bisect_threshold,
+            fd_steps,
+            find_fixed_point,
+        )
+
+        gait = self.env_kwargs.get("gait", "default")
+        loop = ClosedLoop(ctrl, gait)
+        zs = np.asarray(load_gait(gait).z0, dtype=float)
+        try:
+            zc, res, _ = find_fixed_point(loop.map, zs, fd_steps(zs), settle=30, newton_iters=4)
+        except RuntimeError:
+            return 0.0
+        if res > 1e-6:
+            return 0.0
+        worst = BASIN_HI
+        for i, sign in self.directions:
+            def ok(s, i=i, sign=sign):
+                z = zc.copy()
+                z[i] += sign * s * zs[i]
+                return loop.run(z, zc, self.strides)[0]
+
+            worst = min(worst, bisect_threshold(ok, BASIN_LO, BASIN_HI, self.iters)[0])
+            if worst == 0.0:
+                break
+        return float(worst)
+
+    def validate(self) -> float:
+        t0 = time.perf_counter()
+        value = self.score(self.controller())
+        self.logger.record("eval/basin_validation", value)
+        if self.run_dir is not None:
+            path = self.run_dir / "basin_validation.csv"
+            new = not path.exists()
+            with path.open("a") as f:
+                if new:
+                    f.write("timesteps,basin_min,seconds\n")
+                f.write(f"{self.num_timesteps},{value},{time.perf_counter() - t0:.2f}\n")
+            if value > self.best:
+                best = self.run_dir / "best"
+                best.mkdir(exist_ok=True)
+                self.model.save(best / "model.zip")
+                vn = self.model.get_vec_normalize_env()
+                if vn is not None:
+                    vn.save(str(best / "vecnormalize.pkl"))
+                (best / "best.json").write_text(json.dumps(
+                    {"timesteps": self.num_timesteps, "basin_validation": value}) + "\n")
+        self.best = max(self.best, value)
+        return value
+
+
+class CSVEvalCallback(EvalCallback):
+    """`EvalCallback` that also writes ``eval.csv`` (one row per evaluation) and ``eval.png``.
+
+    Besides SB3's mean/std reward and episode length it records the fraction of evaluation
+    episodes that ended in a fall and the mean number of strides per episode.
+    """
+
+    def __init__(self, *args, csv_path: Path, png_path: Path, noise_scale: float = math.nan,
+                 **kwargs):
+        super().__init__(*args, **kwargs)
+        self.csv_path, self.png_path = Path(csv_path), Path(png_path)
+        self.noise_scale = noise_scale
+        self._falls: list[bool] = []
+        self._strides: list[int] = []
+        self._t0 = time.perf_counter()
+
+    def _log_success_callback(self, locals_, globals_) -> None:
+        super()._log_success_callback(locals_, globals_)
+        if locals_["done"]:
+            info = locals_["info"]
+            self._falls.append(info.get("failure") is not None)
+            self._strides.append(int(info.get("stride", 0)))
+
+    def _on_step(self) -> bool:
+        due = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
+        if due:
+            self._falls, self._strides = [], []
+        cont = super()._on_step()
+        if due and self.evaluations_results:
+            rewards = np.asarray(self.evaluations_results[-1], dtype=float)
+            lengths = np.asarray(self.evaluations_length[-1], dtype=float)
+            row = {
+                "timesteps": self.num_timesteps,
+                "mean_reward": float(rewards.mean()),
+                "std_reward": float(rewards.std()),
+                "mean_length": float(lengths.mean()),
+                "mean_strides": float(np.mean(self._strides)) if self._strides else math.nan,
+                "fall_rate": float(np.mean(self._falls)) if self._falls else math.nan,
+                "noise_scale": self.noise_scale,
+                "wall_time_s": time.perf_counter() - self._t0,
+            }
+            append_csv(self.csv_path, row)
+            self.logger.record("eval/fall_rate", row["fall_rate"])
+            try:
+                plot_eval(self.csv_path, self.png_path)
+            except Exception as e:  # noqa: BLE001 - a plot must never stop training
+                print(f"eval plot failed: {e}", file=sys.stderr)
+        return cont
+
+
+def append_csv(path: Path, row: dict) -> None:
+    new = not path.exists()
+    with path.open("a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=EVAL_FIELDS)
+        if new:
+            w.writeheader()
+        w.writerow({k: row.get(k, "") for k in EVAL_FIELDS})
+
+
+def read_csv(path: Path) -> dict[str, np.ndarray]:
+    with Path(path).open() as f:
+        rows = list(csv.DictReader(f))
+    return {k: np.array([float(r[k]) if r.get(k) not in (None, "") else math.nan for r in rows])
+            for k in EVAL_FIELDS}
+
+
+def plot_eval(csv_path: Path, png_path: Path, title: str | None = None) -> None:
+    """Evaluation curve: mean return (± std) and fall rate against timesteps, and below it
+    the basin validation score (``basin_validation.csv`` beside the CSV), if any."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = read_csv(csv_path)
+    val_path = Path(csv_path).parent / "basin_validation.csv"
+    val = np.loadtxt(val_path, delimiter=",", skiprows=1, ndmin=2) if val_path.exists() else None
+    rows = 2 if val is not None and len(val) else 1
+    fig, axes = plt.subplots(rows, 1, figsize=(6.4, 3.6 * rows), dpi=100, sharex=True,
+                             squeeze=False)
+    ax = axes[0, 0]
+    t = d["timesteps"]
+    ax.plot(t, d["mean_reward"], color="C0", label="mean return")
+    ax.fill_between(t, d["mean_reward"] - d["std_reward"], d["mean_reward"] + d["std_reward"],
+                    color="C0", alpha=0.2)
+    ax.set_ylabel("evaluation return", color="C0")
+    ax2 = ax.twinx()
+    ax2.plot(t, d["fall_rate"], color="C3", ls="--", label="fall rate")
+    ax2.set_ylim(-0.05, 1.05)
+    ax2.set_ylabel("fall rate", color="C3")
+    noise = d["noise_scale"][-1] if len(t) else math.nan
+    ax.set_title(title or f"PPO evaluation (start noise {noise:g} x apex_scales)")
+    if rows == 2:
+        axv = axes[1, 0]
+        axv.plot(val[:, 0], val[:, 1], "o-", color="C2", ms=3)
+        best = int(np.argmax(val[:, 1]))
+        axv.plot(val[best, 0], val[best, 1], "*", color="C1", ms=12, label="kept (best)")
+        axv.set_ylabel("basin validation\n(min rel. basin, xdot & y_g)")
+        axv.legend(fontsize=8)
+    axes[-1, 0].set_xlabel("timesteps")
+    fig.tight_layout()
+    fig.savefig(png_path)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------------------------
+# Training
+# --------------------------------------------------------------------------------------------
+
+
+def last_checkpoint(run_dir: Path) -> tuple[Path, Path | None, int] | None:
+    """(model zip, VecNormalize pkl or None, timesteps) of the newest checkpoint, or None."""
+    best = None
+    for p in (Path(run_dir) / "checkpoints").glob("rl_model_*_steps.zip"):
+        m = _CKPT.search(p.name)
+        if m and (best is None or int(m.group(1)) > best[2]):
+            best = (p, None, int(m.group(1)))
+    if best is None:
+        return None
+    pkl = best[0].parent / f"rl_model_vecnormalize_{best[2]}_steps.pkl"
+    return best[0], (pkl if pkl.exists() else None), best[2]
+
+
+def resolve_section(config: str | Path, env_id: str, sets: list[str] | None,
+                    n_timesteps: int | None) -> dict:
+    hp = apply_sets(load_hyperparams(config, env_id), sets)
+    if n_timesteps is not None:
+        hp["n_timesteps"] = int(n_timesteps)
+    return hp
+
+
+def train(
+    config: str | Path = DEFAULT_CONFIG,
+    env_id: str = DEFAULT_ENV_ID,
+    name: str | None = None,
+    seed: int = 0,
+    n_timesteps: int | None = None,
+    sets: list[str] | None = None,
+    resume: bool = False,
+    runs_dir: str | Path = RUNS_DIR,
+    vec_env: str = "auto",
+    eval_freq: int = 20_000,
+    n_eval_episodes: int = 10,
+    save_freq: int = 50_000,
+    progress_bar: bool = True,
+    verbose: int = 0,
+) -> Path:
+    """Train PPO as the config section of ``env_id`` says; returns the run directory."""
+    import torch as th
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    name = name or f"{env_id}_s{seed}"
+    run_dir = Path(runs_dir) / name
+    if resume:
+        saved = run_dir / "config.yaml"
+        if not saved.is_file():
+            raise FileNotFoundError(f"--resume: no run at {run_dir} (missing config.yaml)")
+        data = yaml.safe_load(saved.read_text())
+        env_id = data["run"]["env_id"]
+        seed = int(data["run"]["seed"])
+        hp = data[env_id]
+        if n_timesteps is not None:
+            hp["n_timesteps"] = int(n_timesteps)
+        ckpt = last_checkpoint(run_dir)
+        if ckpt is None:
+            raise FileNotFoundError(f"--resume: no checkpoint under {run_dir / 'checkpoints'}")
+    else:
+        hp = resolve_section(config, env_id, sets, n_timesteps)
+        if (run_dir / "model.zip").exists() or last_checkpoint(run_dir) is not None:
+            raise ValueError(f"run {run_dir} exists; use --resume or another --name")
+        ckpt = None
+    spec = preprocess(hp)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "monitor").mkdir(exist_ok=True)
+    write_config(run_dir / "config.yaml", env_id, hp, seed)
+
+    th.set_num_threads(1)
+    set_random_seed(seed)
+    venv = make_vec(env_id, spec, spec.n_envs, seed, vec_env, run_dir / "monitor")
+    eval_env = make_vec(env_id, spec, 1, seed + 10_000, "dummy")
+    callbacks, curriculum_end = [], math.nan
+    for cls, kwargs in spec.callbacks:
+        cb = cls(**kwargs)
+        callbacks.append(cb)
+        if isinstance(cb, NoiseCurriculumCallback):
+            curriculum_end = cb.end
+        if isinstance(cb, BasinValidationCallback):
+            cb.run_dir, cb.env_kwargs = run_dir, dict(spec.env_kwargs)
+            cb.env_wrapper = hp.get("env_wrapper")
+            prev = run_dir / "best" / "best.json"
+            if ckpt is not None and prev.exists():
+                cb.best = json.loads(prev.read_text())["basin_validation"]
+                cb._last = ckpt[2]
+    if not math.isnan(curriculum_end):
+        eval_env.env_method("set_noise_scale", curriculum_end)
+    else:
+        got = eval_env.get_attr("noise_scale") if _has_attr(eval_env, "noise_scale") else [math.nan]
+        curriculum_end = float(got[0])
+    if spec.normalize_kwargs is not None:
+        if ckpt is not None and ckpt[1] is not None:
+            venv = VecNormalize.load(str(ckpt[1]), venv)
+            venv.training = True
+        else:
+            venv = VecNormalize(venv, **spec.normalize_kwargs)
+        eval_kwargs = {k: v for k, v in spec.normalize_kwargs.items() if k != "norm_reward"}
+        eval_env = VecNormalize(eval_env, training=False, norm_reward=False, **eval_kwargs)
+
+    if ckpt is not None:
+        model = PPO.load(str(ckpt[0]), env=venv, device="cpu", tensorboard_log=str(run_dir / "tb"))
+        done = ckpt[2]
+        model.num_timesteps = done
+    else:
+        model = PPO(env=venv, seed=seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
+                    verbose=verbose, **spec.algo_kwargs)
+        done = 0
+    n_envs = spec.n_envs
+    callbacks.append(CheckpointCallback(
+        save_freq=max(save_freq // n_envs, 1), save_path=str(run_dir / "checkpoints"),
+        name_prefix="rl_model", save_vecnormalize=spec.normalize_kwargs is not None,
+    ))  # fmt: skip
+    callbacks.append(CSVEvalCallback(
+        eval_env, n_eval_episodes=n_eval_episodes, eval_freq=max(eval_freq // n_envs, 1),
+        log_path=str(run_dir), best_model_save_path=None, deterministic=True,
+        csv_path=run_dir / "eval.csv", png_path=run_dir / "eval.png", noise_scale=curriculum_end,
+        warn=False, verbose=verbose,
+    ))  # fmt: skip
+    remaining = max(0, spec.n_timesteps - done)
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=remaining, callback=callbacks, progress_bar=progress_bar,
+                reset_num_timesteps=ckpt is None, tb_log_name="PPO")
+    wall = time.perf_counter() - t0
+    model.save(run_dir / "model.zip")
+    if (run_dir / "eval.csv").exists():
+        plot_eval(run_dir / "eval.csv", run_dir / "eval.png")
+    if spec.normalize_kwargs is not None:
+        model.get_vec_normalize_env().save(str(run_dir / "vecnormalize.pkl"))
+    venv.close()
+    eval_env.close()
+    info_path = run_dir / "run.json"
+    prev = json.loads(info_path.read_text()) if info_path.exists() and resume else {}
+    info = {
+        "env_id": env_id, "seed": seed, "n_timesteps": spec.n_timesteps,
+        "timesteps_done": int(model.num_timesteps), "n_envs": n_envs,
+        "wall_time_s": prev.get("wall_time_s", 0.0) + wall,
+        "sessions": prev.get("sessions", []) + [{"from": done, "to": int(model.num_timesteps),
+                                                  "wall_time_s": wall}],
+        "command": " ".join(sys.argv), "python": platform.python_version(),
+        "versions": _versions(), "machine": f"{platform.machine()}, {_ncpu()} cores",
+    }  # fmt: skip
+    info_path.write_text(json.dumps(info, indent=2) + "\n")
+    return run_dir
+
+
+def _has_attr(venv, attr: str) -> bool:
+    try:
+        venv.get_attr(attr)
+        return True
+    except AttributeError:
+        return False
+
+
+def _ncpu() -> int:
+    import os
+
+    return os.cpu_count() or 1
+
+
+def _versions() -> dict:
+    import gymnasium
+    import stable_baselines3
+    import torch
+
+    return {"stable_baselines3": stable_baselines3.__version__, "torch": torch.__version__,
+            "gymnasium": gymnasium.__version__, "numpy": np.__version__}
+
+
+def write_config(path: Path, env_id: str, hp: dict, seed: int) -> None:
+    """The resolved section in rl-zoo3's format, plus a ``run:`` entry (env id, seed)."""
+    data = {env_id: hp, "run": {"env_id": env_id, "seed": int(seed)}}
+    path.write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
