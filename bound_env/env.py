@@ -129,7 +129,10 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
     | excluded | x_g, position of the centre of mass along the slope  | -1e5  | 1e5      | m     |
 
     (l_max = max(lb_bar, lf_bar).) A flight leg is held at its rest length and touchdown
-    angle, as the model assumes, so entries 9-12 are continuous at touchdown. Entries 13-14
+    angle, as the model assumes, so entries 9-12 are continuous at touchdown; at liftoff the
+    leg angle jumps back to the touchdown angle (the massless leg snaps back), and entries 7-8
+    jump at every contact change (a policy that must be continuous in the state can drop
+    them, as `agents.wrappers.ObservationFilter` does). Entries 13-14
     decide whether the next apex ends a stride (both legs must have touched down), entry 15
     when the episode ends for lack of an apex. The bounds are far outside anything a running
     robot reaches; the observation is clipped to them, which can only matter in the state a
