@@ -94,6 +94,22 @@ def _scatter_ds(ax, x, y, has_ds, color, label=None, filled=False, size=22):
                linewidths=0.9, zorder=3)  # fmt: skip
 
 
+
+def _save_figure(fig, path: Path, title=None, *, fontsize=10, legend_from=None, ncol=5) -> Path:
+    """Title, a shared legend along the bottom (from the axes ``legend_from``), layout, PNG."""
+    rect = (0, 0, 1, 1)
+    if legend_from is not None:
+        fig.legend(*legend_from.get_legend_handles_labels(), loc="lower center", ncol=ncol,
+                   fontsize=7, frameon=False)  # fmt: skip
+        rect = (0, 0.05, 1, 1)
+    if title is not None:
+        fig.suptitle(title, fontsize=fontsize)
+    fig.tight_layout(rect=rect)
+    fig.savefig(path, dpi=DPI)
+    _plt().close(fig)
+    return path
+
+
 def _fig3_fig4(results, d: Path) -> list[Path]:
     plt = _plt()
     paths = results["stiff"].get("paths") or {}
@@ -125,14 +141,14 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
         ax.set_xlabel(r"$k_c$ [N m/rad]")
         ax.set_ylabel(Z_TEX[i])
         ax.grid(alpha=0.3, which="both")
-    fig.legend(*axes.flat[0].get_legend_handles_labels(), loc="lower center", ncol=5,
-               fontsize=7, frameon=False)
-    fig.suptitle("Fig. 3 analogue: fixed points on S_apex against the spine stiffness, ζ = 0.2 "
-                 "(circles: no ds, squares: ds)", fontsize=10)  # fmt: skip
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
-    p3 = d / "fig3_fixed_points_vs_kc.png"
-    fig.savefig(p3, dpi=DPI)
-    plt.close(fig)
+    p3 = _save_figure(
+        fig,
+        d / "fig3_fixed_points_vs_kc.png",
+        "Fig. 3 analogue: fixed points on S_apex against the spine stiffness, ζ = 0.2 "
+        "(circles: no ds, squares: ds)",
+        legend_from=axes.flat[0],
+        ncol=5,
+    )
 
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.5))
     for name, path in paths.items():
@@ -168,14 +184,14 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
         ax.set_ylabel(lab)
         ax.grid(alpha=0.3, which="both")
     axes[1, 1].set_yscale("log")
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", ncol=4,
-               fontsize=7, frameon=False)
-    fig.suptitle("Fig. 4 analogue: e_max, touchdown angles, leg stiffness and slope along the "
-                 "paths (circles: no ds, squares: ds)", fontsize=10)  # fmt: skip
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
-    p4 = d / "fig4_parameters_vs_kc.png"
-    fig.savefig(p4, dpi=DPI)
-    plt.close(fig)
+    p4 = _save_figure(
+        fig,
+        d / "fig4_parameters_vs_kc.png",
+        "Fig. 4 analogue: e_max, touchdown angles, leg stiffness and slope along the "
+        "paths (circles: no ds, squares: ds)",
+        legend_from=axes[0, 0],
+        ncol=4,
+    )
 
     # zoom on the published gait: the three paths near kc = 295 on a linear axis
     fig, axes = plt.subplots(2, 4, figsize=(14, 6.2))
@@ -206,14 +222,14 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
         ax.set_ylabel(labels[i])
         ax.grid(alpha=0.3)
     axes[1, 2].axhline(1.0, color="k", lw=0.6, ls="--")
-    fig.legend(*axes.flat[0].get_legend_handles_labels(), loc="lower center", ncol=5,
-               fontsize=7, frameon=False)
-    fig.suptitle("Figs. 3-4 near the published gait (kc 285-345, linear axis; circles: no ds, "
-                 "squares: ds)", fontsize=10)  # fmt: skip
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
-    pz = d / "fig3b_near_published.png"
-    fig.savefig(pz, dpi=DPI)
-    plt.close(fig)
+    pz = _save_figure(
+        fig,
+        d / "fig3b_near_published.png",
+        "Figs. 3-4 near the published gait (kc 285-345, linear axis; circles: no ds, "
+        "squares: ds)",
+        legend_from=axes.flat[0],
+        ncol=5,
+    )
     return [p3, c3, p4, c4, pz]
 
 
@@ -240,12 +256,9 @@ def _fig5(results, d: Path) -> list[Path]:
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     names = ", ".join(f"{e['name']} {e['t'] * 1e3:.2f} ms" for e in ev)
-    fig.suptitle("Fig. 5 analogue: one stride of the periodic gait, kc = 295, ζ = 0.2 "
-                 "(dotted: transitions)\n" + names, fontsize=8.5)  # fmt: skip
-    fig.tight_layout()
-    p = d / "fig5_periodic_solution.png"
-    fig.savefig(p, dpi=DPI)
-    plt.close(fig)
+    p = _save_figure(fig, d / "fig5_periodic_solution.png",
+                     "Fig. 5 analogue: one stride of the periodic gait, kc = 295, ζ = 0.2 "
+                     "(dotted: transitions)\n" + names, fontsize=8.5)  # fmt: skip
     return [p, csvp]
 
 
@@ -268,12 +281,9 @@ def _fig6(results, d: Path) -> list[Path]:
     for ax in axes[-1]:
         ax.set_xlabel("stride")
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle("Fig. 6 analogue: Δz = z_n − z* after ±1 % on y_g, α = 1.9343, kc = 295, "
-                 "ζ = 0.2", fontsize=10)  # fmt: skip
-    fig.tight_layout()
-    p = d / "fig6_convergence.png"
-    fig.savefig(p, dpi=DPI)
-    plt.close(fig)
+    p = _save_figure(fig, d / "fig6_convergence.png",
+                     "Fig. 6 analogue: Δz = z_n − z* after ±1 % on y_g, α = 1.9343, kc = 295, "
+                     "ζ = 0.2")  # fmt: skip
     c = _write_csv(d / "fig6_convergence.csv", ["perturbation", "stride", *[f"d_{s}" for s in
                    ("y_g_m", "theta1_deg", "theta2_deg", "xdot_g_mps", "theta1dot_degps",
                     "theta2dot_degps")]], rows)  # fmt: skip
@@ -320,10 +330,7 @@ def _fig78(results, d: Path) -> list[Path]:
         ax.legend(fontsize=6.5, loc="upper left")
         ax.set_title(f"Fig. {num} analogue: e_max when {'α' if key == 'alpha_deg' else 'kc'} "
                      "is changed", fontsize=10)  # fmt: skip
-        fig.tight_layout()
-        p = d / f"{name}.png"
-        fig.savefig(p, dpi=DPI)
-        plt.close(fig)
+        p = _save_figure(fig, d / f"{name}.png")
         out += [p, c]
     return out
 
@@ -356,13 +363,10 @@ def _fig_literal(results, d: Path) -> list[Path]:
         ax.set_xscale("log")
         ax.set_xlabel(r"$k_c$ [N m/rad]")
         ax.grid(alpha=0.3, which="both")
-    fig.suptitle("Literal reading: the periodic gait at the published parameters followed to "
-                 "stiffer spines, α balancing the energy (circles: no ds, squares: ds)",
-                 fontsize=9)  # fmt: skip
-    fig.tight_layout()
-    p = d / "figL_literal_kc_path.png"
-    fig.savefig(p, dpi=DPI)
-    plt.close(fig)
+    p = _save_figure(fig, d / "figL_literal_kc_path.png",
+                     "Literal reading: the periodic gait at the published parameters followed to "
+                     "stiffer spines, α balancing the energy (circles: no ds, squares: ds)",
+                     fontsize=9)  # fmt: skip
     return [p, c]
 
 
