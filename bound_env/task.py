@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .dynamics import A_CB, A_CF, A_XB, A_XF, back_hip, front_hip, jit, make_aux, total_energy
+from .dynamics import A_CB, A_CF, jit, leg_back, leg_front, make_aux, total_energy
 from .fast import advance
 from .hybrid import (
     CONTINUE,
@@ -144,19 +144,19 @@ def observe(y, aux, flags, time_since_apex, cfg, out):
         v[j] = y[j]
     v[8] = aux[A_CB]
     v[9] = aux[A_CF]
+    # stance leg: length and angle from the slope normal, positive with the toe ahead of the
+    # hip (unit vector (ux, uy) points toe -> hip)
     if aux[A_CB] > 0.5:
-        hx, hy = back_hip(y, aux)
-        dx = aux[A_XB] - hx
-        v[10] = math.sqrt(dx * dx + hy * hy)
-        v[11] = math.atan2(dx, hy)
+        lb, ux, uy = leg_back(y, aux)
+        v[10] = lb
+        v[11] = math.atan2(-ux, uy)
     else:
         v[10] = aux[P_LB]
         v[11] = aux[P_GB]
     if aux[A_CF] > 0.5:
-        hx, hy = front_hip(y, aux)
-        dx = aux[A_XF] - hx
-        v[12] = math.sqrt(dx * dx + hy * hy)
-        v[13] = math.atan2(dx, hy)
+        lf, ux, uy = leg_front(y, aux)
+        v[12] = lf
+        v[13] = math.atan2(-ux, uy)
     else:
         v[12] = aux[P_LF]
         v[13] = aux[P_GF]
