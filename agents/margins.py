@@ -288,15 +288,14 @@ class ClosedLoop:
 
 
 def apply_kick(env, index: int, delta: float) -> None:
-    """Add ``delta`` to entry ``index`` of the simulator state y between two control
-    intervals. The controller sees it in the next observation (a push is sensed one control
-    interval later, like a sampled sensor).
-
-    The environment has no public way to change its state mid-episode, so this writes to the
-    single-robot batch of `bound_env.env.PassiveBoundEnv` (``_b.y``); a public
-    ``kick``/``set_state`` method would replace it.
-    """
-    env._b.y[0, index] += delta
+    """Add ``delta`` to velocity entry ``index`` (4..7) of the simulator state y between two
+    control intervals (`bound_env.env.PassiveBoundEnv.kick`). The controller sees it in the
+    next observation (a push is sensed one control interval later, like a sampled sensor)."""
+    if not 4 <= index <= 7:
+        raise ValueError(f"a kick changes a velocity (state index 4..7), got index {index}")
+    d = np.zeros(4)
+    d[index - 4] = delta
+    env.kick(d)
 
 
 # --------------------------------------------------------------------------------------------

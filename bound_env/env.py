@@ -291,6 +291,15 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
         """Parameter and contact vector of the simulator (see `bound_env.dynamics`), a copy."""
         return self._b.aux[0].copy()
 
+    def kick(self, delta_qdot) -> None:
+        """An impulse between two control intervals: add ``delta_qdot`` = [d xdot_g, d ydot_g,
+        d theta1dot, d theta2dot] (SI) to the velocities. Positions, contacts and toes stay, so
+        the hybrid state stays consistent; the next observation shows the kick."""
+        d = np.asarray(delta_qdot, dtype=np.float64).reshape(4)
+        if not np.isfinite(d).all():
+            raise ValueError(f"kick must be finite, got {d.tolist()}")
+        self._b.y[0, 4:] += d
+
     # -- Gymnasium API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

@@ -439,3 +439,15 @@ def test_native_vector_env_options_threads_and_render():
         serial.step(np.full((n, 1), np.nan))
     serial.close()
     threads.close()
+
+
+def test_kick_changes_only_the_velocities_and_rejects_nan():
+    env = gym.make("PassiveBound-v0", reset_noise_scale=0.0).unwrapped
+    env.reset(seed=0)
+    before = env.state
+    env.kick([0.1, 0.0, -0.5, 0.0])
+    after = env.state
+    assert np.array_equal(after[:4], before[:4])
+    assert after[4] == pytest.approx(before[4] + 0.1) and after[6] == pytest.approx(before[6] - 0.5)
+    with pytest.raises(ValueError, match="finite"):
+        env.kick([np.nan, 0, 0, 0])
