@@ -8,7 +8,8 @@
 - `agents.compare`: the passive vs learned table in ``docs/MARGINS.md``, ``bound-env compare``.
 
 Importing the package registers ``PassiveBoundLiteral-v0``: ``PassiveBound-v0`` on the
-*literal* reading of Table II (``gait="paper-literal"``), so that rl-zoo3-style configs can
+*literal* reading of Table II, started on that reading's periodic (passively unstable) gait
+(``gait="literal-cycle"``), so that rl-zoo3-style configs can
 key its hyperparameters by their own environment id
 (``rl_zoo3 train --env PassiveBoundLiteral-v0 --gym-packages agents``).
 """
@@ -29,7 +30,7 @@ def register_envs() -> None:
     register(
         id=LITERAL_ENV_ID,
         entry_point="bound_env.env:PassiveBoundEnv",
-        kwargs={"gait": "paper-literal"},
+        kwargs={"gait": "literal-cycle"},
         max_episode_steps=bound_env.MAX_EPISODE_STEPS,
     )
 

@@ -50,7 +50,7 @@ def test_config_file_parses_in_rl_zoo3_format():
     assert [c.__name__ for c, _ in spec.callbacks] == ["NoiseCurriculumCallback",
                                                         "BasinValidationCallback"]
     literal = preprocess(load_hyperparams(DEFAULT_CONFIG, "PassiveBoundLiteral-v0"))
-    assert literal.env_kwargs["gait"] == "paper-literal"
+    assert literal.env_kwargs["gait"] == "literal-cycle"
     assert literal.algo_kwargs["n_steps"] == spec.algo_kwargs["n_steps"]
 
 
