@@ -686,7 +686,8 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
     for k, (r, lab) in enumerate(zip(results, labels, strict=True)):
         vals = [r["basin"][c][s]["rel"] for c in Z_LABELS for s in ("+", "-")]
         ax.bar(x + (k - (len(results) - 1) / 2) * wbar, vals, wbar, label=lab)
-    ax.set_yscale("log")
+    if any(r["basin"][c][s]["rel"] > 0 for r in results for c in Z_LABELS for s in "+-"):
+        ax.set_yscale("log")  # an empty basin (all zero) has nothing to put on a log axis
     ax.set_xticks(x, names, rotation=45, ha="right")
     ax.set_ylabel("largest relative perturbation")
     ax.set_title("Basin along each apex component (capped at 1)")
