@@ -894,14 +894,18 @@ def refine_emax_crossing(base: Params, q0: dict, q1: dict, pins, n: int = 12) ->
 # --------------------------------------------------------------------------------------------
 
 
+def _kept_meta(gait) -> dict:
+    """The source gait file's notes that a regenerated gait file carries over."""
+    return {k: v for k, v in (gait.meta or {}).items()
+            if k in ("h_b_unused", "h_f_unused", "reading")}  # fmt: skip
+
+
 def write_gait_files(results: dict, gaits_dir: Path = GAITS_DIR) -> list[Path]:
     """default.yaml (the published gait's fixed point, reproducing reading) and
     literal-cycle.yaml (the literal reading's periodic gait at the published parameters)."""
     written = []
     gr = reproducing_gait()
     fp = results["reproducing"]["fixed_point"]
-    meta_keep = {k: v for k, v in (gr.meta or {}).items()
-                 if k in ("h_b_unused", "h_f_unused", "reading")}  # fmt: skip
     written.append(save_gait(
         gaits_dir / "default.yaml", gr.params, z_star=np.asarray(fp["z_si"]),
         z_published=gr.z_published,
@@ -911,13 +915,11 @@ def write_gait_files(results: dict, gaits_dir: Path = GAITS_DIR) -> list[Path]:
         residual=float(fp["residual"]), eigenvalues=fp["eigenvalues"],
         emax=float(fp["emax"]), phases=fp["phases"],
         durations=[float(d) for d in fp["durations"]],
-        strides_to_converge=fp["strides_to_converge"], **meta_keep,
+        strides_to_converge=fp["strides_to_converge"], **_kept_meta(gr),
     ))  # fmt: skip
     lit = results["literal"].get("fixed_point")
     if lit:
         gl = literal_gait()
-        meta_l = {k: v for k, v in (gl.meta or {}).items()
-                  if k in ("h_b_unused", "h_f_unused", "reading")}  # fmt: skip
         written.append(save_gait(
             gaits_dir / "literal-cycle.yaml", gl.params, z_star=np.asarray(lit["z_si"]),
             z_published=gl.z_published,
@@ -928,7 +930,7 @@ def write_gait_files(results: dict, gaits_dir: Path = GAITS_DIR) -> list[Path]:
             "eigenvalue outside the unit circle",
             residual=float(lit["residual"]), eigenvalues=lit["eigenvalues"],
             emax=float(lit["emax"]), phases=lit["phases"],
-            durations=[float(d) for d in lit["durations"]], **meta_l,
+            durations=[float(d) for d in lit["durations"]], **_kept_meta(gl),
         ))  # fmt: skip
     return written
 
