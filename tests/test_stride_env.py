@@ -1,0 +1,221 @@
+"""Tests of PassiveBoundStride-v0: zero action is the passive Poincare map, the torque profile is
+applied event-accurately (checked against the reference back-end), bases, rewards, failures,
+arguments, seeding and both env checkers."""
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import bound_env
+from bound_env.dynamics import make_aux
+from bound_env.hybrid import (
+    APEX,
+    FAILURES,
+    N_FLAGS,
+    TIME_UP,
+    simulate_reference,
+    simulate_stride,
+    state_from_z,
+    z_from_state,
+)
+from bound_env.params import P_TAU, load_gait
+from bound_env.stride_task import make_basis
+from bound_env.task import APEX_SCALES
+
+gym.register_envs(bound_env)
+ENV_ID = "PassiveBoundStride-v0"
+GAIT = load_gait("default")
+Z_STAR = GAIT.z0
+
+
+def make(**kw):
+    return gym.make(ENV_ID, **kw)
+
+
+def test_zero_action_is_exactly_the_passive_poincare_map():
+    env = make(reset_noise_scale=0.0)
+    obs, info = env.reset(seed=0)
+    np.testing.assert_array_equal(info["start_z"], Z_STAR)
+    z = Z_STAR + np.array([0.004, 0.02, -0.03, 0.03, 0.3, -0.2])  # off the cycle
+    env.reset(options={"apex_state": z})
+    _, reward, terminated, _, info = env.step(np.zeros(4, np.float32))
+    ref = simulate_stride(z, GAIT.params, rtol=1e-10, atol=1e-10)
+    assert not terminated and ref.failure is None
+    np.testing.assert_allclose(info["apex_z"], ref.z1, rtol=0, atol=1e-12)
+    assert info["period"] == pytest.approx(ref.t_end, abs=1e-12)
+    assert info["effort"] == 0.0 and info["reward_ctrl"] == 0.0
+    # and through the reference back-end (solve_ivp), to the integrator tolerance
+    slow = simulate_stride(z, GAIT.params, backend="reference")
+    np.testing.assert_allclose(info["apex_z"], slow.z1, rtol=0, atol=1e-7)
+
+
+def test_fifty_zero_action_strides_stay_on_the_cycle():
+    env = make(reset_noise_scale=0.0)
+    env.reset(seed=0)
+    worst = 0.0
+    for _ in range(50):
+        obs, reward, terminated, truncated, info = env.step(np.zeros(4, np.float32))
+        assert not terminated and not truncated
+        worst = max(worst, float(np.max(np.abs(info["apex_z"] - Z_STAR))))
+        assert reward == pytest.approx(1.0, abs=1e-12)
+    assert worst < 1e-9
+    np.testing.assert_allclose(obs, Z_STAR.astype(np.float32), rtol=1e-6)
+
+
+def reference_profile(z, edges, taus, params):
+    """The same profile with the reference back-end (solve_ivp): one call per window, the last
+    torque held until the apex."""
+    y = state_from_z(z)
+    aux = make_aux(params.to_array())
+    flags = np.zeros(N_FLAGS, dtype=np.bool_)
+    t = 0.0
+    for j, tau in enumerate(taus):
+        aux[P_TAU] = tau
+        t_end = edges[j + 1] if j < len(taus) - 1 else 2.0
+        status, t, y, _, _ = simulate_reference(y, aux, flags, t0=t, t_end=t_end)
+        if status != TIME_UP:
+            break
+    assert status == APEX
+    return z_from_state(y), t
+
+
+@pytest.mark.parametrize("basis", ["windows", "phases", "hats"])
+def test_profile_is_applied_event_accurately(basis):
+    """A profile whose window edges fall inside stance phases, on a stride longer than the
+    nominal one (so the last window holds past T), matches the reference back-end."""
+    env = make(basis=basis, K=None if basis == "phases" else 4).unwrapped
+    z = Z_STAR + np.array([0.01, 0.0, 0.0, -0.03, 0.0, 0.0])  # higher, slower: a longer stride
+    env.reset(options={"apex_state": z})
+    u = np.array([0.2, 0.2, -0.3, 0.3, 0.2][: env.task.K], np.float32)
+    _, _, terminated, _, info = env.step(u)
+    assert not terminated
+    assert info["period"] > env.basis.period  # past the nominal period
+    taus = env.basis.torques(u.astype(float), 80.0)
+    np.testing.assert_array_equal(info["tau_windows"], taus)
+    z_ref, t_ref = reference_profile(z, env.basis.edges, taus, GAIT.params)
+    np.testing.assert_allclose(info["apex_z"], z_ref, rtol=0, atol=2e-7)
+    assert info["period"] == pytest.approx(t_ref, abs=1e-9)
+    # the profile changed the stride: it is not the passive map
+    passive = simulate_stride(z, GAIT.params).z1
+    assert np.max(np.abs(info["apex_z"] - passive)) > 1e-3
+    # effort = time average of |tau| over the stride
+    dt = np.diff(np.append(env.basis.edges[:-1], info["period"]))
+    assert info["effort"] == pytest.approx(np.dot(np.abs(taus), dt) / info["period"], rel=1e-9)
+
+
+def test_equal_profiles_on_different_grids_give_the_same_stride():
+    """[c, c, d, d] on 4 windows is [c, d] on 2 windows; equal hat coefficients are a constant
+    torque (a partition of unity), as is a constant on any grid."""
+    z = Z_STAR + np.array([0.003, 0.01, 0.0, 0.02, 0.1, 0.0])
+
+    def apex(u, **kw):
+        env = make(**kw).unwrapped
+        env.reset(options={"apex_state": z})
+        return env.step(np.array(u, np.float32))[4]["apex_z"]
+
+    np.testing.assert_allclose(
+        apex([0.25, 0.25, -0.5, -0.5], K=4), apex([0.25, -0.5], K=2), rtol=0, atol=1e-8
+    )
+    const = simulate_stride(z, GAIT.params, tau=0.25 * 80.0).z1
+    np.testing.assert_array_equal(apex([0.25] * 3, K=3), const)
+    np.testing.assert_allclose(apex([0.25] * 5, basis="hats", K=5), const, rtol=0, atol=1e-8)
+
+
+def test_bases():
+    T = 0.4
+    w = make_basis("windows", 4, T)
+    np.testing.assert_allclose(w.edges, [0, 0.1, 0.2, 0.3, 0.4])
+    taus = np.array([1.0, 2.0, 3.0, 4.0])
+    assert w.average(taus, 0.05, 0.15) == pytest.approx(1.5)
+    assert w.average(taus, 0.35, 0.55) == pytest.approx(4.0)  # the last window holds
+    assert w.average(taus, 0.2, 0.2) == 3.0
+    h = make_basis("hats", 3, T)
+    np.testing.assert_allclose(h.phi.sum(axis=1), 1.0)  # partition of unity
+    assert h.K == 3 and h.phi[0, 0] > h.phi[7, 0] > 0 and h.phi[8, 0] == 0
+    p = make_basis("phases", None, T, [0.1, 0.2, 0.1])
+    np.testing.assert_allclose(p.edges, [0, 0.1, 0.3, 0.4])
+    env = make(basis="phases").unwrapped
+    assert env.task.K == len(GAIT.meta["phases"]) == 5
+    np.testing.assert_allclose(np.diff(env.basis.edges), GAIT.meta["durations"], atol=1e-8)
+
+
+def test_bad_arguments_and_actions():
+    for bad, msg in (
+        ({"basis": "splines"}, "basis"),
+        ({"K": 0}, "K"),
+        ({"K": 2.5}, "K"),
+        ({"basis": "phases", "K": 3}, "phases"),
+        ({"basis": "hats", "K": 1}, "hats"),
+        ({"max_torque": -1.0}, "max_torque"),
+        ({"rtol": 0.0}, "rtol"),
+        ({"reset_noise_scale": np.nan}, "reset_noise_scale"),
+    ):
+        with pytest.raises(ValueError, match=msg):
+            make(**bad)
+    env = make()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.array([0, np.nan, 0, 0], np.float32))
+    with pytest.raises(ValueError, match="K=4"):
+        env.step(np.zeros(3))
+    with pytest.raises(ValueError, match="apex_state"):
+        env.reset(options={"apex_state": [1.0, 2.0]})
+
+
+def test_rewards_clipping_and_failures():
+    env = make(tracking_cost_weight=2.0, ctrl_cost_weight=0.3, alive_reward=0.5)
+    env.reset(seed=4)
+    u = np.array([0.2, -0.4, 3.0, 0.0], np.float32)  # 3 is clipped to 1
+    _, reward, terminated, _, info = env.step(u)
+    assert not terminated
+    assert reward == info["reward_alive"] + info["reward_tracking"] + info["reward_ctrl"]
+    assert info["reward_alive"] == 0.5
+    cost = np.sum(((info["apex_z"] - Z_STAR) / APEX_SCALES) ** 2)
+    assert info["reward_tracking"] == pytest.approx(-2.0 * cost, rel=1e-12)
+    assert info["reward_ctrl"] == pytest.approx(-0.3 * np.mean(np.square([0.2, -0.4, 1.0, 0])))
+    assert info["tau_windows"][2] == 80.0
+    # a full reverse torque all stride long makes it fall, with a reason
+    env.reset(seed=0)
+    for _ in range(20):
+        obs, reward, terminated, _, info = env.step(-np.ones(4, np.float32))
+        if terminated:
+            break
+    assert terminated and info["failure"] in FAILURES and info["reward_alive"] == 0.0
+    assert "apex_z" not in info and env.observation_space.contains(obs)
+    z = Z_STAR.copy()
+    z[3] = -0.5
+    _, info = env.reset(options={"apex_state": z})
+    assert info["failure"] == "moving_backwards"
+    _, _, terminated, _, info = env.step(np.zeros(4, np.float32))
+    assert terminated and info["failure"] == "moving_backwards"
+
+
+def test_seeding_noise_and_overrides():
+    a, b = make(), make()
+    za = a.reset(seed=5)[1]["start_z"]
+    np.testing.assert_array_equal(za, b.reset(seed=5)[1]["start_z"])
+    step = gym.make("PassiveBound-v0")  # the same start as the step env from the same seed
+    np.testing.assert_array_equal(za, step.reset(seed=5)[1]["start_z"])
+    assert np.all(np.abs((za - Z_STAR) / APEX_SCALES) <= 0.5)
+    over = make(gait_overrides={"alpha_deg": 2.0}, reset_noise_scale=0.0).unwrapped
+    assert over.params.alpha == pytest.approx(np.radians(2.0))
+    np.testing.assert_array_equal(over.z_ref, Z_STAR)
+    over.reset(seed=0)
+    z1 = over.step(np.zeros(4))[4]["apex_z"]
+    np.testing.assert_array_equal(z1, simulate_stride(Z_STAR, over.params).z1)
+
+
+@pytest.mark.parametrize("kw", [{}, {"basis": "phases"}, {"basis": "hats", "K": 6}])
+def test_gymnasium_and_sb3_env_checkers_pass_without_warnings(kw):
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = make(**kw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env.unwrapped)
+        sb3_check_env(env.unwrapped)
+        sb3_check_env(env)
+    env.close()
