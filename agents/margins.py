@@ -63,6 +63,14 @@ from pathlib import Path
 
 import numpy as np
 
+from bound_env.analysis.numerics import (  # noqa: F401 - bisect_threshold: re-exported
+    bisect_threshold,
+    fd_jacobian,
+    map_fixed_point,
+    sorted_eigenvalues,
+)
+from bound_env.cache import TaskCache
+
 from .policy import MLPController, ZeroController, load_controller
 
 ENV_ID = "PassiveBound-v0"
@@ -110,88 +118,20 @@ WINDOW_SCAN = {"alpha_deg": (0.005, 4.0), "kc": (0.5, 256.0)}
 
 
 # --------------------------------------------------------------------------------------------
-# Generic numerics (tested on known answers)
+# Numerics: `bound_env.analysis.numerics` (the names below were defined here and stay importable)
 # --------------------------------------------------------------------------------------------
 
 
-def bisect_threshold(ok, lo: float, hi: float, iters: int, log: bool = True):
-    """Largest s in [lo, hi] with ``ok(s)``, assuming ok holds below a threshold and fails
-    above. Returns (s, capped): (hi, True) if ok(hi); (0.0, False) if not ok(lo); else the
-    last ``ok`` point after ``iters`` bisection steps (on log s if ``log``)."""
-    if ok(hi):
-        return hi, True
-    if not ok(lo):
-        return 0.0, False
-    for _ in range(iters):
-        mid = math.sqrt(lo * hi) if log else 0.5 * (lo + hi)
-        if ok(mid):
-            lo = mid
-        else:
-            hi = mid
-    return lo, False
-
-
 def central_jacobian(f, z, steps) -> np.ndarray:
-    """Jacobian of f at z by central differences with per-component ``steps``."""
-    z = np.asarray(z, dtype=float)
-    cols = []
-    for i, h in enumerate(steps):
-        e = np.zeros_like(z)
-        e[i] = h
-        fp, fm = f(z + e), f(z - e)
-        if fp is None or fm is None:
-            raise RuntimeError(f"the map failed within {h:g} of the fixed point (component {i})")
-        cols.append((np.asarray(fp) - np.asarray(fm)) / (2.0 * h))
-    return np.array(cols).T
+    """Jacobian of f at z by central differences with per-component ``steps`` (no one-sided
+    fallback: a failing side raises). Alias of `numerics.fd_jacobian` with ``one_sided=False``."""
+    return fd_jacobian(f, z, steps, one_sided=False)
 
 
 def find_fixed_point(f, z0, steps, settle: int = 60, newton_iters: int = 8, tol: float = 1e-11):
-    """Fixed point of the map f: iterate ``settle`` times (stopping early when converged or
-    when the residual grows), then Newton with a central-difference Jacobian.
-
-    Returns (z, residual max|f(z) - z|, Jacobian at z). Raises RuntimeError if f fails.
-    """
-    z = np.asarray(z0, dtype=float)
-    fz = f(z)
-    if fz is None:
-        raise RuntimeError("the map fails at the start point")
-    res = np.max(np.abs(fz - z))
-    best = (res, z, fz)
-    for _ in range(settle):
-        if res < tol:
-            break
-        z, fz = fz, f(fz)
-        if fz is None:
-            break
-        res = np.max(np.abs(fz - z))
-        if res < best[0]:
-            best = (res, z, fz)
-        elif res > 10 * best[0]:
-            break
-    res, z, fz = best
-    jac = central_jacobian(f, z, steps)
-    for _ in range(newton_iters):
-        if res < tol:
-            break
-        try:
-            dz = np.linalg.solve(jac - np.eye(len(z)), -(fz - z))
-        except np.linalg.LinAlgError:
-            break
-        z_new = z + dz
-        f_new = f(z_new)
-        if f_new is None:
-            break
-        r_new = np.max(np.abs(f_new - z_new))
-        if r_new >= res:
-            break
-        z, fz, res = z_new, f_new, r_new
-        jac = central_jacobian(f, z, steps)
-    return z, float(res), jac
-
-
-def sorted_eigenvalues(jac) -> np.ndarray:
-    lam = np.linalg.eigvals(np.asarray(jac, dtype=float))
-    return lam[np.lexsort((-lam.imag, -np.abs(lam)))]
+    """Old name of `bound_env.analysis.numerics.map_fixed_point` (returns (z, residual,
+    Jacobian)); `bound_env.analysis.find_fixed_point` is the Poincare map's."""
+    return tuple(map_fixed_point(f, z0, steps, settle=settle, newton_iters=newton_iters, tol=tol))
 
 
 def random_directions(n: int, seed: int = 12345) -> np.ndarray:
@@ -336,8 +276,8 @@ def task_cycle(setup: Setup) -> dict:
     """Closed-loop fixed point, multipliers, effort on the cycle."""
     loop = _loop(setup)
     b = setup.budget
-    z_cl, res, jac = find_fixed_point(loop.map, setup.z_star, fd_steps(setup.z_star),
-                                      settle=b.settle_strides, newton_iters=b.newton_iters)
+    z_cl, res, jac = map_fixed_point(loop.map, setup.z_star, fd_steps(setup.z_star),
+                                     settle=b.settle_strides, newton_iters=b.newton_iters)
     lam = sorted_eigenvalues(jac)
     out = loop.stride(z_cl)
     return {
@@ -458,40 +398,17 @@ class SerialExecutor(cf.Executor):
         return fut
 
 
-class Cache:
-    """Task results as JSON lines, keyed by (setup key, task)."""
-
-    def __init__(self, path: Path | None):
-        self.path = path
-        self.data: dict = {}
-        if path is not None and path.exists():
-            for line in path.read_text().splitlines():
-                try:
-                    rec = json.loads(line)
-                    self.data[rec["key"]] = rec["result"]
-                except (json.JSONDecodeError, KeyError):
-                    continue
-
-    @staticmethod
-    def key(setup_key: str, name: str, args: tuple) -> str:
-        return f"{setup_key}/{name}/{json.dumps(list(args))}"
-
-    def get(self, key):
-        return self.data.get(key)
-
-    def put(self, key, result) -> None:
-        self.data[key] = result
-        if self.path is not None:
-            with self.path.open("a") as f:
-                f.write(json.dumps({"key": key, "result": result}) + "\n")
+def task_key(setup_key: str, name: str, args: tuple) -> str:
+    """Cache key of one task: the setup's settings hash, the task name and its arguments."""
+    return f"{setup_key}/{name}/{json.dumps(list(args))}"
 
 
-def _run_all(executor, setup: Setup, jobs: list, cache: Cache, progress: bool,
+def _run_all(executor, setup: Setup, jobs: list, cache: TaskCache, progress: bool,
              desc: str) -> dict:
     """Run (name, args) jobs through the executor, using and filling the cache."""
     results, pending = {}, {}
     for name, args in jobs:
-        key = Cache.key(setup.key, name, args)
+        key = task_key(setup.key, name, args)
         hit = cache.get(key)
         if hit is not None:
             results[(name, args)] = hit
@@ -545,7 +462,7 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
     out_dir = Path(out) if out is not None else None
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-    cache = Cache(out_dir / "cache.jsonl" if (out_dir is not None and use_cache) else None)
+    cache = TaskCache(out_dir / "cache.jsonl" if (out_dir is not None and use_cache) else None)
     setup = Setup(controller=controller, gait=gait, budget=budget, z_star=z_star,
                   key=setup_key(controller, gait, budget))
     own = executor is None

@@ -196,22 +196,16 @@ class BasinValidationCallback(BaseCallback):
         return ctrl
 
     def score(self, ctrl) -> float:
+        from bound_env.analysis.numerics import bisect_threshold, map_fixed_point
         from bound_env.params import load_gait
 
-        from .margins import (
-            BASIN_HI,
-            BASIN_LO,
-            ClosedLoop,
-            bisect_threshold,
-            fd_steps,
-            find_fixed_point,
-        )
+        from .margins import BASIN_HI, BASIN_LO, ClosedLoop, fd_steps
 
         gait = self.env_kwargs.get("gait", "default")
         loop = ClosedLoop(ctrl, gait)
         zs = np.asarray(load_gait(gait).z0, dtype=float)
         try:
-            zc, res, _ = find_fixed_point(loop.map, zs, fd_steps(zs), settle=30, newton_iters=4)
+            zc, res, _ = map_fixed_point(loop.map, zs, fd_steps(zs), settle=30, newton_iters=4)
         except RuntimeError:
             return 0.0
         if res > 1e-6:

@@ -30,6 +30,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..params import GAIT_KEYS, Z_NAMES, Params, z_to_paper
+from .numerics import (  # noqa: F401 - NewtonOutcome, scaled_rcond: re-exported (old home)
+    NEWTON_MAX_ITER,
+    NEWTON_TOL,
+    NewtonOutcome,
+    inf_norm,
+    newton,
+    scaled_rcond,
+)
 from .poincare import (
     PAPER_STRIDES,
     IterationResult,
@@ -38,94 +46,10 @@ from .poincare import (
     iterate,
     stride,
 )
-from .stability import DZ, fd_jacobian, recovery, stability
+from .stability import DZ, recovery, stability
 
-NEWTON_TOL = 1e-10  # converged when max |F| <= this (SI; J for an energy pin)
-NEWTON_MAX_ITER = 50  # Newton iterations
-MAX_HALVINGS = 16  # line-search halvings of one Newton step before giving up
-ARMIJO = 1e-4  # sufficient decrease: ||F_new|| <= (1 - ARMIJO lambda) ||F||
-SINGULAR_RCOND = 1e-8  # column-scaled s_min / s_max below this: singular (FD noise ~1e-8)
 FREE_KEYS = ("alpha_deg", "gamma_b_deg", "gamma_f_deg", "kb", "kf")  # the usual free keys
 PIN_NAMES = ("energy",) + Z_NAMES
-
-
-# --------------------------------------------------------------------------------------------
-# A bounded, globalised Newton method for residual functions that can fail
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass
-class NewtonOutcome:
-    u: np.ndarray  # last iterate (the solution when converged)
-    residual: np.ndarray | None  # F(u), None if the stride at u failed
-    converged: bool
-    reason: str
-    iterations: int
-    jacobian: np.ndarray | None = None  # the last Jacobian of F computed
-    history: list = field(default_factory=list)  # per iteration: |F|, step length lambda
-
-
-def _inf_norm(r) -> float:
-    return math.inf if r is None else float(np.max(np.abs(r)))
-
-
-def newton(residual, u0, steps, tol=NEWTON_TOL, max_iter=NEWTON_MAX_ITER,
-           max_halvings=MAX_HALVINGS, jacobian=None) -> NewtonOutcome:  # fmt: skip
-    """Solve F(u) = 0 (square, or overdetermined and consistent) by damped Newton.
-
-    ``residual(u)`` returns F or None where the stride fails; ``steps`` are the central
-    difference steps per unknown; ``jacobian(u)`` may replace the differences. The line
-    search halves lambda until ||F(u + lambda du)||_2 <= (1 - 1e-4 lambda) ||F(u)||_2.
-    """
-    u = np.array(u0, dtype=float)
-    r = residual(u)
-    hist: list = []
-    if r is None:
-        return NewtonOutcome(u, None, False, "the start falls", 0, history=hist)
-    jac = None
-    for it in range(max_iter + 1):
-        norm = _inf_norm(r)
-        hist.append({"residual": norm})
-        if norm <= tol:
-            return NewtonOutcome(u, r, True, "converged", it, jac, hist)
-        if it == max_iter:
-            break
-        try:
-            jac = jacobian(u) if jacobian is not None else fd_jacobian(residual, u, steps)
-        except StrideFailure as e:
-            return NewtonOutcome(u, r, False, f"stride failed while differentiating: "
-                                 f"{e.reason}", it, jac, hist)  # fmt: skip
-        if not np.all(np.isfinite(jac)):
-            return NewtonOutcome(u, r, False, "non-finite Jacobian", it, jac, hist)
-        rcond = scaled_rcond(jac)
-        if jac.shape[0] == jac.shape[1] and rcond < SINGULAR_RCOND:
-            return NewtonOutcome(u, r, False, f"singular Jacobian (scaled rcond {rcond:.1e}): "
-                                 "the solution is not isolated or the pins are redundant; "
-                                 "free fewer parameters or add a pin", it, jac, hist)  # fmt: skip
-        du = np.linalg.lstsq(jac, -r, rcond=None)[0]
-        lam, n2 = 1.0, float(np.linalg.norm(r))
-        for _ in range(max_halvings + 1):
-            r_new = residual(u + lam * du)
-            if r_new is not None and np.linalg.norm(r_new) <= (1.0 - ARMIJO * lam) * n2:
-                break
-            lam *= 0.5
-        else:
-            return NewtonOutcome(u, r, False, f"line search failed: no decrease of |F| = "
-                                 f"{norm:.3e} along the Newton step after {max_halvings} "
-                                 "halvings", it, jac, hist)  # fmt: skip
-        hist[-1]["lambda"] = lam
-        u, r = u + lam * du, r_new
-    return NewtonOutcome(u, r, False, f"no convergence in {max_iter} iterations "
-                         f"(|F| = {_inf_norm(r):.3e})", max_iter, jac, hist)  # fmt: skip
-
-
-def scaled_rcond(jac) -> float:
-    """s_min / s_max of the Jacobian with unit-norm columns (independent of the units)."""
-    norms = np.linalg.norm(jac, axis=0)
-    if np.any(norms == 0.0):
-        return 0.0
-    s = np.linalg.svd(jac / norms, compute_uv=False)
-    return float(s[-1] / s[0])
 
 
 # --------------------------------------------------------------------------------------------
@@ -272,7 +196,7 @@ def find_fixed_point(
         p_out = params
     result = FixedPointResult(
         z=out.u[:6].copy(), params=p_out,
-        residual=_inf_norm(None if out.residual is None else out.residual[:6]),
+        residual=inf_norm(None if out.residual is None else out.residual[:6]),
         converged=out.converged, reason=reason, iterations=out.iterations, free=free_vals,
         history=out.history,
     )  # fmt: skip

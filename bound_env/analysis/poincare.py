@@ -26,19 +26,17 @@ import numpy as np
 from ..dynamics import make_aux, total_energy
 from ..hybrid import StrideResult, simulate_stride, state_from_z
 from ..params import Params
+from .numerics import MapFailure
 
 ANALYSIS_TOL = 1e-12  # rtol = atol of the integrator for every analysis stride
 PAPER_STRIDES = 100  # strides simulated before the convergence check (III.D.4 C, IV.B.3)
 PAPER_CONV_TOL = 1e-5  # converged iff max |z_99 - z_100| < this (SI units), ibid.
 
 
-class StrideFailure(RuntimeError):
+class StrideFailure(MapFailure):
     """A stride of the Poincare map failed (the robot fell, or the integration did)."""
 
-    def __init__(self, reason: str, z=None):
-        super().__init__(f"stride failed: {reason}")
-        self.reason = reason
-        self.z = z
+    prefix = "stride failed"
 
 
 def sim_options(**sim_kw) -> dict:

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..params import Params
+from .numerics import MapFailure, fd_jacobian, sorted_eigenvalues  # both once defined here
 from .poincare import StrideFailure, poincare_map, sim_options, stride
 
 DZ = 1e-6  # central-difference step of eq. (23), SI units
@@ -24,38 +25,12 @@ RECOVERY_MAX_STRIDES = 300  # bound on the strides of one recovery run
 REAL_EIG_TOL = 1e-7  # |Im lambda| below this counts as a real eigenvalue
 
 
-def fd_jacobian(fun, u, steps) -> np.ndarray:
-    """Central differences of a vector function (eq. 23), one column per entry of u.
-
-    ``fun(u)`` returns an array or None (a failed stride). Where one side fails the
-    one-sided difference is used; where both fail, `StrideFailure` is raised.
-    """
-    u = np.asarray(u, dtype=float)
-    f0 = None
-    cols = []
-    for i, h in enumerate(np.broadcast_to(steps, u.shape)):
-        e = np.zeros_like(u)
-        e[i] = h
-        fp, fm = fun(u + e), fun(u - e)
-        if fp is not None and fm is not None:
-            cols.append((fp - fm) / (2.0 * h))
-            continue
-        if f0 is None:
-            f0 = fun(u)
-        if f0 is None:
-            raise StrideFailure("stride failed at the differentiation point", u)
-        if fp is not None:
-            cols.append((fp - f0) / h)
-        elif fm is not None:
-            cols.append((f0 - fm) / h)
-        else:
-            raise StrideFailure(f"strides fail on both sides of component {i}", u)
-    return np.column_stack(cols)
-
-
 def jacobian_fd(z, params: Params, dz: float = DZ, **sim_kw) -> np.ndarray:
     """The linearised Poincare map by central differences, eqs. (22)-(23)."""
-    return fd_jacobian(lambda zz: poincare_map(zz, params, **sim_kw), z, dz)
+    try:
+        return fd_jacobian(lambda zz: poincare_map(zz, params, **sim_kw), z, dz)
+    except MapFailure as e:
+        raise StrideFailure(e.reason, e.z) from e
 
 
 def jacobian(z, params: Params, method: str = "fd", dz: float = DZ, **sim_kw) -> np.ndarray:
@@ -72,12 +47,6 @@ def jacobian(z, params: Params, method: str = "fd", dz: float = DZ, **sim_kw) ->
             raise StrideFailure(str(e), z) from e
         return np.asarray(out[0] if isinstance(out, tuple) else out, dtype=float)
     raise ValueError(f"jacobian method must be 'fd' or 'variational', got {method!r}")
-
-
-def sorted_eigenvalues(jac) -> np.ndarray:
-    """Eigenvalues of nabla P, largest modulus first (ties: positive imaginary part first)."""
-    lam = np.linalg.eigvals(np.asarray(jac, dtype=float))
-    return lam[np.lexsort((-lam.imag, -np.abs(lam)))]
 
 
 @dataclass
