@@ -294,3 +294,19 @@ def test_continuation_with_freed_slope_keeps_the_energy(gait, fixed):
         p = gait.params.with_values(kc=pt.value, alpha_deg=pt.free["alpha_deg"])
         assert abs(apex_energy(pt.z, p) - e0) < 1e-9
         assert _residual(pt.z, p) < 1e-10
+
+
+def test_continuation_resumes_after_a_row_cut_short(gait, fixed, tmp_path):
+    """A kill in the middle of appending a row: the next run warns, drops that row and
+    recomputes it, and ends with the same branch."""
+    full = continue_branch(gait.params, fixed.z, "kc", 297.0, step=1.0, out_dir=tmp_path)
+    csv_path, js = tmp_path / "branch.csv", tmp_path / "branch.json"
+    text = csv_path.read_text()
+    csv_path.write_text(text[: len(text) - 40])  # the last row loses its tail
+    state = json.loads(js.read_text())
+    js.write_text(json.dumps({**state, "status": "running"}))
+    with pytest.warns(RuntimeWarning, match="truncated last line"):
+        again = continue_branch(gait.params, fixed.z, "kc", 297.0, step=1.0, out_dir=tmp_path)
+    assert again.reached and [p.value for p in again.points] == [295.0, 296.0, 297.0]
+    assert np.array_equal(again.z(), full.z())
+    assert [p.value for p in read_branch_csv(csv_path, "kc")] == [295.0, 296.0, 297.0]

@@ -24,6 +24,7 @@ reuses a finished branch and resumes an unfinished one.
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import sys
@@ -32,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cache import append_line, atomic_write, read_lines
 from ..params import GAIT_KEYS, Params, z_to_paper, z_to_si
 from .fixed_point import (
     NEWTON_TOL,
@@ -153,21 +155,28 @@ def point_row(i: int, pt: BranchPoint, free) -> list:
                   repr(pt.step), int(pt.fold), int(pt.pd), int(pt.ns)]  # fmt: skip
 
 
+def csv_line(row) -> str:
+    """One CSV row as `csv.writer` writes it (with its ``\r\n``)."""
+    buf = io.StringIO()
+    csv.writer(buf).writerow(row)
+    return buf.getvalue()
+
+
 def read_branch_csv(path, param: str, free=()) -> list[BranchPoint]:
-    """The points of a ``branch.csv`` written by `continue_branch`."""
+    """The points of a ``branch.csv`` written by `continue_branch` (a last row cut short by a
+    kill is skipped with a warning)."""
     pts = []
-    with open(path, newline="") as f:
-        for r in csv.DictReader(f):
-            lam = np.array([float(r[f"lambda{i}_re"]) + 1j * float(r[f"lambda{i}_im"])
-                            for i in range(1, 7)])  # fmt: skip
-            pts.append(BranchPoint(
-                value=float(r[param]), z=z_to_si([float(r[c]) for c in Z_COLUMNS]),
-                residual=float(r["residual"]), eigenvalues=None if np.isnan(lam).any() else lam,
-                emax=float(r["emax"]), phases=r["phases"].split("-"),
-                period=float(r["period_s"]), free={k: float(r[k]) for k in free},
-                iterations=int(r["iterations"]), step=float(r["step"]),
-                fold=r["fold"] == "1", pd=r["pd"] == "1", ns=r["ns"] == "1",
-            ))  # fmt: skip
+    for r in csv.DictReader(read_lines(path)):
+        lam = np.array([float(r[f"lambda{i}_re"]) + 1j * float(r[f"lambda{i}_im"])
+                        for i in range(1, 7)])  # fmt: skip
+        pts.append(BranchPoint(
+            value=float(r[param]), z=z_to_si([float(r[c]) for c in Z_COLUMNS]),
+            residual=float(r["residual"]), eigenvalues=None if np.isnan(lam).any() else lam,
+            emax=float(r["emax"]), phases=r["phases"].split("-"),
+            period=float(r["period_s"]), free={k: float(r[k]) for k in free},
+            iterations=int(r["iterations"]), step=float(r["step"]),
+            fold=r["fold"] == "1", pd=r["pd"] == "1", ns=r["ns"] == "1",
+        ))  # fmt: skip
     return pts
 
 
@@ -184,14 +193,12 @@ class _Writer:
         self.dir.mkdir(parents=True, exist_ok=True)
         self.csv = self.dir / "branch.csv"
         if n_existing == 0:
-            with open(self.csv, "w", newline="") as f:
-                csv.writer(f).writerow(csv_header(param, free))
+            atomic_write(self.csv, csv_line(csv_header(param, free)))
         self.status("running")
 
     def add(self, pt: BranchPoint):
         if self.dir is not None:
-            with open(self.csv, "a", newline="") as f:
-                csv.writer(f).writerow(point_row(self.i, pt, self.free))
+            append_line(self.csv, csv_line(point_row(self.i, pt, self.free)), end="")
         self.i += 1
 
     def status(self, status, reason=None, reached=None):
@@ -199,7 +206,7 @@ class _Writer:
             return
         data = {"config": self.config, "status": status, "reason": reason, "reached": reached,
                 "state": self.state}  # fmt: skip
-        (self.dir / "branch.json").write_text(json.dumps(data, indent=1))
+        atomic_write(self.dir / "branch.json", json.dumps(data, indent=1))
 
 
 def load_cached(out_dir, config) -> tuple[dict | None, list]:

@@ -29,7 +29,6 @@ Units: z in SI inside, paper units [m, deg, deg, m/s, deg/s, deg/s] in the cache
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import shutil
@@ -40,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cache import atomic_write, settings_hash
 from ..params import GAITS_DIR, Params, load_gait, save_gait, z_to_paper, z_to_si
 from .fixed_point import find_fixed_point, ladder, make_residual, newton, param_step, slope_secant
 from .poincare import StrideFailure, apex_energy, stride
@@ -116,8 +116,7 @@ def jsonable(x):
 
 
 def config_hash(config: dict) -> str:
-    text = json.dumps(jsonable(config), sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:12]
+    return settings_hash(jsonable(config), length=12)
 
 
 class Cache:
@@ -144,9 +143,7 @@ class Cache:
         t0 = time.perf_counter()
         data = jsonable(compute())
         data["seconds"] = time.perf_counter() - t0
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(data))
-        tmp.replace(path)
+        atomic_write(path, json.dumps(data))
         self.misses.append(stage)
         self.log(f"{stage}: done in {data['seconds']:.1f} s")
         return data
@@ -971,7 +968,7 @@ def run(out_dir, quick: bool = False, force: bool = False, progress: bool = True
     results["figures"] = [str(p.relative_to(out_dir)) for p in figs]
     results["wall_seconds"] = time.perf_counter() - t0
     report = reproduce_report.write_report(results, out_dir / "REPRODUCTION.md")
-    (out_dir / "results.json").write_text(json.dumps(jsonable(
+    atomic_write(out_dir / "results.json", json.dumps(jsonable(
         {k: v for k, v in results.items() if k != "figures"} | {"figures": results["figures"]}
     )))  # fmt: skip
     if write_gaits:

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cache import atomic_write
+
 PAPER = {
     "z": [0.2536, 0.6303, -1.152, 2.840, 293.2, -143.7],
     "z_half_digit": [0.00005, 0.00005, 0.0005, 0.0005, 0.05, 0.05],
@@ -932,7 +934,7 @@ def write_report(results: dict, path) -> Path:
       + f"; total {total:.0f} s. This run: {results['wall_seconds']:.1f} s wall "
       f"(cached stages: {', '.join(results['cache']['hits']) or 'none'}).")
     w("")
-    path.write_text("\n".join(lines) + "\n")
+    atomic_write(path, "\n".join(lines) + "\n")
     return path
 
 
