@@ -14,7 +14,7 @@ import numpy as np
 from gymnasium import spaces, utils
 
 from .hybrid import FAIL_FIRST
-from .params import Params
+from .params import P_ALPHA, Params
 from .task import (
     DEFAULT_ALIVE_REWARD,
     DEFAULT_CTRL_COST_WEIGHT,
@@ -23,6 +23,7 @@ from .task import (
     DEFAULT_RESET_NOISE_SCALE,
     DEFAULT_RTOL,
     DEFAULT_TRACKING_COST_WEIGHT,
+    S_NAPEX,
     S_REWARD,
     S_STATUS,
     S_STRIDES,
@@ -190,6 +191,17 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
     `apex_z` (the new apex state, SI, 6 numbers; the last one if several) and `apex_count`.
     `reset()` returns the same keys (reward terms 0) plus `start_z`, the start apex state.
 
+    ## Rough terrain
+
+    With `slope_noise_deg` = sigma > 0 the slope changes at every apex: alpha_k = alpha +
+    sigma * xi_k, xi_k standard normal from the env's RNG (`reset(seed=...)` fixes the
+    terrain). The ground tilts under the robot in flight about the point below its centre of
+    mass and the state is re-expressed in the new slope frame (`bound_env.terrain`: theta1
+    shifts by the change, the velocity components rotate, the height becomes y_g cos d). The
+    apex state in `info["apex_z"]` is the one before the tilt; the reset restores the nominal
+    slope. `env.unwrapped.alpha_deg` is the slope under the robot now. With sigma = 0 (default)
+    nothing is drawn and every result is bit-identical to the smooth slope.
+
     ## Arguments
 
     ```python
@@ -214,13 +226,15 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
     | `rtol` | **float** | `1e-8` | integrator tolerance (relative and absolute) |
     | `render_mode` | **str** | `None` | `"rgb_array"` or `"human"` |
     | `width`, `height` | **int** | `640`, `360` | frame size [pixels] |
+    | `slope_noise_deg` | **float** | `0.0` | rough terrain: sigma of the slope change [deg] |
 
     `max_torque` is of the order of the spine spring's torque on the passive cycle: k_c
     |theta2| peaks at 295 N m/rad * 0.1448 rad = 42.7 N m (theta2 spans -3.3 to +8.3 deg).
 
     ## Version History
 
-    * v0: Initial version.
+    * v0: Initial version. `slope_noise_deg` (rough terrain) added later with default 0,
+      which leaves every result bit-identical.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": round(1 / DEFAULT_DT)}
@@ -241,11 +255,13 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
         render_mode: str | None = None,
         width: int = 640,
         height: int = 360,
+        slope_noise_deg: float = 0.0,
     ):
         utils.EzPickle.__init__(
             self, gait, gait_overrides, dt, max_torque, reset_noise_scale, alive_reward,
             tracking_cost_weight, ctrl_cost_weight, apex_scales,
             exclude_current_positions_from_observation, rtol, render_mode, width, height,
+            slope_noise_deg,
         )  # fmt: skip
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(
@@ -257,7 +273,7 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
             tracking_cost_weight=tracking_cost_weight, ctrl_cost_weight=ctrl_cost_weight,
             apex_scales=apex_scales,
             exclude_current_positions_from_observation=exclude_current_positions_from_observation,
-            rtol=rtol,
+            rtol=rtol, slope_noise_deg=slope_noise_deg,
         )  # fmt: skip
         self.dt = self.task.dt
         self.metadata = {"render_modes": list(RENDER_MODES), "render_fps": round(1 / self.dt)}
@@ -275,6 +291,11 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
     def params(self) -> Params:
         """Physical parameters in use (the gait's, with ``gait_overrides``)."""
         return self.task.params
+
+    @property
+    def alpha_deg(self) -> float:
+        """The slope under the robot now [deg] (changes at each apex with ``slope_noise_deg``)."""
+        return math.degrees(self._b.aux[0, P_ALPHA])
 
     @property
     def z_ref(self) -> np.ndarray:
@@ -305,6 +326,7 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
         super().reset(seed=seed)
         z = self.task.start_state(self.np_random, options)
         self.task.reset_robot(self._b, 0, z)
+        self.task.draw_slope_noise(self._b, 0, self.np_random)
         if self.render_mode == "human":
             self.render()
         return self._b.obs[0].copy(), self.task.info(self._b, 0, reset=True)
@@ -314,6 +336,8 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
         b.actions[0] = _action_value(action)
         self.task.step(b)
         s = b.s[0]
+        if s[S_NAPEX] > 0.0:
+            self.task.draw_slope_noise(b, 0, self.np_random)
         terminated = s[S_STATUS] >= FAIL_FIRST
         if self.render_mode == "human":
             self.render()

@@ -27,6 +27,7 @@ import numpy as np
 from .dynamics import A_CB, A_CF, jit, leg_back, leg_front, make_aux, total_energy
 from .fast import advance
 from .hybrid import (
+    APEX,
     CONTINUE,
     DEFAULT_T_MAX,
     F_NO_APEX,
@@ -45,6 +46,7 @@ from .hybrid import (
     state_from_z,
 )
 from .params import P_GB, P_GF, P_LB, P_LF, P_TAU, Z_NAMES, Gait, load_gait
+from .terrain import change_slope
 
 # ---------------------------------------------------------------------------------------------
 # Defaults (constructor arguments of the environments).
@@ -105,7 +107,9 @@ S_TRACKING = 11
 S_CTRL = 12
 S_X = 13  # x_g after the last interval [m] (a copy, for the info)
 S_PHASE = 14  # stance condition index after the last interval (PHASES)
-N_S = 15
+S_XI = 15  # N_XI entries: standard normal draws for the slope changes at the next apexes
+N_XI = 4  # (rough terrain only; refilled by `PassiveBoundTask.draw_slope_noise`)
+N_S = S_XI + N_XI
 
 # Task constants, entries of the float64 vector `PassiveBoundTask.cfg` the kernel reads.
 C_DT, C_MAX_TORQUE, C_RTOL, C_ATOL, C_NO_APEX = 0, 1, 2, 3, 4
@@ -115,7 +119,8 @@ C_ZSCALE = 15  # 6 entries: APEX_SCALES
 N_OBS_FULL = len(OBS_NAMES)
 C_OBS_LOW = 21  # N_OBS_FULL entries: lower bounds of the full observation (float32 values)
 C_OBS_HIGH = C_OBS_LOW + N_OBS_FULL  # N_OBS_FULL entries: upper bounds
-N_CFG = C_OBS_HIGH + N_OBS_FULL
+C_SLOPE_NOISE = C_OBS_HIGH + N_OBS_FULL  # sigma of the slope change at each apex [rad]
+N_CFG = C_SLOPE_NOISE + 1
 
 _Z_IN_Y = (1, 2, 3, 4, 6, 7)  # z = y[_Z_IN_Y] at an apex (eq. 17)
 _Z_IDX = np.array(_Z_IN_Y)
@@ -200,6 +205,35 @@ def reward_terms(cfg, tracking, a, failed):
 
 
 @jit
+def advance_rough(y, aux, flags, s, t_end, cfg, ev_t, ev_g, ev_ph, apex, rec_t, rec_y, rec_ph,
+                  rec_e):
+    """`bound_env.fast.advance` to t_end on rough terrain: at every apex the apex state is
+    stored in ``apex`` (as the smooth path stores it), then the ground tilts by
+    cfg[C_SLOPE_NOISE] * s[S_XI + k] for the k-th apex of the interval
+    (`bound_env.terrain.change_slope`) and a new stride starts.
+
+    Returns (status, t, h_next, n_apex, t_last_apex or -1).
+    """
+    t, h = s[S_T], s[S_H]
+    n_apex, t_apex = 0, -1.0
+    for _ in range(apex.shape[0] + 8):
+        status, t, h, _, _, _ = advance(
+            y, aux, flags, t, t_end, True, cfg[C_RTOL], cfg[C_ATOL], h,
+            ev_t, ev_g, ev_ph, apex, 0.0, rec_t, rec_y, rec_ph, rec_e,
+        )  # fmt: skip
+        if status != APEX:
+            return status, t, h, n_apex, t_apex
+        if n_apex < apex.shape[0]:
+            apex[n_apex, :] = y
+        change_slope(y, aux, cfg[C_SLOPE_NOISE] * s[S_XI + min(n_apex, N_XI - 1)])
+        n_apex += 1
+        t_apex = t
+        flags[FL_TOUCHED_B] = False
+        flags[FL_TOUCHED_F] = False
+    return status, t, h, n_apex, t_apex
+
+
+@jit
 def step_env(y, aux, flags, s, apex, obs, cfg, action):
     """One control interval of one robot: torque, integration, reward terms, observation.
 
@@ -220,15 +254,21 @@ def step_env(y, aux, flags, s, apex, obs, cfg, action):
     rec_e = np.empty(0)
     steps = s[S_STEPS] + 1.0
     t_end = steps * cfg[C_DT]  # not accumulated, so no drift over long episodes
-    status, t, h, n_ev, n_apex, _ = advance(
-        y, aux, flags, s[S_T], t_end, False, cfg[C_RTOL], cfg[C_ATOL], s[S_H],
-        ev_t, ev_g, ev_ph, apex, 0.0, rec_t, rec_y, rec_ph, rec_e,
-    )  # fmt: skip
+    if cfg[C_SLOPE_NOISE] > 0.0:  # rough terrain: stop at each apex and tilt the ground
+        status, t, h, n_apex, t_apex = advance_rough(
+            y, aux, flags, s, t_end, cfg, ev_t, ev_g, ev_ph, apex, rec_t, rec_y, rec_ph, rec_e,
+        )  # fmt: skip
+        n_ev = 0
+    else:
+        status, t, h, n_ev, n_apex, _ = advance(
+            y, aux, flags, s[S_T], t_end, False, cfg[C_RTOL], cfg[C_ATOL], s[S_H],
+            ev_t, ev_g, ev_ph, apex, 0.0, rec_t, rec_y, rec_ph, rec_e,
+        )  # fmt: skip
+        t_apex = t
     if status == TIME_UP:
         status = CONTINUE
     tracking = tracking_cost(apex, min(n_apex, apex.shape[0]), cfg)
     if n_apex > 0:
-        t_apex = t
         for e in range(min(n_ev, ev_t.shape[0])):
             if ev_g[e] == G_APEX:
                 t_apex = ev_t[e]
@@ -334,9 +374,11 @@ class PassiveBoundTask:
         apex_scales=None,
         exclude_current_positions_from_observation: bool = True,
         rtol: float = DEFAULT_RTOL,
+        slope_noise_deg: float = 0.0,
     ):
         dt, max_torque, rtol = (_number(n, v, 0.0, strict=True) for n, v in (
             ("dt", dt), ("max_torque", max_torque), ("rtol", rtol)))  # fmt: skip
+        self.slope_noise_deg = _number("slope_noise_deg", slope_noise_deg, 0.0)
         reset_noise_scale, alive_reward, tracking_cost_weight, ctrl_cost_weight = (
             _number(n, v, 0.0) for n, v in (
                 ("reset_noise_scale", reset_noise_scale), ("alive_reward", alive_reward),
@@ -379,6 +421,7 @@ class PassiveBoundTask:
         self._obs_high = np.array([b[1] for b in bounds], dtype=np.float32)
         cfg[C_OBS_LOW : C_OBS_LOW + N_OBS_FULL] = self._obs_low
         cfg[C_OBS_HIGH : C_OBS_HIGH + N_OBS_FULL] = self._obs_high
+        cfg[C_SLOPE_NOISE] = math.radians(self.slope_noise_deg)
         self.cfg = cfg
         self._aux0 = make_aux(self.params.to_array())
 
@@ -442,6 +485,13 @@ class PassiveBoundTask:
         s[S_X] = y[0]
         s[S_PHASE] = 0  # df
         observe(y, b.aux[i], b.flags[i], 0.0, self.cfg, b.obs[i])
+
+    def draw_slope_noise(self, b: Batch, i: int, rng: np.random.Generator) -> None:
+        """Rough terrain only (``slope_noise_deg > 0``): fresh standard normal draws xi for
+        the slope changes at robot i's next apexes (call after `reset_robot` and after every
+        interval in which a stride completed). Without slope noise no number is drawn."""
+        if self.slope_noise_deg > 0.0:
+            b.s[i, S_XI : S_XI + N_XI] = rng.standard_normal(N_XI)
 
     def step(self, b: Batch, parallel: bool = False) -> None:
         """One control interval for the robots with ``b.active`` (torques in ``b.actions``)."""

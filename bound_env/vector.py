@@ -65,6 +65,9 @@ class PassiveBoundVectorEnv(VectorEnv):
             raise ValueError(
                 f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}"
             )
+        if float(task_kwargs.get("slope_noise_deg") or 0.0) != 0.0:
+            raise ValueError("slope_noise_deg (rough terrain) is supported by the single env "
+                             "PassiveBound-v0 only, not by the native vector env")
         self.task = PassiveBoundTask(**task_kwargs)
         self.num_envs = int(num_envs)
         self.max_episode_steps = (
