@@ -37,6 +37,10 @@ def register(sub) -> None:
     p.add_argument("--save-freq", type=int, default=200_000, help="timesteps between checkpoints")
     p.add_argument("--export", metavar="DIR",
                    help="afterwards copy the policy files to DIR (e.g. agents/policies/default)")
+    p.add_argument("--export-from", choices=("final", "best"), default="final",
+                   help="export the final model (default: no selection), or the checkpoint "
+                        "with the best validation score (validation set disjoint from the "
+                        "margins' test set: see configs/ppo.yaml)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
 
@@ -53,12 +57,17 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_margins)
 
     p = sub.add_parser("compare", help="passive vs learned margins -> docs/MARGINS.md")
-    p.add_argument("--policy", action="append", metavar="LABEL=PATH[@GAIT]",
-                   help="entries besides passive (default: the shipped policies)")
+    p.add_argument("--entry", "--policy", action="append", dest="entry",
+                   metavar="LABEL=PATH[,PATH...][@GAIT]",
+                   help="a column besides passive: one controller, or several made the same "
+                        "way (seeds), e.g. learned=runs/s0,runs/s1,runs/s2 (mean and 95%% "
+                        "t interval over them); repeatable (default: the shipped policies)")
     p.add_argument("--budget", choices=("test", "quick", "full"), default="full")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out", default="out/margins", help="per-entry results and caches")
     p.add_argument("--docs", default=None, help="where MARGINS.md and its PNGs go (default: docs/)")
+    p.add_argument("--note", default="", help="a paragraph for the top of the page (e.g. why "
+                   "the budget is not the full one)")
     p.set_defaults(func=cmd_compare)
 
 
@@ -75,27 +84,32 @@ def cmd_train(args) -> int:
     )  # fmt: skip
     print(f"run {run}  ({time.perf_counter() - t0:.0f} s)")
     if args.export:
-        dest = export_policy(run, args.export)
+        dest = export_policy(run, args.export, source=args.export_from)
         print(f"exported to {dest}")
     return 0
 
 
-def export_policy(run_dir, dest) -> Path:
-    """Copy a run's policy files to ``dest``: the model and its VecNormalize statistics (the
-    best-validation ones from ``best/`` when the run kept them, else the final ones), and the
-    config, run info, evaluation and validation curves."""
+def export_policy(run_dir, dest, source: str = "final") -> Path:
+    """Copy a run's policy files to ``dest``: the model and its VecNormalize statistics (with
+    ``source="final"``, the default, the final ones: no selection; with ``"best"`` the
+    best-validation ones from ``best/`` when the run kept them), and the config, run info,
+    evaluation and validation curves. ``exported.json`` says which."""
     run_dir, dest = Path(run_dir), Path(dest)
+    if source not in ("final", "best"):
+        raise ValueError(f"export source must be 'final' or 'best', got {source!r}")
     if not (run_dir / "model.zip").is_file():
         raise FileNotFoundError(f"no model.zip in {run_dir}")
     dest.mkdir(parents=True, exist_ok=True)
-    src = run_dir / "best" if (run_dir / "best" / "model.zip").is_file() else run_dir
+    best = run_dir / "best"
+    src = best if source == "best" and (best / "model.zip").is_file() else run_dir
     for name in ("model.zip", "vecnormalize.pkl"):
         if (src / name).is_file():
             shutil.copyfile(src / name, dest / name)
     for name in POLICY_FILES[2:] + ("basin_validation.csv",):
         if (run_dir / name).is_file():
             shutil.copyfile(run_dir / name, dest / name)
-    info = {"exported_from": str(src)}
+    info = {"exported_from": str(src), "selection": "best validation" if src == best
+            else "none (final model)"}
     if (src / "best.json").is_file():
         info.update(json.loads((src / "best.json").read_text()))
     (dest / "exported.json").write_text(json.dumps(info, indent=2) + "\n")
@@ -122,9 +136,11 @@ def cmd_compare(args) -> int:
     from .compare import DEFAULT_DOCS, compare, default_entries, parse_entry
 
     entries = default_entries()
-    if args.policy:
-        entries = [entries[0]] + [parse_entry(t) for t in args.policy]
+    if args.entry:
+        parsed = [parse_entry(t) for t in args.entry]
+        entries = ([] if any(e[1] == ["passive"] and e[2] == "default" for e in parsed)
+                   else [entries[0]]) + parsed
     path = compare(entries, budget=args.budget, workers=args.workers, out=args.out,
-                   docs=args.docs or DEFAULT_DOCS, progress=sys.stderr.isatty())
+                   docs=args.docs or DEFAULT_DOCS, progress=sys.stderr.isatty(), note=args.note)
     print(f"wrote {path}")
     return 0

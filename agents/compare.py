@@ -13,6 +13,7 @@ import shutil
 from pathlib import Path
 
 from .margins import Z_LABELS, compute_margins, plot_margins
+from .stats import t_interval
 
 POLICIES_DIR = Path(__file__).resolve().parent / "policies"
 ROOT = Path(__file__).resolve().parent.parent
@@ -20,49 +21,76 @@ DEFAULT_DOCS = ROOT / "docs"
 DEFAULT_OUT = Path("out") / "margins"
 
 
-def default_entries() -> list[tuple[str, str, str]]:
-    """(label, policy, gait) for the passive gait and every shipped policy."""
-    entries = [("passive", "passive", "default")]
-    if (POLICIES_DIR / "default" / "model.zip").is_file():
-        entries.append(("learned", str(POLICIES_DIR / "default"), "default"))
+def default_entries() -> list[tuple[str, list[str], str]]:
+    """(label, policies, gait) for the passive gait and every shipped policy."""
+    entries = [("passive", ["passive"], "default")]
+    for name in ("ppo-v1", "default"):
+        if (POLICIES_DIR / name / "model.zip").is_file():
+            entries.append(("learned", [str(POLICIES_DIR / name)], "default"))
+            break
     if (POLICIES_DIR / "literal-cycle" / "model.zip").is_file():
-        entries.append(("passive literal", "passive", "literal-cycle"))
-        entries.append(("learned literal", str(POLICIES_DIR / "literal-cycle"), "literal-cycle"))
+        entries.append(("passive literal", ["passive"], "literal-cycle"))
+        entries.append(("learned literal", [str(POLICIES_DIR / "literal-cycle")],
+                        "literal-cycle"))
     return entries
 
 
-def parse_entry(text: str) -> tuple[str, str, str]:
-    """``LABEL=PATH`` or ``LABEL=PATH@GAIT``."""
+def parse_entry(text: str) -> tuple[str, list[str], str]:
+    """``LABEL=PATH[,PATH...]`` or ``LABEL=PATH[,PATH...]@GAIT``: one controller made several
+    times (e.g. one policy per training seed), or ``passive``, or a controller name."""
     if "=" not in text:
-        raise ValueError(f"--policy {text!r} must look like LABEL=PATH (or LABEL=PATH@GAIT)")
+        raise ValueError(f"--entry {text!r} must look like LABEL=PATH[,PATH...][@GAIT]")
     label, rest = text.split("=", 1)
-    path, _, gait = rest.partition("@")
-    return label.strip(), path.strip(), (gait.strip() or "default")
+    paths, _, gait = rest.rpartition("@") if "@" in rest else (rest, "", "")
+    policies = [p.strip() for p in paths.split(",") if p.strip()]
+    if not label.strip() or not policies:
+        raise ValueError(f"--entry {text!r} needs a label and at least one policy")
+    return label.strip(), policies, (gait.strip() or "default")
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
 
 
 def compare(entries=None, budget: str = "full", workers: int = 2, out: str | Path = DEFAULT_OUT,
-            docs: str | Path = DEFAULT_DOCS, progress: bool = True, executor=None) -> Path:
-    """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path."""
-    entries = entries or default_entries()
+            docs: str | Path = DEFAULT_DOCS, progress: bool = True, executor=None,
+            note: str = "") -> Path:
+    """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path.
+
+    An entry is (label, policies, gait); an old-style (label, policy, gait) is accepted. Each
+    policy of an entry is one seed of the same recipe: the page reports per measure the mean
+    and a 95 % Student-t interval over them, and every seed's value in a collapsible detail.
+    """
+    entries = [(lab, [pol] if isinstance(pol, str) else list(pol), gait)
+               for lab, pol, gait in (entries or default_entries())]
     out, docs = Path(out), Path(docs)
     docs.mkdir(parents=True, exist_ok=True)
-    results = []
-    for label, policy, gait in entries:
-        r = compute_margins(policy, budget=budget, gait=gait, workers=workers,
-                            executor=executor, out=out / label, progress=progress)
-        r["label"] = label
-        results.append(r)
-    plots = plot_margins(results, docs, prefix="margins_")
+    groups = []
+    for label, policies, gait in entries:
+        runs = []
+        for policy in policies:
+            sub = out / _slug(label) if len(policies) == 1 else \
+                out / _slug(label) / _slug(Path(policy).name)
+            r = compute_margins(policy, budget=budget, gait=gait, workers=workers,
+                                executor=executor, out=sub, progress=progress)
+            r["label"] = label
+            r["source"] = policy
+            runs.append(r)
+        groups.append({"label": label, "gait": gait, "policies": policies, "runs": runs})
+    firsts = [g["runs"][0] for g in groups]
+    plots = plot_margins(firsts, docs, prefix="margins_")
     curves = []
-    for label, policy, _ in entries:
-        src = Path(policy) / "eval.png"
-        if policy != "passive" and src.is_file():
-            dst = docs / f"training_{label.replace(' ', '_')}.png"
+    for g in groups:
+        src = Path(g["policies"][0]) / "eval.png"
+        if src.is_file():
+            dst = docs / f"training_{g['label'].replace(' ', '_')}.png"
             shutil.copyfile(src, dst)
-            curves.append((label, policy, dst))
-    page = render_markdown(results, entries, plots, curves, budget)
+            curves.append((g["label"], g["policies"][0], dst))
+    page = render_markdown(groups, plots, curves, budget, note)
     path = docs / "MARGINS.md"
-    path.write_text(page)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(page)
+    tmp.replace(path)
     return path
 
 
@@ -72,130 +100,336 @@ def _fmt(v, digits=4) -> str:
     return f"{v:.{digits}g}"
 
 
-def _window(r, key, capped_key, digits) -> str:
-    lo, hi = r[key]
-    c = r.get(capped_key, [False, False])
-    return f"{'≤' if c[0] else ''}{_fmt(lo, digits)} – {'≥' if c[1] else ''}{_fmt(hi, digits)}"
+def _dir_label(r, key) -> str:
+    return r.get(key) or "—"
 
 
-def _ratio(a, b) -> str:
+# (name, value of one result, digits, ratio against passive?)
+MEASURES = [
+    ("basin_min", "**basin_min** (zstar scale: units of \\|z*_i\\|, worst of 12 directions)",
+     lambda r: r["basin_min"], 3, True),
+    ("basin_min_cycle", "basin_min_cycle (units of the passive peak-to-peak range)",
+     lambda r: r.get("basin_min_cycle"), 3, True),
+    ("basin_share_min", "basin_share_min (basin / ceiling, worst direction)",
+     lambda r: r.get("basin_share_min"), 3, False),
+    ("r50", "random-direction **r50** (P(return) ≥ 0.5 up to; zstar scale)",
+     lambda r: r["basin_curve"]["r50"], 3, True),
+    ("terrain_sigma50_deg", "rough terrain **σ50** [deg] (≥ half of the runs survive)",
+     lambda r: r.get("terrain_sigma50_deg"), 3, True),
+    ("emax", "**emax** (closed-loop apex map)", lambda r: r["emax"], 4, False),
+    ("slope_lo", "slope window α, low edge [deg] (survive 50 strides)",
+     lambda r: r["slope_window_deg"][0], 4, False),
+    ("slope_hi", "slope window α, high edge [deg]", lambda r: r["slope_window_deg"][1], 4,
+     False),
+    ("kc_lo", "k_c window, low edge [N m/rad]", lambda r: r["kc_window"][0], 4, False),
+    ("kc_hi", "k_c window, high edge [N m/rad]", lambda r: r["kc_window"][1], 4, False),
+    ("push_xdot", "push p50, Δẋ [m/s]", lambda r: r["push"]["xdot"]["p50"], 3, False),
+    ("push_th1dot", "push p50, Δθ̇1 [rad/s]", lambda r: r["push"]["th1dot"]["p50"], 3, False),
+    ("effort", "**effort** mean \\|τ\\| on the cycle [N m]", lambda r: r["effort"], 3, False),
+]
+
+
+def _value(fn, r):
     try:
-        return f"{a / b:.2f}×"
-    except (TypeError, ZeroDivisionError):
+        v = fn(r)
+    except (KeyError, TypeError, IndexError):
+        return math.nan
+    return math.nan if v is None else float(v)
+
+
+def _agg(values, digits) -> str:
+    """One value as it is; several (seeds) as mean [95 % t interval]."""
+    vals = [v for v in values if not math.isnan(v)]
+    if not vals:
         return "—"
+    if len(values) == 1:
+        return _fmt(vals[0], digits)
+    ti = t_interval(vals)
+    return f"{_fmt(ti['mean'], digits)} [{_fmt(ti['low'], digits)}, {_fmt(ti['high'], digits)}]"
 
 
-def render_markdown(results, entries, plots, curves, budget) -> str:
-    labels = [r["label"] for r in results]
-    base = results[0]
-    head = "| measure | " + " | ".join(labels) + " |"
-    sep = "| --- |" + " --- |" * len(labels)
-    rows = []
+def _cell(g, base, name, fn, digits, ratio) -> str:
+    runs = g["runs"]
+    vals = [_value(fn, r) for r in runs]
+    text = _agg(vals, digits)
+    if name == "basin_min":
+        dirs = sorted({r["basin_min_direction"] or "—" for r in runs})
+        text += f" ({', '.join(dirs)})"
+    elif name == "basin_min_cycle":
+        dirs = sorted({r.get("basin_min_cycle_direction") or "—" for r in runs})
+        text += f" ({', '.join(dirs)})"
+    elif name == "basin_share_min":
+        dirs = sorted({r.get("basin_share_min_direction") or "—" for r in runs})
+        text += f" ({', '.join(dirs)})"
+    elif name == "r50" and len(runs) == 1:
+        lo, hi = runs[0]["basin_curve"].get("r50_ci", [math.nan, math.nan])
+        text += f" (Wilson-based [{_fmt(lo, 3)}, {_fmt(hi, 3)}])"
+    elif name == "terrain_sigma50_deg" and len(runs) == 1:
+        lo, hi = runs[0].get("terrain_sigma50_ci_deg", [math.nan, math.nan])
+        text += f" (Wilson-based [{_fmt(lo, 3)}, {_fmt(hi, 3)}])"
+    elif name == "effort" and runs[0]["policy"] == "passive":
+        text = "0 (zero action)"
+    if ratio and g is not base:
+        b = _value(fn, base["runs"][0])
+        ratios = [v / b if b and not math.isnan(v) else math.nan for v in vals]
+        if not all(math.isnan(x) for x in ratios):
+            text += f", **{_agg(ratios, 3)}×**"
+    return text
 
-    def row(name, fn):
-        rows.append(f"| {name} | " + " | ".join(fn(r) for r in results) + " |")
 
-    row("**basin_min** (relative, worst of 12 directions)",
-        lambda r: f"**{_fmt(r['basin_min'], 3)}** ({r['basin_min_direction']}, "
-                  f"{_fmt(r['basin_min_abs'], 3)} {_unit(r['basin_min_direction'])})"
-                  + ("" if r is base else f", {_ratio(r['basin_min'], base['basin_min'])}"))
-    row("random-direction r50 (P(return) ≥ 0.5 up to)",
-        lambda r: _fmt(r["basin_curve"]["r50"], 3))
-    row("**emax** (closed-loop apex map)", lambda r: f"**{r['emax']:.4f}**")
-    row("eigenvalue moduli",
-        lambda r: ", ".join(f"{math.hypot(*e):.3f}" for e in r["eigenvalues"]))
-    row("fixed-point shift z_cl − z* [m, rad, rad, m/s, rad/s, rad/s]",
-        lambda r: "[" + ", ".join(_fmt(v, 2) for v in r["fixed_point_shift"]) + "]")
-    row("slope window α [deg] (survive 50 strides)",
-        lambda r: _window(r, "slope_window_deg", "slope_window_capped", 4))
-    row("k_c window [N m/rad] (survive 50 strides)",
-        lambda r: _window(r, "kc_window", "kc_window_capped", 4))
-    row("push p50, Δẋ [m/s]", lambda r: _fmt(r["push"]["xdot"]["p50"], 3))
-    row("push p50, Δθ̇1 [rad/s]", lambda r: _fmt(r["push"]["th1dot"]["p50"], 3))
-    row("**effort** mean \\|τ\\| on the cycle [N m]",
-        lambda r: "**0** (zero action)" if r["policy"] == "passive" else
-                  f"**{_fmt(r['effort'], 3)}** ({100 * r['effort_frac']:.2f} % of "
-                  f"max_torque {r['max_torque']:g} N m)")
+def _basin_cell(runs, label, sym, key, field="rel", digits=3) -> str:
+    vals = [r[key][label][sym][field] if r[key].get(label, {}).get(sym) else math.nan
+            for r in runs]
+    vals = [math.nan if v is None else float(v) for v in vals]
+    text = _agg(vals, digits)
+    capped = sum(bool(r[key][label][sym].get("capped")) for r in runs
+                 if r[key].get(label, {}).get(sym))
+    if capped:
+        text = ("≥" if capped == len(runs) else f"({capped}/{len(runs)} capped) ") + text
+    return text
+
+
+def _provenance(g) -> list[str]:
+    """How each controller of a column was made."""
+    lines = []
+    for policy in g["policies"]:
+        if policy == "passive":
+            lines.append("zero spine torque (no controller)")
+            continue
+        p = Path(policy)
+        info_path = p / "run.json"
+        if not info_path.is_file():
+            runs = g["runs"]
+            desc = next((r.get("description") for r in runs if r.get("source") == policy), None)
+            lines.append(desc or f"controller `{policy}` (see its documentation)")
+            continue
+        info = json.loads(info_path.read_text())
+        t = info.get("wall_time_s")
+        exp_path = p / "exported.json"
+        exp = json.loads(exp_path.read_text()) if exp_path.is_file() else {}
+        if "timesteps" in exp:
+            sel = (f"**selected**: the checkpoint with the best basin validation at "
+                   f"{exp['timesteps']} timesteps")
+        else:
+            sel = "final model, **no selection**"
+        lines.append(
+            f"`{_rel(policy)}`: seed {info.get('seed', '?')}, {info.get('timesteps_done', '?')} "
+            f"timesteps, {'%.1f min' % (t / 60) if t else '?'} of training on "
+            f"{info.get('machine', '?')}; {sel}; command `{_command(info.get('command', '?'))}`")
+    return lines
+
+
+def render_markdown(groups, plots, curves, budget, note: str = "") -> str:
+    from .margins import BUDGETS
+
+    labels = [g["label"] for g in groups]
+    base = groups[0]
+    head = "| measure | " + " | ".join(
+        f"{g['label']} ({len(g['runs'])} seed{'s' if len(g['runs']) > 1 else ''})"
+        if g["policies"] != ["passive"] else g["label"] for g in groups) + " |"
+    sep = "| --- |" + " --- |" * len(groups)
+    rows = ["| gait | " + " | ".join(f"`{g['gait']}`" for g in groups) + " |"]
+    for name, title, fn, digits, ratio in MEASURES:
+        rows.append(f"| {title} | " + " | ".join(
+            _cell(g, base, name, fn, digits, ratio) for g in groups) + " |")
     main = "\n".join([head, sep, *rows])
 
-    bhead = "| direction | " + " | ".join(labels) + " |"
-    bsep = "| --- |" + " --- |" * len(labels)
-    brows = []
-    for c in Z_LABELS:
-        for s in ("+", "-"):
-            cells = []
-            for r in results:
-                e = r["basin"][c]
-                v = e[s]
-                mark = "≥" if v["capped"] else ""
-                cells.append(f"{mark}{_fmt(v['rel'], 3)} ({_fmt(v['abs'], 3)} {e['unit']})")
-            brows.append(f"| {c}{s} | " + " | ".join(cells) + " |")
-    basin_table = "\n".join([bhead, bsep, *brows])
+    def direction_table(key, field="rel", digits=3, unit=True):
+        bhead = "| direction | " + " | ".join(labels) + " |"
+        brows = []
+        for c in Z_LABELS:
+            for sym in ("+", "-"):
+                cells = [_basin_cell(g["runs"], c, sym, key, field, digits) for g in groups]
+                brows.append(f"| {c}{sym} | " + " | ".join(cells) + " |")
+        return "\n".join([bhead, sep.replace("| --- |", "| --- |", 1), *brows])
 
-    train_lines = []
-    for label, policy, png in curves:
-        info_path = Path(policy) / "run.json"
-        info = json.loads(info_path.read_text()) if info_path.is_file() else {}
-        t = info.get("wall_time_s")
-        exp_path = Path(policy) / "exported.json"
-        exp = json.loads(exp_path.read_text()) if exp_path.is_file() else {}
-        kept = (f" The shipped model is the checkpoint with the best basin validation, at "
-                f"{exp['timesteps']} timesteps (score {exp['basin_validation']:.4f}; lower "
-                f"panel)." if "timesteps" in exp else "")
-        train_lines.append(
-            f"- **{label}** (`{_rel(policy)}`): seed {info.get('seed', '?')}, "
-            f"{info.get('timesteps_done', '?')} timesteps, "
-            f"{'%.1f min' % (t / 60) if t else '?'} of training on {info.get('machine', '?')}; "
-            f"command `{_command(info.get('command', '?'))}`.{kept}\n\n"
-            f"  ![training curve {label}]({png.name})"
-        )
-    settings = base["settings"]
-    return f"""# Stability margins: passive vs learned spine control
+    mech_rows = []
+    for g in groups:
+        r = g["runs"][0]
+        for c in Z_LABELS:
+            for sym in ("+", "-"):
+                e = r.get("basin_ceiling", {}).get(c, {}).get(sym)
+                if not e:
+                    continue
+                bey = e.get("beyond") or {}
+                mech_rows.append(
+                    f"| {g['label']} | {c}{sym} | {_fmt(e['rel'], 3)} | "
+                    f"{'yes' if e.get('geometric') else 'no'} | {e.get('mechanism') or '—'} | "
+                    f"{_fmt(bey.get('rel'), 3)} |")
+    mech = "\n".join(["| column (first seed) | direction | ceiling (zstar) | geometric | "
+                      "what stops it | first failing size |",
+                      "| --- | --- | --- | --- | --- | --- |", *mech_rows])
 
-Generated by `bound-env compare --budget {budget}` (agents/compare.py); do not edit by hand.
+    fail_rows = []
+    for g in groups:
+        r = g["runs"][0]
+        for c in Z_LABELS:
+            for sym in ("+", "-"):
+                bey = r["basin"][c][sym].get("beyond") or {}
+                if not bey:
+                    continue
+                fail_rows.append(
+                    f"| {g['label']} | {c}{sym} | {_fmt(bey.get('rel'), 3)} | "
+                    f"{bey.get('reason')} | {bey.get('stride')} | {bey.get('phase') or '—'} | "
+                    f"{'; '.join(bey.get('mechanisms') or []) or '—'} |")
+    fails = "\n".join(["| column (first seed) | direction | size | failure | stride | phase | "
+                       "start geometry |", "| --- | --- | --- | --- | --- | --- | --- |",
+                       *fail_rows])
+
+    details = []
+    for g in groups:
+        if len(g["runs"]) < 2:
+            continue
+        names = [Path(p).name for p in g["policies"]]
+        dh = "| measure | " + " | ".join(names) + " |"
+        ds = "| --- |" + " --- |" * len(names)
+        drows = []
+        for name, _title, fn, digits, _ in MEASURES:
+            drows.append(f"| {name} | " + " | ".join(
+                _fmt(_value(fn, r), digits) for r in g["runs"]) + " |")
+        drows.append("| basin_min direction | " + " | ".join(
+            _dir_label(r, "basin_min_direction") for r in g["runs"]) + " |")
+        details.append(f"<details><summary>per-seed values: {g['label']}</summary>\n\n"
+                       + "\n".join([dh, ds, *drows]) + "\n\n</details>")
+
+    prov = []
+    for g in groups:
+        prov.append(f"- **{g['label']}** (gait `{g['gait']}`):")
+        prov += [f"  - {line}" for line in _provenance(g)]
+
+    train_lines = [f"- **{label}** (`{_rel(policy)}`)\n\n  ![training curve {label}]({png.name})"
+                   for label, policy, png in curves]
+    settings = base["runs"][0]["settings"]
+    b = BUDGETS.get(budget)
+    full = BUDGETS["full"]
+    if budget == "full":
+        budget_note = "the **full** budget"
+    else:
+        budget_note = (f"the **{budget}** budget, NOT the full one: "
+                       f"{b.curve_dirs} random directions instead of "
+                       f"{full.curve_dirs}, {b.basin_strides} strides to return instead of "
+                       f"{full.basin_strides}, {b.terrain_runs} rough-terrain runs of "
+                       f"{b.terrain_strides} strides instead of {full.terrain_runs} of "
+                       f"{full.terrain_strides}" if b else f"the `{budget}` budget")
+    terrain = base["runs"][0].get("terrain", {})
+    ceil = settings.get("ceiling", {})
+    r0 = base["runs"][0]
+    para_note = ("\n\n" + note + "\n") if note else ""
+    return f"""# Stability margins: passive, classical and learned spine control
+
+Generated by `bound-env compare --budget {budget}` (agents/compare.py) with {budget_note};
+do not edit by hand.{para_note}
 Every column is measured on the same yardsticks by `bound-env margins` (agents/margins.py):
 the closed-loop apex-to-apex map, each stride an episode started at an apex with
-`reset(options={{"apex_state": z}})` so the control intervals restart at the apex, integrator
-tolerance {settings['rtol']:g}, "returned" = max-abs apex error below {settings['return_tol']:g}
-(SI) within {settings['basin_strides']} strides.
+`reset(options={{"apex_state": z}})` so the control intervals restart at the apex,
+integrator tolerance {settings['rtol']:g}, "returned" = max-abs apex error below
+{settings['return_tol']:g} (SI) within {settings['basin_strides']} strides.
+
+**Statistics.** A column with several seeds shows the **mean [95 % Student-t interval] over
+its seeds** (t with n − 1 degrees of freedom; with 3 seeds the interval is wide, and it is
+the honest one); the per-seed values are in the collapsible details below the table. A
+single-seed or passive column shows its value; for r50 and σ50 it adds the interval that the
+95 % Wilson intervals of the success rates give (same rule applied to the lower and upper
+bounds). Ratios (×) are each seed's value over the default-gait passive value, averaged the
+same way. No learned column was selected on these yardsticks unless its provenance below
+says so.
 
 {main}
 
-Relative perturbations are z*_i·s added to the controller's own cycle z_cl, with z* the
-passive fixed point, so the absolute sizes are the same for every column. Windows: the
-connected range around the nominal value (α = {base['slope_nominal_deg']:.4f}°,
-k_c = {base['kc_nominal']:g} N m/rad) in which the loop started at z_cl survives 50 strides;
-≤/≥ mark an edge at the end of the scanned range. The paper's passive windows
-(1.92–2.05°, 294–308 N m/rad) come from its own criterion (a stable fixed point that the
-gait converges to); survival for 50 strides is a looser test, so the passive windows here
-differ from the paper's, mostly on the low side. Push: a kick of the given size,
-random sign, at a random control instant of a cycle stride; p50 = the largest size up to
-which at least half of the {settings['push_samples']} trials return.
+{chr(10).join(details)}
 
-## Basin along each apex component
+## How each column was made
 
-Largest relative perturbation s (and its absolute size) from which the loop returns; ≥ marks
-the bracket's end (s = 1).
+{chr(10).join(prov)}
 
-{basin_table}
+## The yardsticks
+
+- **Basin, uncapped.** Along each apex component and sign, the largest s such that the loop
+  started at z_cl + s z*_i e_i returns (z* the passive fixed point, the same absolute sizes
+  for every column). s = 1e-3 and 1 are tried first; while the loop returns, the bracket
+  doubles from the last success up to the direction's physical cap (the size at which the
+  start state itself is invalid: a hip or the spine joint in the ground, or ẋ ≤ 0; else
+  {settings.get('basin_cap', 64):g} |z*_i|), then bisection on log s ({settings['basin_iters']}
+  steps). ≥ marks an edge at the cap.
+- **Two scales.** `zstar`: units of |z*_i| (the paper-style scale; basin_min keeps this
+  meaning, now uncapped). `cycle`: units of the component's peak-to-peak range over one
+  passive stride (y_g 0.032 m, θ1 0.59 rad, θ2 0.20 rad, ẋ_g 0.42 m/s, θ̇1 9.5 rad/s, θ̇2
+  6.4 rad/s on the default gait), so that a step in θ1 means as much as a step in ẋ_g.
+- **Ceiling.** For each direction, the largest perturbation from which *some* admissible
+  open-loop torque profile (|τ| ≤ the column's max_torque, piecewise constant over
+  {ceil.get('piece_intervals', '?')} control intervals) completes the first
+  {ceil.get('strides', '?')} strides without a fall. At each tested size the search tries
+  the zero profile, ±max, bang-bang profiles with one switch, {ceil.get('random_profiles', '?')}
+  random piecewise-constant profiles and {ceil.get('optimizer_iters', '?')} iterations of a
+  (1+1) evolution-strategy shooting optimizer from the best; sizes are grown and bisected
+  like the basin ({ceil.get('iters', '?')} steps). A search finds profiles, it cannot prove
+  there is none: the ceiling is a lower bound, and a share slightly above 1 means the
+  controller's edge lies within the bisection's resolution of it. basin_share = basin /
+  ceiling.
+- **Random directions.** {base['runs'][0]['basin_curve']['directions']} directions (seed
+  {base['runs'][0]['basin_curve'].get('direction_seed', '?')}) uniform on the sphere, scaled to max
+  |u_i| = 1, sizes in the zstar scale; 95 % Wilson intervals per point.
+- **Rough terrain.** The slope becomes α_k = α + σ ξ_k at every apex (ξ_k standard normal
+  from the env's RNG; `slope_noise_deg`), the ground tilting under the robot in flight about
+  the point below its centre of mass (`bound_env/terrain.py`). σ50 = the largest σ on the
+  grid at which at least half of {terrain.get('runs', '?')} runs (env seeds
+  {terrain.get('seeds', ['?'])[0]}…) survive {terrain.get('strides', '?')} strides.
+
+Windows: the connected range around the nominal value (α = {r0['slope_nominal_deg']:.4f}°,
+k_c = {r0['kc_nominal']:g} N m/rad) in which the loop started at z_cl survives 50
+strides. The paper's passive windows (1.92–2.05°, 294–308 N m/rad) come from its own
+criterion (a stable fixed point that the gait converges to); survival for 50 strides is a
+looser test. Push: a kick of the given size, random sign, at a random control instant of a
+cycle stride; p50 = the largest size up to which at least half of the
+{settings['push_samples']} trials return.
+
+## Basin along each apex component (zstar scale)
+
+{direction_table("basin")}
+
+## Basin in the cycle scale
+
+{direction_table("basin", "rel_cycle")}
+
+## Ceilings and each controller's share of them
+
+Ceiling (zstar scale) per direction:
+
+{direction_table("basin_ceiling")}
+
+Basin / ceiling:
+
+{direction_table("basin", "share")}
+
+What stops the ceiling (first seed of each column):
+
+{mech}
+
+## Where the loop fails beyond each basin edge
+
+The first failing perturbation found beyond each edge (first seed of each column): the failure
+reason (`no_return`: no fall, but not back within the stride limit), the stride (1 = the
+first) and the stance phase in which it happened, and what the start state itself rules out.
+
+{fails}
 
 ![basin per direction](margins_basin.png)
 
 ![success probability against the size of a random-direction perturbation](margins_curve.png)
 
+![survival on rough terrain](margins_terrain.png)
+
 ![push recovery](margins_push.png)
 
-## Training
+## Training curves
 
 {chr(10).join(train_lines) if train_lines else "(no trained policy)"}
 
 The literal reading of Table II (`PassiveBoundLiteral-v0`, section of `configs/ppo.yaml`):
-its published apex state falls within the first stride (PPO started there never completed a
-stride in 3-4·10⁶ steps), so its task starts on the literal reading's own periodic gait at the
-published parameters (`configs/gaits/literal-cycle.yaml`, found by `bound-env reproduce`), a
-saddle with e_max 1.364: its passive basin is empty. The "literal" columns, where present,
-measure that cycle, passive and with `agents/policies/literal-cycle`; their ratios are against
-the first column (the default gait's passive basin), since the literal passive basin is zero.
+its published apex state falls within the first stride, so its task starts on the literal
+reading's own periodic gait at the published parameters (`configs/gaits/literal-cycle.yaml`),
+a saddle with e_max 1.364: its passive basin is empty. The literal columns' ratios are
+against the default gait's passive column, since the literal passive values are zero.
 """
 
 

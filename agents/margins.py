@@ -22,16 +22,48 @@ Measures (JSON keys)
   of the Jacobian of P_pi there (``[re, im]`` pairs, largest modulus first);
   ``fixed_point_shift`` = z_cl - z* (SI).
 - ``basin``: for each apex component i and each sign, the largest relative perturbation s
-  such that the loop started at z_cl + s z*_i e_i *returns*: max_j |z_j - z_cl_j| < 1e-4
-  (SI) within a bounded number of strides, without a fall. Found by bisection on log(s)
-  between 1e-3 and 1 (1 = 100 %: a direction that reaches it is reported as ``capped``).
-  Each entry also has the absolute size |s z*_i| with its unit. ``basin_min`` is the
-  smallest over the 12 directions (``basin_min_direction`` names it). The perturbations are
-  relative to the *passive* z* for every controller, so the absolute sizes are identical.
+  such that the loop started at z_cl + s |z*_i| e_i *returns*: max_j |z_j - z_cl_j| < 1e-4
+  (SI) within a bounded number of strides, without a fall. **Uncapped**: s = 1e-3 and s = 1
+  are tried first; while the loop returns, the bracket grows by doubling from the last
+  success, up to the direction's *physical cap*: the smallest s at which the start state
+  itself is invalid (a hip or the spine joint at or below the ground, or x_dot <= 0, as
+  `bound_env.hybrid.start_status` says), else ``BASIN_CAP`` (64 |z*_i|). Then bisection on
+  log s. An entry that reaches its cap says ``capped: true`` (and ``cap``, ``cap_reason``).
+  Each entry has ``rel`` (units of |z*_i|), ``abs`` (SI), ``rel_cycle`` (units of the
+  component's passive peak-to-peak range, below), ``capped``, ``share`` (= abs / the
+  direction's ceiling) and ``beyond``: the first failing perturbation beyond the edge (size,
+  failure reason or ``no_return``, stride, phase, and geometric mechanisms of its start).
+  The perturbations are relative to the *passive* z* for every controller, so the absolute
+  sizes are identical.
+- ``basin_scale``: the two yardsticks per component: ``zstar`` = |z*_i| (the paper-style
+  scale; ``basin_min`` and ``basin_curve`` use it, as before) and ``cycle`` = the peak-to-peak
+  range of the component over one passive stride of the gait (so that a step in theta1 means
+  as much as a step in xdot_g). ``basin_min`` (``basin_min_direction``) is the smallest
+  ``rel`` of the 12 directions, ``basin_min_cycle`` (``basin_min_cycle_direction``) the
+  smallest ``rel_cycle``.
+- ``basin_ceiling`` (same shape as ``basin``): for each direction the largest perturbation
+  from which *some* admissible open-loop torque profile (|tau| <= max_torque, piecewise
+  constant over ``PROFILE_SEG`` control intervals) completes the first ``ceiling_strides``
+  strides without a fall. Searched, at each tested size, over the zero profile, the two
+  constant extremes, bang-bang profiles with one switch, random piecewise-constant profiles
+  and a (1+1) evolution-strategy shooting optimizer started from the best of them (budget in
+  ``settings``); grown and bisected like the basin. A search can only find profiles, so the
+  ceiling is a lower bound on the true one. ``mechanism`` names what stops it at the first
+  failing size: geometric ("back hip below touchdown height at the apex": the back hip's
+  height at the start is below l_b cos gamma_b, so the leg cannot be placed; the start state
+  invalid) or "no admissible profile found" with the best profile's failure.
+  ``basin_share_min`` (``basin_share_min_direction``) is the smallest basin / ceiling.
 - ``basin_curve``: the probability of returning against the size r of a perturbation in a
   random direction: z_cl + r |z*| * u with u uniform on the sphere and scaled to max |u_i| = 1
-  (so r is the largest relative perturbation of any component, as in ``basin``); the same
-  directions for every size and every controller.
+  (so r is the largest relative perturbation of any component, in the ``zstar`` scale); the
+  same directions (seed ``CURVE_SEED``) for every size and every controller; 95 % Wilson
+  intervals per point (``ci_low``, ``ci_high``); ``r50`` = the largest size up to which
+  P(return) >= 0.5, ``r50_ci`` the same rule applied to the interval's bounds.
+- ``terrain``: survival of ``terrain_runs`` runs of ``terrain_strides`` strides from z_cl on
+  rough terrain (``slope_noise_deg`` = sigma: the slope changes by sigma xi at every apex,
+  `bound_env.terrain`), each run one long episode with its own seed (``TERRAIN_SEED`` + k),
+  against sigma [deg], with Wilson intervals; ``terrain_sigma50_deg`` = the largest sigma up
+  to which at least half survive (``terrain_sigma50_ci_deg`` from the interval's bounds).
 - ``slope_window_deg``, ``kc_window``: the range of slope alpha (deg), and separately of
   spine stiffness k_c (N m/rad), containing the nominal value over which the loop started at
   z_cl survives ``window_strides`` strides (50) without a fall (``gait_overrides``); edges by
@@ -43,17 +75,25 @@ Measures (JSON keys)
 - ``effort``: mean |tau| (N m, time average) over one stride of the closed-loop cycle, and
   ``effort_frac`` = effort / max_torque.
 
+Controllers
+-----------
+`compute_margins` takes ``"passive"``, a policy path, or any controller object with the
+protocol ``__call__(obs) -> float`` (normalized torque in [-1, 1]), ``fingerprint() -> str``
+(changes whenever its actions can), optional ``env_kwargs`` (environment arguments it was
+made for, e.g. ``max_torque``), optional ``name`` and optional ``on_apex(z, time_since_apex)``
+(called at the start apex of every episode and at every apex reached).
+
 Evaluations run through a `concurrent.futures` executor (``--workers N`` processes; any
 object with ``submit`` returning futures can be passed to `compute_margins`). Every task's
-result is cached in ``<out>/cache.jsonl`` under a key of the controller, gait and budget, so
-an interrupted run resumes.
+result is cached in ``<out>/cache.jsonl`` under a key of the controller, gait, budget and
+every module setting that changes a result (`SETTINGS`), so an interrupted run resumes and
+a changed setting never returns a stale result.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
 import csv
-import hashlib
 import json
 import math
 import sys
@@ -69,16 +109,22 @@ from bound_env.analysis.numerics import (  # noqa: F401 - bisect_threshold: re-e
     map_fixed_point,
     sorted_eigenvalues,
 )
-from bound_env.cache import TaskCache
+from bound_env.cache import TaskCache, settings_hash
 
-from .policy import MLPController, ZeroController, load_controller
+from .policy import load_controller
+from .stats import threshold_on_grid, wilson_interval
 
 ENV_ID = "PassiveBound-v0"
 Z_LABELS = ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
 Z_UNITS = ("m", "rad", "rad", "m/s", "rad/s", "rad/s")
 RETURN_TOL = 1e-4  # "returned to the cycle": max-abs apex error below this (SI)
 EVAL_RTOL = 1e-10  # integrator tolerance of every evaluation (training uses the env's 1e-8)
-BASIN_LO, BASIN_HI = 1e-3, 1.0  # bracket of the relative basin bisection
+BASIN_LO, BASIN_HI = 1e-3, 1.0  # first bracket of the relative basin search (then it grows)
+BASIN_CAP = 64.0  # largest relative perturbation tried where the start state stays valid
+CURVE_SEED = 12345  # random directions of the test curve (training validation uses others)
+TERRAIN_SEED = 20_000  # rough-terrain run k uses env seed TERRAIN_SEED + k
+PROFILE_SEG = 5  # ceiling search: control intervals per piece of a torque profile
+CYCLE_RECORD_DT = 1e-3  # sampling of the passive stride for the cycle scale [s]
 FD_REL = 1e-4  # central-difference step, relative to max(|z*_i|, FD_FLOOR_i)
 FD_FLOOR = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1])  # SI floors of the FD step scale
 Y_XDOT, Y_TH1DOT = 4, 6  # indices in the full state y = [x, y, th1, th2, xd, yd, th1d, th2d]
@@ -100,18 +146,30 @@ class Budget:
     push_samples: int  # random phases/signs per size
     newton_iters: int = 8
     settle_strides: int = 60  # map iterations before Newton
+    ceiling_strides: int = 2  # strides an open-loop profile must complete
+    ceiling_iters: int = 6  # bisection steps per ceiling
+    ceiling_random: int = 16  # random piecewise-constant profiles per tested size
+    ceiling_opt: int = 16  # (1+1)-ES shooting iterations per tested size
+    terrain_sigmas: tuple = (0.05, 0.1, 0.2, 0.5, 1.0)  # slope noise [deg]
+    terrain_runs: int = 16  # rough-terrain runs per sigma
+    terrain_strides: int = 50  # strides to survive
 
 
-_CURVE_FULL = tuple(float(x) for x in np.round(np.geomspace(0.005, 0.5, 16), 5))
+_CURVE_FULL = tuple(float(x) for x in np.round(np.geomspace(0.005, 0.5, 16), 5)) + (0.7, 1.0)
+_TERRAIN_FULL = (0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
 BUDGETS = {
     "test": Budget("test", 3, 40, (0.01, 0.1), 2, 2, 10, (0.1, 0.4), (0.5, 2.0), 2,
-                   newton_iters=3, settle_strides=10),
-    "quick": Budget("quick", 7, 100, (0.01, 0.02, 0.04, 0.06, 0.1, 0.15, 0.25, 0.4), 12,
+                   newton_iters=3, settle_strides=10, ceiling_strides=1, ceiling_iters=2,
+                   ceiling_random=2, ceiling_opt=2, terrain_sigmas=(0.05, 0.5), terrain_runs=2,
+                   terrain_strides=5),
+    "quick": Budget("quick", 7, 100, (0.01, 0.02, 0.04, 0.06, 0.1, 0.15, 0.25, 0.4, 0.7), 32,
                     5, 50, (0.05, 0.1, 0.2, 0.3, 0.4, 0.6, 0.8), (0.25, 0.5, 1.0, 2.0, 3.0, 4.0,
                                                                  6.0), 8),
-    "full": Budget("full", 14, 300, _CURVE_FULL, 128, 10, 50,
+    "full": Budget("full", 14, 300, _CURVE_FULL, 256, 10, 50,
                    (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.6, 0.8, 1.0),
-                   (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0), 64),
+                   (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0), 64,
+                   ceiling_strides=2, ceiling_iters=8, ceiling_random=48, ceiling_opt=48,
+                   terrain_sigmas=_TERRAIN_FULL, terrain_runs=64, terrain_strides=100),
 }
 # Window scans: first offset from nominal, doubling up to the limit.
 WINDOW_SCAN = {"alpha_deg": (0.005, 4.0), "kc": (0.5, 256.0)}
@@ -134,7 +192,7 @@ def find_fixed_point(f, z0, steps, settle: int = 60, newton_iters: int = 8, tol:
     return tuple(map_fixed_point(f, z0, steps, settle=settle, newton_iters=newton_iters, tol=tol))
 
 
-def random_directions(n: int, seed: int = 12345) -> np.ndarray:
+def random_directions(n: int, seed: int = CURVE_SEED) -> np.ndarray:
     """n directions uniform on the 6-sphere, each scaled to max |u_i| = 1."""
     u = np.random.default_rng(seed).standard_normal((n, 6))
     return u / np.max(np.abs(u), axis=1, keepdims=True)
@@ -154,6 +212,7 @@ class StrideOut:
     effort: float = math.nan  # time-averaged |tau| [N m]
     period: float = math.nan  # [s]
     steps: int = 0  # control intervals started
+    phase: str | None = None  # stance condition at the end (at the failure)
 
 
 class ClosedLoop:
@@ -163,13 +222,15 @@ class ClosedLoop:
     ``delta`` to one entry of the simulator state just before control interval ``step``.
     """
 
-    def __init__(self, controller, gait: str = "default", gait_overrides: dict | None = None):
+    def __init__(self, controller, gait: str = "default", gait_overrides: dict | None = None,
+                 env_extra: dict | None = None):
         import gymnasium as gym
 
         import bound_env
 
         gym.register_envs(bound_env)
-        kwargs = dict(controller.env_kwargs)
+        kwargs = dict(getattr(controller, "env_kwargs", None) or {})
+        kwargs.update(env_extra or {})
         kwargs["gait"] = gait
         overrides = {**(kwargs.get("gait_overrides") or {}), **(gait_overrides or {})}
         kwargs["gait_overrides"] = overrides or None
@@ -183,12 +244,17 @@ class ClosedLoop:
 
         self.max_steps = int(math.ceil(NO_APEX_TIME / self.dt)) + 2
         self.i_since_apex = list(self.env.task.obs_names).index("time_since_apex")
+        self.on_apex = getattr(controller, "on_apex", None)
+        self.last_phase: str | None = None  # stance condition at the end of the last `run`
 
     def stride(self, z, kick: tuple | None = None) -> StrideOut:
         env, ctrl = self.env, self.controller
-        obs, info = env.reset(options={"apex_state": np.asarray(z, dtype=float)})
+        z = np.asarray(z, dtype=float)
+        obs, info = env.reset(options={"apex_state": z})
         if info["failure"] is not None:
-            return StrideOut(None, info["failure"])
+            return StrideOut(None, info["failure"], phase="df")
+        if self.on_apex is not None:
+            self.on_apex(z, 0.0)
         t_prev, impulse = 0.0, 0.0
         for k in range(self.max_steps):
             if kick is not None and k == kick[0]:
@@ -203,8 +269,8 @@ class ClosedLoop:
             impulse += tau * (info["time"] - t_prev)
             t_prev = info["time"]
             if terminated:
-                return StrideOut(None, info["failure"], steps=k + 1)
-        return StrideOut(None, "no_apex", steps=self.max_steps)
+                return StrideOut(None, info["failure"], steps=k + 1, phase=info["phase"])
+        return StrideOut(None, "no_apex", steps=self.max_steps, phase=info["phase"])
 
     def map(self, z) -> np.ndarray | None:
         return self.stride(z).z1
@@ -215,9 +281,11 @@ class ClosedLoop:
         strides, failure): success = returned within RETURN_TOL of ``z_target`` within
         ``max_strides`` (or, with ``survive_only``, did not fall in ``max_strides``)."""
         z = np.asarray(z0, dtype=float)
+        self.last_phase = None
         for n in range(1, max_strides + 1):
             out = self.stride(z, kick if n == 1 else None)
             if out.z1 is None:
+                self.last_phase = out.phase
                 return False, n, out.failure
             z = out.z1
             if not np.all(np.isfinite(z)):
@@ -225,6 +293,54 @@ class ClosedLoop:
             if not survive_only and np.max(np.abs(z - z_target)) < RETURN_TOL:
                 return True, n, None
         return survive_only, max_strides, None
+
+    def episode(self, z0, max_strides: int, seed: int | None = None) -> tuple:
+        """One long episode from the apex state z0 (env seed ``seed``: with
+        ``slope_noise_deg`` it fixes the terrain). Returns (survived ``max_strides`` strides,
+        strides completed, failure)."""
+        env, ctrl = self.env, self.controller
+        z0 = np.asarray(z0, dtype=float)
+        obs, info = env.reset(seed=seed, options={"apex_state": z0})
+        if info["failure"] is not None:
+            return False, 0, info["failure"]
+        if self.on_apex is not None:
+            self.on_apex(z0, 0.0)
+        while True:
+            obs, _, terminated, _, info = env.step(np.array([ctrl(obs)]))
+            if terminated:
+                self.last_phase = info["phase"]
+                return False, info["stride"], info["failure"]
+            if "apex_z" in info:
+                if info["stride"] >= max_strides:
+                    return True, info["stride"], None
+                if self.on_apex is not None:
+                    self.on_apex(np.array(info["apex_z"]), float(obs[self.i_since_apex]))
+
+    def profile(self, z0, actions, max_strides: int, seg: int = PROFILE_SEG) -> tuple:
+        """Open loop: the normalized torques ``actions[j]`` held over control intervals
+        [j seg, (j + 1) seg) from the apex state z0, zero after the last piece. Returns
+        (strides completed >= max_strides, progress score, failure, phase, strides) with
+        score = strides completed + the fraction of a nominal stride survived since."""
+        env = self.env
+        obs, info = env.reset(options={"apex_state": np.asarray(z0, dtype=float)})
+        if info["failure"] is not None:
+            return False, 0.0, info["failure"], "df", 0
+        n_act = len(actions)
+        t_apex = 0.0
+        for k in range(self.max_steps * max_strides):
+            a = actions[k // seg] if k // seg < n_act else 0.0
+            obs, _, terminated, _, info = env.step(np.array([a]))
+            if "apex_z" in info:
+                t_apex = info["time"] - float(obs[self.i_since_apex])
+                if info["stride"] >= max_strides:
+                    return True, float(info["stride"]), None, None, info["stride"]
+            if terminated:
+                frac = min(0.99, (info["time"] - t_apex) / max(self.period_hint, 1e-3))
+                return (False, info["stride"] + frac, info["failure"], info["phase"],
+                        info["stride"])
+        return False, float(info["stride"]), "no_apex", info["phase"], info["stride"]
+
+    period_hint = 0.39  # s, nominal stride duration for the profile score (set by the tasks)
 
 
 def apply_kick(env, index: int, delta: float) -> None:
@@ -254,17 +370,22 @@ class Setup:
     z_cl: np.ndarray | None = None
     cycle_steps: int = 0
     key: str = ""
+    period: float = math.nan  # closed-loop stride period [s]
 
 
 _LOOPS: dict = {}
 
 
-def _loop(setup: Setup, overrides: dict | None = None) -> ClosedLoop:
-    k = (setup.key, tuple(sorted((overrides or {}).items())))
+def _loop(setup: Setup, overrides: dict | None = None, env_extra: dict | None = None
+          ) -> ClosedLoop:
+    k = (setup.key, tuple(sorted((overrides or {}).items())),
+         tuple(sorted((env_extra or {}).items())))
     if k not in _LOOPS:
         if len(_LOOPS) > 64:
             _LOOPS.clear()
-        _LOOPS[k] = ClosedLoop(setup.controller, setup.gait, overrides)
+        _LOOPS[k] = ClosedLoop(setup.controller, setup.gait, overrides, env_extra)
+        if math.isfinite(setup.period):
+            _LOOPS[k].period_hint = setup.period
     return _LOOPS[k]
 
 
@@ -288,17 +409,210 @@ def task_cycle(setup: Setup) -> dict:
     }
 
 
+def start_geometry(z, loop: ClosedLoop) -> dict:
+    """What the apex start state z itself rules out: ``invalid`` (the start failure, or None)
+    and ``mechanisms``: geometric reasons a stride from z cannot go as the gait does."""
+    from bound_env.dynamics import back_hip, front_hip, make_aux
+    from bound_env.hybrid import failure_name, start_status, state_from_z
+    from bound_env.params import P_GB, P_GF, P_LB, P_LF
+
+    y = state_from_z(z)
+    aux = make_aux(loop.env.params.to_array())
+    code = start_status(y, aux)
+    invalid = failure_name(code) if code != 0 else None
+    mech = []
+    if invalid is not None:
+        mech.append(f"start state invalid ({invalid})")
+    if back_hip(y, aux)[1] < aux[P_LB] * math.cos(aux[P_GB]):
+        mech.append("back hip below touchdown height at the apex")
+    if front_hip(y, aux)[1] < aux[P_LF] * math.cos(aux[P_GF]):
+        mech.append("front hip below touchdown height at the apex")
+    return {"invalid": invalid, "mechanisms": mech}
+
+
+def physical_cap(loop: ClosedLoop, zc, zs, i: int, sign: int) -> tuple[float, str]:
+    """(cap, reason): the smallest relative size s (units of |z*_i|) at which the start state
+    z_cl + sign s z*_i e_i is invalid (doubling scan, then 40 bisection steps), or
+    (BASIN_CAP, "numeric cap") if it stays valid up to BASIN_CAP."""
+    def invalid(s):
+        z = zc.copy()
+        z[i] += sign * s * zs[i]
+        return start_geometry(z, loop)["invalid"]
+
+    good, bad = 0.0, BASIN_LO
+    while bad <= BASIN_CAP and invalid(bad) is None:
+        good, bad = bad, 2.0 * bad
+    if bad > BASIN_CAP:
+        return BASIN_CAP, "numeric cap"
+    for _ in range(40):
+        mid = 0.5 * (good + bad)
+        if invalid(mid) is None:
+            good = mid
+        else:
+            bad = mid
+    return bad, f"start state invalid beyond ({invalid(bad)})"
+
+
+def hip_thresholds(loop: ClosedLoop, zc, zs, i: int, sign: int, cap: float) -> dict:
+    """For "back" and "front": the smallest relative size s <= cap at which that hip starts
+    below its touchdown height l cos gamma at the apex (None if it never does up to cap);
+    found by a doubling scan and 40 bisection steps on the start geometry alone."""
+    out = {}
+    for end in ("back", "front"):
+        text = f"{end} hip below touchdown height at the apex"
+
+        def below(s, text=text):
+            z = zc.copy()
+            z[i] += sign * s * zs[i]
+            return text in start_geometry(z, loop)["mechanisms"]
+
+        good, bad = 0.0, BASIN_LO
+        while bad <= cap and not below(bad):
+            good, bad = bad, 2.0 * bad
+        if bad > cap:
+            out[end] = None
+            continue
+        for _ in range(40):
+            mid = 0.5 * (good + bad)
+            if below(mid):
+                bad = mid
+            else:
+                good = mid
+        out[end] = bad
+    return out
+
+
+def _grown_search(ok, cap: float, iters: int) -> tuple[float, bool, float | None]:
+    """`bisect_threshold` grown up to ``cap``, remembering the tested points: returns
+    (edge, capped, smallest failing size tested or None)."""
+    fails = []
+
+    def test(s):
+        good = ok(s)
+        if not good:
+            fails.append(s)
+        return good
+
+    s, capped = bisect_threshold(test, min(BASIN_LO, cap / 2), min(BASIN_HI, cap), iters,
+                                 grow=True, cap=cap)
+    first_fail = min(fails) if fails else None
+    if not capped and first_fail is not None and first_fail >= cap:
+        capped = True  # every size below the (invalid-start) cap returned
+    return s, capped, first_fail
+
+
 def task_basin(setup: Setup, i: int, sign: int) -> dict:
     loop = _loop(setup)
     zs, zc = setup.z_star, setup.z_cl
+    n = setup.budget.basin_strides
 
-    def ok(s):
+    def start(s):
         z = zc.copy()
         z[i] += sign * s * zs[i]
-        return loop.run(z, zc, setup.budget.basin_strides)[0]
+        return z
 
-    s, capped = bisect_threshold(ok, BASIN_LO, BASIN_HI, setup.budget.basin_iters)
-    return {"rel": s, "abs": abs(s * zs[i]), "capped": capped}
+    cap, cap_reason = physical_cap(loop, zc, zs, i, sign)
+    s, capped, fail = _grown_search(lambda s: loop.run(start(s), zc, n)[0], cap,
+                                    setup.budget.basin_iters)
+    beyond = None
+    if fail is not None:
+        ok, strides, failure = loop.run(start(fail), zc, n)
+        geo = start_geometry(start(fail), loop)
+        beyond = {"rel": fail, "reason": failure or "no_return", "stride": strides,
+                  "phase": loop.last_phase if failure else None,
+                  "mechanisms": geo["mechanisms"]}
+    return {"rel": s, "abs": abs(s * zs[i]), "capped": capped, "cap": cap,
+            "cap_reason": cap_reason, "beyond": beyond}
+
+
+def _profile_search(loop: ClosedLoop, z, n_strides: int, n_pieces: int, b: Budget,
+                    rng: np.random.Generator) -> tuple[bool, dict]:
+    """Is there an admissible torque profile that completes ``n_strides`` strides from z?
+    Candidates in order: zero, +-max, bang-bang with one switch, random piecewise-constant
+    (half bang-bang valued, half uniform), then a (1+1)-ES shooting optimizer from the best.
+    Returns (found, best: {score, failure, phase, stride})."""
+    best = {"score": -1.0}
+    best_a = None
+
+    def trial(a):
+        nonlocal best, best_a
+        ok, score, failure, phase, strides = loop.profile(z, a, n_strides)
+        if score > best["score"]:
+            best = {"score": score, "failure": failure, "phase": phase, "stride": strides}
+            best_a = np.array(a, dtype=float)
+        return ok
+
+    cands = [np.zeros(n_pieces), np.ones(n_pieces), -np.ones(n_pieces)]
+    per_stride = max(2, n_pieces // max(1, n_strides))
+    for k in range(1, per_stride, max(1, per_stride // 6)):
+        a = np.where(np.arange(n_pieces) < k, 1.0, -1.0)
+        cands += [a, -a]
+    for j in range(b.ceiling_random):
+        if j % 2 == 0:
+            cands.append(rng.choice([-1.0, 1.0], n_pieces))
+        else:
+            cands.append(rng.uniform(-1.0, 1.0, n_pieces))
+    for a in cands:
+        if trial(a):
+            return True, best
+    step = 0.5
+    for _ in range(b.ceiling_opt):
+        mask = rng.random(n_pieces) < 0.3
+        child = np.clip(best_a + mask * rng.normal(0.0, step, n_pieces), -1.0, 1.0)
+        before = best["score"]
+        if trial(child):
+            return True, best
+        step = min(2.0, step * 1.5) if best["score"] > before else max(0.05, step * 0.85)
+    return False, best
+
+
+def task_ceiling(setup: Setup, i: int, sign: int) -> dict:
+    """The largest perturbation along (i, sign) from which some admissible open-loop torque
+    profile completes the first ``ceiling_strides`` strides (see the module docstring)."""
+    loop = _loop(setup)
+    zs, zc, b = setup.z_star, setup.z_cl, setup.budget
+    n = b.ceiling_strides
+    period = setup.period if math.isfinite(setup.period) else 0.39
+    n_pieces = int(math.ceil(1.3 * n * period / loop.dt / PROFILE_SEG))
+    found_at: dict = {}
+
+    def start(s):
+        z = zc.copy()
+        z[i] += sign * s * zs[i]
+        return z
+
+    def ok(s):
+        rng = np.random.default_rng([i, 1 if sign > 0 else 0, int(round(s * 1e9)) % 2**32])
+        found, best = _profile_search(loop, start(s), n, n_pieces, b, rng)
+        found_at[s] = best
+        return found
+
+    cap, cap_reason = physical_cap(loop, zc, zs, i, sign)
+    s, capped, fail = _grown_search(ok, cap, b.ceiling_iters)
+    hips = hip_thresholds(loop, zc, zs, i, sign, cap)
+    mechanism, beyond, geometric = None, None, False
+    if capped:
+        mechanism = cap_reason
+        geometric = cap_reason != "numeric cap"
+    elif fail is not None:
+        geo = start_geometry(start(fail), loop)
+        best = found_at.get(fail, {})
+        beyond = {"rel": fail, "reason": best.get("failure"), "stride": best.get("stride"),
+                  "phase": best.get("phase"), "mechanisms": geo["mechanisms"]}
+        # geometric: the edge sits at the size where a hip starts below its touchdown height
+        # (within the bisection's resolution) and the best profile fails by that hip
+        for end, at in hips.items():
+            if at is not None and s <= at <= fail * 1.001 and \
+                    f"ground_contact_{end}_hip" == best.get("failure"):
+                mechanism = f"{end} hip below touchdown height at the apex (from s = {at:.4g})"
+                geometric = True
+        if mechanism is None:
+            mechanism = (f"no admissible profile found within the search budget (best: "
+                         f"{best.get('failure')} in stride {(best.get('stride') or 0) + 1}, "
+                         f"phase {best.get('phase')})")
+    return {"rel": s, "abs": abs(s * zs[i]), "capped": capped, "cap": cap,
+            "cap_reason": cap_reason, "mechanism": mechanism, "geometric": geometric,
+            "hip_below_touchdown_from": hips, "beyond": beyond, "profile_pieces": n_pieces}
 
 
 def task_curve(setup: Setup, size: float) -> dict:
@@ -308,7 +622,24 @@ def task_curve(setup: Setup, size: float) -> dict:
     dirs = random_directions(setup.budget.curve_dirs)
     for u in dirs:
         wins += loop.run(zc + size * np.abs(zs) * u, zc, setup.budget.basin_strides)[0]
-    return {"size": size, "success": wins / len(dirs), "n": len(dirs)}
+    return {"size": size, "success": wins / len(dirs), "n": len(dirs), "k": int(wins)}
+
+
+def task_terrain(setup: Setup, sigma: float) -> dict:
+    """Rough terrain: how many of ``terrain_runs`` episodes from z_cl with slope noise sigma
+    [deg] survive ``terrain_strides`` strides."""
+    loop = _loop(setup, env_extra={"slope_noise_deg": float(sigma)})
+    b = setup.budget
+    k, strides, reasons = 0, [], {}
+    for j in range(b.terrain_runs):
+        ok, n, failure = loop.episode(setup.z_cl, b.terrain_strides, seed=TERRAIN_SEED + j)
+        k += ok
+        strides.append(n)
+        if failure:
+            reasons[failure] = reasons.get(failure, 0) + 1
+    return {"sigma_deg": sigma, "k": int(k), "n": b.terrain_runs,
+            "success": k / b.terrain_runs, "mean_strides": float(np.mean(strides)),
+            "failures": reasons}
 
 
 def task_window(setup: Setup, key: str, side: int) -> dict:
@@ -367,7 +698,7 @@ def task_push(setup: Setup, kind: str, size: float, index: int) -> dict:
 
 
 TASKS = {"cycle": task_cycle, "basin": task_basin, "curve": task_curve, "window": task_window,
-         "push": task_push}
+         "push": task_push, "ceiling": task_ceiling, "terrain": task_terrain}
 
 
 def run_task(setup: Setup, name: str, args: tuple) -> dict:
@@ -432,10 +763,50 @@ def _run_all(executor, setup: Setup, jobs: list, cache: TaskCache, progress: boo
     return results
 
 
+# Every module setting that changes a result: part of each cache key (with the budget).
+SETTINGS = {
+    "version": 2, "rtol": EVAL_RTOL, "return_tol": RETURN_TOL, "basin_lo": BASIN_LO,
+    "basin_hi": BASIN_HI, "basin_cap": BASIN_CAP, "fd_rel": FD_REL,
+    "fd_floor": FD_FLOOR.tolist(), "curve_seed": CURVE_SEED, "terrain_seed": TERRAIN_SEED,
+    "profile_seg": PROFILE_SEG, "window_scan": WINDOW_SCAN, "env_id": ENV_ID,
+    "cycle_record_dt": CYCLE_RECORD_DT,
+}
+
+
 def setup_key(controller, gait: str, budget: Budget) -> str:
-    h = hashlib.sha256(f"{controller.fingerprint()}|{gait}|{asdict(budget)}|{EVAL_RTOL}|"
-                       f"{RETURN_TOL}".encode())
-    return h.hexdigest()[:16]
+    env_kwargs = getattr(controller, "env_kwargs", None) or {}
+    return settings_hash({"controller": controller.fingerprint(), "gait": str(gait),
+                          "budget": asdict(budget), "settings": SETTINGS,
+                          "env_kwargs": sorted((str(k), repr(v)) for k, v in env_kwargs.items())})
+
+
+def as_controller(policy):
+    """``"passive"`` or a path -> `agents.policy.load_controller`; an object with the
+    controller protocol (``__call__`` and ``fingerprint``) is used as it is."""
+    if isinstance(policy, (str, Path)):
+        return load_controller(policy)
+    if callable(policy) and callable(getattr(policy, "fingerprint", None)):
+        return policy
+    raise ValueError(f"policy must be 'passive', a policy path or a controller with __call__ "
+                     f"and fingerprint(), got {type(policy).__name__}")
+
+
+def controller_name(controller) -> str:
+    return str(getattr(controller, "name", None) or type(controller).__name__)
+
+
+def cycle_scale(gait: str) -> np.ndarray:
+    """Peak-to-peak range of each apex component [y_g, th1, th2, xdot_g, th1dot, th2dot]
+    over one passive stride from the gait's z* (SI): the ``cycle`` yardstick."""
+    from bound_env.hybrid import simulate_stride
+    from bound_env.params import load_gait
+
+    g = load_gait(gait)
+    res = simulate_stride(g.z0, g.params, backend="fast", rtol=EVAL_RTOL, atol=EVAL_RTOL,
+                          record_dt=CYCLE_RECORD_DT)
+    tr = res.trajectory
+    full = np.hstack([tr.q, tr.qd])[:, [1, 2, 3, 4, 6, 7]]
+    return full.max(axis=0) - full.min(axis=0)
 
 
 def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str = "default",
@@ -443,6 +814,7 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
                     progress: bool = False, use_cache: bool = True) -> dict:
     """All margins of ``policy`` (``"passive"``, a path, or a controller) as a JSON-able dict.
 
+    ``policy`` may be any object with the controller protocol (module docstring).
     ``executor``: any `concurrent.futures.Executor`-like object; default: a process pool of
     ``workers`` processes (in-process when ``workers == 1``). ``out``: directory for the
     CSV/PNG outputs and the task cache.
@@ -455,10 +827,11 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
         budget = BUDGETS[budget]
     if workers < 1:
         raise ValueError(f"--workers must be at least 1, got {workers}")
-    controller = policy if isinstance(policy, (MLPController, ZeroController)) else \
-        load_controller(policy)
+    controller = as_controller(policy)
     g = load_gait(gait)
     z_star = np.asarray(g.z0, dtype=float)
+    scale = {"names": list(Z_LABELS), "units": list(Z_UNITS),
+             "zstar": np.abs(z_star).tolist(), "cycle": cycle_scale(gait).tolist()}
     out_dir = Path(out) if out is not None else None
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -473,65 +846,119 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
         cyc = _run_all(executor, setup, [("cycle", ())], cache, False, "cycle")[("cycle", ())]
         if "error" in cyc:
             raise RuntimeError(f"no closed-loop cycle: {cyc['error']}")
-        setup = replace(setup, z_cl=np.array(cyc["z_cl"]), cycle_steps=int(cyc["cycle_steps"]))
+        setup = replace(setup, z_cl=np.array(cyc["z_cl"]), cycle_steps=int(cyc["cycle_steps"]),
+                        period=float(cyc["period"]))
         jobs = [("basin", (i, s)) for i in range(6) for s in (1, -1)]
+        jobs += [("ceiling", (i, s)) for i in range(6) for s in (1, -1)]
         jobs += [("curve", (r,)) for r in budget.curve_sizes]
+        jobs += [("terrain", (v,)) for v in budget.terrain_sigmas]
         jobs += [("window", (k, s)) for k in ("alpha_deg", "kc") for s in (-1, 1)]
         jobs += [("push", ("xdot", v, j)) for j, v in enumerate(budget.push_xdot)]
         jobs += [("push", ("th1dot", v, j)) for j, v in enumerate(budget.push_th1dot)]
-        res = _run_all(executor, setup, jobs, cache, progress, f"margins {controller.name}")
+        res = _run_all(executor, setup, jobs, cache, progress,
+                       f"margins {controller_name(controller)}")
     finally:
         if own:
             executor.shutdown()
-    result = assemble(controller, gait, budget, z_star, cyc, res)
+    result = assemble(controller, gait, budget, z_star, cyc, res, scale)
     result["seconds"] = time.perf_counter() - t0
     if out_dir is not None:
         write_outputs(result, out_dir)
     return result
 
 
-def _p50(sizes, success) -> float:
-    """Largest size up to which the success rate stays >= 0.5 (0 if the first is below)."""
-    best = 0.0
-    for s, p in zip(sizes, success, strict=True):
-        if p < 0.5:
-            break
-        best = s
-    return best
+def _direction_entry(r: dict, i: int, scale: dict) -> dict:
+    e = {k: r.get(k) for k in ("rel", "abs", "capped", "cap", "cap_reason", "beyond")}
+    e["rel_cycle"] = r["abs"] / scale["cycle"][i] if scale["cycle"][i] > 0 else math.nan
+    for k in ("mechanism", "geometric", "hip_below_touchdown_from"):
+        if k in r:
+            e[k] = r[k]
+    return e
 
 
-def assemble(controller, gait, budget, z_star, cyc, res) -> dict:
-    basin = {}
+def _rate_curve(xs, items) -> dict:
+    k = [int(c["k"]) for c in items]
+    n = [int(c["n"]) for c in items]
+    rates = [c["success"] for c in items]
+    ci = [wilson_interval(a, b) for a, b in zip(k, n, strict=True)]
+    lo, hi = [c[0] for c in ci], [c[1] for c in ci]
+    return {"success": rates, "k": k, "n": n, "ci_low": lo, "ci_high": hi,
+            "x50": threshold_on_grid(xs, rates),
+            "x50_ci": [threshold_on_grid(xs, lo), threshold_on_grid(xs, hi)],
+            "x50_at_grid_end": bool(rates and rates[-1] >= 0.5)}
+
+
+def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
+    scale = scale or {"names": list(Z_LABELS), "units": list(Z_UNITS),
+                      "zstar": np.abs(z_star).tolist(), "cycle": [math.nan] * 6}
+    basin, ceiling = {}, {}
     worst = (math.inf, None, math.nan)
+    worst_cycle = (math.inf, None)
+    worst_share = (math.inf, None)
     for i, label in enumerate(Z_LABELS):
         entry = {"unit": Z_UNITS[i], "z_star": float(z_star[i])}
+        centry = dict(entry)
         for sign, sym in ((1, "+"), (-1, "-")):
             r = res[("basin", (i, sign))]
-            entry[sym] = {k: r.get(k) for k in ("rel", "abs", "capped")}
+            entry[sym] = _direction_entry(r, i, scale)
+            c = res.get(("ceiling", (i, sign)))
+            if c is not None:
+                centry[sym] = _direction_entry(c, i, scale)
+                share = r["abs"] / c["abs"] if c["abs"] > 0 else math.nan
+                entry[sym]["share"] = share
+                if share < worst_share[0]:
+                    worst_share = (share, f"{label}{sym}")
             if r.get("rel") is not None and r["rel"] < worst[0]:
                 worst = (r["rel"], f"{label}{sym}", r["abs"])
+            if entry[sym]["rel_cycle"] < worst_cycle[0]:
+                worst_cycle = (entry[sym]["rel_cycle"], f"{label}{sym}")
         basin[label] = entry
+        ceiling[label] = centry
     curve = [res[("curve", (r,))] for r in budget.curve_sizes]
+    for c in curve:  # results cached before the success counts were kept
+        c.setdefault("k", int(round(c["success"] * c["n"])))
+    ccurve = _rate_curve(list(budget.curve_sizes), curve)
+    terr = [res[("terrain", (v,))] for v in budget.terrain_sigmas]
+    tcurve = _rate_curve(list(budget.terrain_sigmas), terr)
     push = {}
     for kind, sizes in (("xdot", budget.push_xdot), ("th1dot", budget.push_th1dot)):
         rates = [res[("push", (kind, v, j))]["success"] for j, v in enumerate(sizes)]
         push[kind] = {"unit": "m/s" if kind == "xdot" else "rad/s", "sizes": list(sizes),
-                      "success": rates, "p50": _p50(sizes, rates)}
+                      "success": rates, "p50": threshold_on_grid(sizes, rates)}
     win = {(k, s): res[("window", (k, s))] for k in ("alpha_deg", "kc") for s in (-1, 1)}
     z_cl = np.array(cyc["z_cl"])
     curve_sizes = [c["size"] for c in curve]
-    curve_rates = [c["success"] for c in curve]
     return {
-        "policy": controller.name,
+        "policy": controller_name(controller),
         "gait": gait,
         "budget": budget.name,
+        "basin_scale": scale,
         "basin": basin,
         "basin_min": worst[0],
         "basin_min_direction": worst[1],
         "basin_min_abs": worst[2],
-        "basin_curve": {"sizes": curve_sizes, "success": curve_rates,
-                        "r50": _p50(curve_sizes, curve_rates),
-                        "directions": budget.curve_dirs},
+        "basin_min_cycle": worst_cycle[0],
+        "basin_min_cycle_direction": worst_cycle[1],
+        "basin_ceiling": ceiling,
+        "basin_share_min": worst_share[0] if worst_share[1] else None,
+        "basin_share_min_direction": worst_share[1],
+        "basin_curve": {"sizes": curve_sizes, "success": ccurve["success"], "k": ccurve["k"],
+                        "n": ccurve["n"], "ci_low": ccurve["ci_low"],
+                        "ci_high": ccurve["ci_high"], "interval": "95% Wilson",
+                        "r50": ccurve["x50"], "r50_ci": ccurve["x50_ci"],
+                        "r50_at_grid_end": ccurve["x50_at_grid_end"],
+                        "directions": budget.curve_dirs, "direction_seed": CURVE_SEED,
+                        "scale": "zstar"},
+        "terrain": {"sigmas_deg": list(budget.terrain_sigmas), "survival": tcurve["success"],
+                    "k": tcurve["k"], "n": tcurve["n"], "ci_low": tcurve["ci_low"],
+                    "ci_high": tcurve["ci_high"], "interval": "95% Wilson",
+                    "runs": budget.terrain_runs, "strides": budget.terrain_strides,
+                    "seeds": [TERRAIN_SEED, TERRAIN_SEED + budget.terrain_runs - 1],
+                    "mean_strides": [t["mean_strides"] for t in terr],
+                    "failures": [t["failures"] for t in terr]},
+        "terrain_sigma50_deg": tcurve["x50"],
+        "terrain_sigma50_ci_deg": tcurve["x50_ci"],
+        "terrain_sigma50_at_grid_end": tcurve["x50_at_grid_end"],
         "emax": cyc["emax"],
         "eigenvalues": cyc["eigenvalues"],
         "z_star": z_star.tolist(),
@@ -551,8 +978,16 @@ def assemble(controller, gait, budget, z_star, cyc, res) -> dict:
         "period": cyc["period"],
         "settings": {"return_tol": RETURN_TOL, "rtol": EVAL_RTOL,
                      "basin_strides": budget.basin_strides, "basin_iters": budget.basin_iters,
+                     "basin_first_bracket": [BASIN_LO, BASIN_HI], "basin_cap": BASIN_CAP,
                      "window_strides": budget.window_strides,
-                     "push_samples": budget.push_samples},
+                     "push_samples": budget.push_samples,
+                     "ceiling": {"strides": budget.ceiling_strides,
+                                 "iters": budget.ceiling_iters,
+                                 "random_profiles": budget.ceiling_random,
+                                 "optimizer_iters": budget.ceiling_opt,
+                                 "piece_intervals": PROFILE_SEG},
+                     "terrain_runs": budget.terrain_runs,
+                     "terrain_strides": budget.terrain_strides},
     }
 
 
@@ -564,18 +999,36 @@ def assemble(controller, gait, budget, z_star, cyc, res) -> dict:
 def write_outputs(result: dict, out_dir: Path) -> None:
     """margins.json, basin.csv, curve.csv, push.csv and PNG plots."""
     (out_dir / "margins.json").write_text(json.dumps(result, indent=2) + "\n")
-    with (out_dir / "basin.csv").open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["component", "unit", "sign", "rel", "abs", "capped"])
-        for label, e in result["basin"].items():
-            for sym in ("+", "-"):
-                w.writerow([label, e["unit"], sym, e[sym]["rel"], e[sym]["abs"], e[sym]["capped"]])
+    for name, key in (("basin.csv", "basin"), ("ceiling.csv", "basin_ceiling")):
+        with (out_dir / name).open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["component", "unit", "sign", "rel", "abs", "capped", "rel_cycle",
+                        "share", "cap", "beyond_rel", "beyond_reason", "beyond_stride",
+                        "beyond_phase", "mechanisms"])
+            for label, e in result[key].items():
+                for sym in ("+", "-"):
+                    v = e.get(sym)
+                    if v is None:
+                        continue
+                    bey = v.get("beyond") or {}
+                    w.writerow([label, e["unit"], sym, v["rel"], v["abs"], v["capped"],
+                                v.get("rel_cycle"), v.get("share"), v.get("cap"),
+                                bey.get("rel"), bey.get("reason"), bey.get("stride"),
+                                bey.get("phase"), "; ".join(bey.get("mechanisms") or [])])
+    c = result["basin_curve"]
     with (out_dir / "curve.csv").open("w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["size_rel", "success"])
-        for s, p in zip(result["basin_curve"]["sizes"], result["basin_curve"]["success"],
-                        strict=True):
-            w.writerow([s, p])
+        w.writerow(["size_rel", "success", "k", "n", "ci_low", "ci_high"])
+        for row in zip(c["sizes"], c["success"], c["k"], c["n"], c["ci_low"], c["ci_high"],
+                       strict=True):
+            w.writerow(row)
+    t = result["terrain"]
+    with (out_dir / "terrain.csv").open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["sigma_deg", "survival", "k", "n", "ci_low", "ci_high", "mean_strides"])
+        for row in zip(t["sigmas_deg"], t["survival"], t["k"], t["n"], t["ci_low"],
+                       t["ci_high"], t["mean_strides"], strict=True):
+            w.writerow(row)
     with (out_dir / "push.csv").open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["kind", "unit", "size", "success"])
@@ -607,7 +1060,7 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
         ax.set_yscale("log")  # an empty basin (all zero) has nothing to put on a log axis
     ax.set_xticks(x, names, rotation=45, ha="right")
     ax.set_ylabel("largest relative perturbation")
-    ax.set_title("Basin along each apex component (capped at 1)")
+    ax.set_title("Basin along each apex component (units of |z*_i|; uncapped)")
     ax.legend(fontsize=8)
     fig.tight_layout()
     paths.append(out_dir / f"{prefix}basin.png")
@@ -616,7 +1069,11 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
 
     fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
     for r, lab in zip(results, labels, strict=True):
-        ax.plot(r["basin_curve"]["sizes"], r["basin_curve"]["success"], "o-", label=lab)
+        c = r["basin_curve"]
+        line = ax.plot(c["sizes"], c["success"], "o-", label=lab, ms=3)[0]
+        if "ci_low" in c:
+            ax.fill_between(c["sizes"], c["ci_low"], c["ci_high"], color=line.get_color(),
+                            alpha=0.15)
     ax.set_xscale("log")
     ax.set_xlabel("relative perturbation size r (random direction)")
     ax.set_ylabel("P(return)")
@@ -639,6 +1096,23 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
     paths.append(out_dir / f"{prefix}push.png")
     fig.savefig(paths[-1])
     plt.close(fig)
+
+    if all("terrain" in r for r in results):
+        fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
+        for r, lab in zip(results, labels, strict=True):
+            t = r["terrain"]
+            line = ax.plot(t["sigmas_deg"], t["survival"], "o-", label=lab, ms=3)[0]
+            ax.fill_between(t["sigmas_deg"], t["ci_low"], t["ci_high"],
+                            color=line.get_color(), alpha=0.15)
+        ax.set_xscale("log")
+        ax.set_xlabel("slope noise sigma per apex [deg]")
+        ax.set_ylabel(f"P(survive {results[0]['terrain']['strides']} strides)")
+        ax.set_ylim(-0.05, 1.05)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        paths.append(out_dir / f"{prefix}terrain.png")
+        fig.savefig(paths[-1])
+        plt.close(fig)
     return paths
 
 
@@ -647,7 +1121,13 @@ def summary_text(r: dict) -> str:
     lines = [
         f"policy {r['policy']}  gait {r['gait']}  budget {r['budget']}  ({r['seconds']:.1f} s)",
         f"basin_min {r['basin_min']:.4g} ({r['basin_min_direction']}, "
-        f"abs {r['basin_min_abs']:.4g})",
+        f"abs {r['basin_min_abs']:.4g})   cycle scale {r['basin_min_cycle']:.4g} "
+        f"({r['basin_min_cycle_direction']})   share of ceiling "
+        f"{_num(r['basin_share_min'])} ({r['basin_share_min_direction']})",
+        f"r50 {r['basin_curve']['r50']:.3g} [{r['basin_curve']['r50_ci'][0]:.3g}, "
+        f"{r['basin_curve']['r50_ci'][1]:.3g}]   terrain sigma50 "
+        f"{r['terrain_sigma50_deg']:.3g} deg [{r['terrain_sigma50_ci_deg'][0]:.3g}, "
+        f"{r['terrain_sigma50_ci_deg'][1]:.3g}]",
         f"emax {r['emax']:.4f}   fixed-point shift max |dz| "
         f"{np.max(np.abs(r['fixed_point_shift'])):.3g}",
         f"slope window {r['slope_window_deg'][0]:.4f} .. {r['slope_window_deg'][1]:.4f} deg   "
@@ -656,3 +1136,7 @@ def summary_text(r: dict) -> str:
         f" rad/s   effort {r['effort']:.3g} N m ({100 * r['effort_frac']:.2f} % of max torque)",
     ]
     return "\n".join(lines)
+
+
+def _num(v, digits: int = 4) -> str:
+    return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.{digits}g}"

@@ -144,30 +144,50 @@ class NoiseCurriculumCallback(BaseCallback):
         return True
 
 
+VALIDATION_SEED = 777  # random directions of the checkpoint validation (the test uses 12345)
+
+
 class BasinValidationCallback(BaseCallback):
-    """Keep the checkpoint with the widest basin along the passive gait's weakest directions.
+    """Keep the checkpoint with the widest basin on a *validation* set of directions.
 
     Every ``eval_freq`` timesteps the current deterministic policy (with the training
     ``VecNormalize`` statistics) is put in the closed loop of `agents.margins`: its
-    closed-loop fixed point is found, then the basin along ``directions`` (apex component,
-    sign; default forward speed and height, both signs: where the passive basin is
-    narrowest) by ``iters`` log-bisection steps with ``strides`` strides to return. The
-    smallest of them is the validation score, written to ``basin_validation.csv``; a new
-    best is saved as ``best/model.zip`` + ``best/vecnormalize.pkl``, which ``--export``
-    ships. (Like EvalCallback's best model, with a margin instead of the mean return.)
+    closed-loop fixed point is found, then, along each of ``n_directions`` random directions
+    (seed ``direction_seed``, drawn like the margins' random-direction curve but from another
+    seed, so disjoint from the test set: neither the 12 axis directions of the basin nor the
+    curve's directions, nor the rough-terrain seeds), the largest size that returns, by
+    ``iters`` log-bisection steps with ``strides`` strides to return. The smallest of them is
+    the validation score, written to ``basin_validation.csv``; a new best is saved as
+    ``best/model.zip`` + ``best/vecnormalize.pkl``, which ``--export-from best`` ships
+    (``--export`` ships the final model by default). ``directions`` (a list of (component,
+    sign)) restores the old axis-aligned check, which overlaps the test: use it only for
+    monitoring.
     """
 
-    def __init__(self, eval_freq: int = 100_000, directions=((3, -1), (3, 1), (0, -1), (0, 1)),
-                 iters: int = 8, strides: int = 100, verbose: int = 0):
+    def __init__(self, eval_freq: int = 100_000, directions=None, n_directions: int = 8,
+                 direction_seed: int = VALIDATION_SEED, iters: int = 8, strides: int = 100,
+                 verbose: int = 0):
         super().__init__(verbose)
         self.eval_freq = int(eval_freq)
-        self.directions = [tuple(d) for d in directions]
+        self.directions = None if directions is None else [tuple(d) for d in directions]
+        self.n_directions, self.direction_seed = int(n_directions), int(direction_seed)
         self.iters, self.strides = int(iters), int(strides)
         self.run_dir: Path | None = None  # set by `train`
         self.env_kwargs: dict = {}
         self.env_wrapper = None
         self.best = -1.0
         self._last = 0
+
+    def validation_directions(self) -> np.ndarray:
+        """The validation perturbation directions (rows; units of |z*_i|, max |u_i| = 1)."""
+        from .margins import random_directions
+
+        if self.directions is not None:
+            out = np.zeros((len(self.directions), 6))
+            for k, (i, sign) in enumerate(self.directions):
+                out[k, i] = sign
+            return out
+        return random_directions(self.n_directions, seed=self.direction_seed)
 
     def _on_step(self) -> bool:
         if self.num_timesteps - self._last >= self.eval_freq:
@@ -211,11 +231,9 @@ class BasinValidationCallback(BaseCallback):
         if res > 1e-6:
             return 0.0
         worst = BASIN_HI
-        for i, sign in self.directions:
-            def ok(s, i=i, sign=sign):
-                z = zc.copy()
-                z[i] += sign * s * zs[i]
-                return loop.run(z, zc, self.strides)[0]
+        for u in self.validation_directions():
+            def ok(s, u=u):
+                return loop.run(zc + s * np.abs(zs) * u, zc, self.strides)[0]
 
             worst = min(worst, bisect_threshold(ok, BASIN_LO, BASIN_HI, self.iters)[0])
             if worst == 0.0:

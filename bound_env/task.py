@@ -45,7 +45,7 @@ from .hybrid import (
     start_status,
     state_from_z,
 )
-from .params import P_GB, P_GF, P_LB, P_LF, P_TAU, Z_NAMES, Gait, load_gait
+from .params import P_ALPHA, P_GB, P_GF, P_LB, P_LF, P_TAU, Z_NAMES, Gait, load_gait
 from .terrain import change_slope
 
 # ---------------------------------------------------------------------------------------------
@@ -119,8 +119,9 @@ C_ZSCALE = 15  # 6 entries: APEX_SCALES
 N_OBS_FULL = len(OBS_NAMES)
 C_OBS_LOW = 21  # N_OBS_FULL entries: lower bounds of the full observation (float32 values)
 C_OBS_HIGH = C_OBS_LOW + N_OBS_FULL  # N_OBS_FULL entries: upper bounds
-C_SLOPE_NOISE = C_OBS_HIGH + N_OBS_FULL  # sigma of the slope change at each apex [rad]
-N_CFG = C_SLOPE_NOISE + 1
+C_SLOPE_NOISE = C_OBS_HIGH + N_OBS_FULL  # sigma of the slope at each apex [rad]
+C_ALPHA_NOMINAL = C_SLOPE_NOISE + 1  # the nominal slope alpha [rad]
+N_CFG = C_ALPHA_NOMINAL + 1
 
 _Z_IN_Y = (1, 2, 3, 4, 6, 7)  # z = y[_Z_IN_Y] at an apex (eq. 17)
 _Z_IDX = np.array(_Z_IN_Y)
@@ -208,9 +209,10 @@ def reward_terms(cfg, tracking, a, failed):
 def advance_rough(y, aux, flags, s, t_end, cfg, ev_t, ev_g, ev_ph, apex, rec_t, rec_y, rec_ph,
                   rec_e):
     """`bound_env.fast.advance` to t_end on rough terrain: at every apex the apex state is
-    stored in ``apex`` (as the smooth path stores it), then the ground tilts by
-    cfg[C_SLOPE_NOISE] * s[S_XI + k] for the k-th apex of the interval
-    (`bound_env.terrain.change_slope`) and a new stride starts.
+    stored in ``apex`` (as the smooth path stores it), then the slope becomes
+    alpha + sigma xi_k (alpha nominal, xi_k = s[S_XI + k] for the k-th apex of the interval):
+    the ground tilts by the difference (`bound_env.terrain.change_slope`) and a new stride
+    starts.
 
     Returns (status, t, h_next, n_apex, t_last_apex or -1).
     """
@@ -225,7 +227,8 @@ def advance_rough(y, aux, flags, s, t_end, cfg, ev_t, ev_g, ev_ph, apex, rec_t, 
             return status, t, h, n_apex, t_apex
         if n_apex < apex.shape[0]:
             apex[n_apex, :] = y
-        change_slope(y, aux, cfg[C_SLOPE_NOISE] * s[S_XI + min(n_apex, N_XI - 1)])
+        alpha_k = cfg[C_ALPHA_NOMINAL] + cfg[C_SLOPE_NOISE] * s[S_XI + min(n_apex, N_XI - 1)]
+        change_slope(y, aux, alpha_k - aux[P_ALPHA])
         n_apex += 1
         t_apex = t
         flags[FL_TOUCHED_B] = False
@@ -422,6 +425,7 @@ class PassiveBoundTask:
         cfg[C_OBS_LOW : C_OBS_LOW + N_OBS_FULL] = self._obs_low
         cfg[C_OBS_HIGH : C_OBS_HIGH + N_OBS_FULL] = self._obs_high
         cfg[C_SLOPE_NOISE] = math.radians(self.slope_noise_deg)
+        cfg[C_ALPHA_NOMINAL] = self.params.alpha
         self.cfg = cfg
         self._aux0 = make_aux(self.params.to_array())
 

@@ -170,10 +170,14 @@ def test_training_smoke_run_writes_a_model_that_loads_and_acts(smoke_run):
         obs, *_ = env.step(np.array([a_np]))
 
 
-def test_export_ships_the_best_validation_model(smoke_run, tmp_path):
+def test_export_ships_the_final_model_unless_told(smoke_run, tmp_path):
     from agents.cli import export_policy
 
-    dest = export_policy(smoke_run, tmp_path / "policy")
+    dest = export_policy(smoke_run, tmp_path / "final")
+    assert (dest / "model.zip").read_bytes() == (smoke_run / "model.zip").read_bytes()
+    info = json.loads((dest / "exported.json").read_text())
+    assert info["selection"].startswith("none") and "basin_validation" not in info
+    dest = export_policy(smoke_run, tmp_path / "policy", source="best")
     assert (dest / "model.zip").read_bytes() == (smoke_run / "best" / "model.zip").read_bytes()
     info = json.loads((dest / "exported.json").read_text())
     assert info["exported_from"].endswith("best") and "basin_validation" in info
@@ -265,7 +269,16 @@ def _check_schema(r):
     assert set(r["basin"]) == {"y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot"}
     for e in r["basin"].values():
         for s in ("+", "-"):
-            assert 0.0 <= e[s]["rel"] <= 1.0 and e[s]["abs"] >= 0
+            assert 0.0 <= e[s]["rel"] <= e[s]["cap"] and e[s]["abs"] >= 0
+            assert e[s]["abs"] == pytest.approx(e[s]["rel"] * abs(e["z_star"]))
+    for key in ("basin_scale", "basin_ceiling", "basin_min_cycle", "basin_share_min",
+                "terrain", "terrain_sigma50_deg"):
+        assert key in r, key
+    assert set(r["basin_ceiling"]) == set(r["basin"])
+    c = r["basin_curve"]
+    assert len(c["ci_low"]) == len(c["sizes"]) and c["r50_ci"][0] <= c["r50"] <= c["r50_ci"][1]
+    assert all(lo <= p <= hi for lo, p, hi in zip(c["ci_low"], c["success"], c["ci_high"],
+                                                  strict=True))
     assert r["basin_min"] == min(e[s]["rel"] for e in r["basin"].values() for s in "+-")
     assert len(r["eigenvalues"]) == 6 and all(len(v) == 2 for v in r["eigenvalues"])
     assert r["emax"] == pytest.approx(math.hypot(*r["eigenvalues"][0]))
@@ -335,6 +348,7 @@ def test_budgets_are_ordered():
     assert f.curve_dirs > q.curve_dirs and f.push_samples > q.push_samples
 
 
+@pytest.mark.slow
 def test_cli_margins_json_and_compare(tmp_path, capsys):
     from bound_env.cli import main
 

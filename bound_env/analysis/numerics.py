@@ -243,7 +243,8 @@ def map_fixed_point(f, z0, steps, settle: int = MAP_SETTLE, newton_iters: int = 
 # --------------------------------------------------------------------------------------------
 
 
-def bisect_threshold(ok, lo: float, hi: float, iters: int, log: bool = True):
+def bisect_threshold(ok, lo: float, hi: float, iters: int, log: bool = True,
+                     grow: bool = False, cap: float = math.inf):
     """Largest s in [lo, hi] with ``ok(s)``, assuming ok holds below a threshold and fails
     above. Returns (s, capped): (hi, True) if ok(hi); (0.0, False) if not ok(lo); else the
     last ``ok`` point after ``iters`` bisection steps (on log s if ``log``, else linear).
@@ -251,10 +252,26 @@ def bisect_threshold(ok, lo: float, hi: float, iters: int, log: bool = True):
     Calls: ok(hi), ok(lo), then one per step, in that order. Extensions (for example
     growing ``hi`` while ok(hi) holds, for an uncapped basin) belong here as keyword
     arguments whose defaults keep this behaviour.
+
+    With ``grow`` (the uncapped basin of `agents.margins`), an ``ok(hi)`` does not stop the
+    search: the bracket grows by doubling from the last success (2 hi, 4 hi, ..., never
+    beyond ``cap``) until ok fails, then bisects between the last success and the first
+    failure; (cap, True) if ok still holds at ``cap``.
     """
     if ok(hi):
-        return hi, True
-    if not ok(lo):
+        if not grow:
+            return hi, True
+        lo = hi
+        while True:
+            if lo >= cap:
+                return lo, True
+            nxt = min(2.0 * lo, cap)
+            if ok(nxt):
+                lo = nxt
+            else:
+                hi = nxt
+                break
+    elif not ok(lo):
         return 0.0, False
     for _ in range(iters):
         mid = math.sqrt(lo * hi) if log else 0.5 * (lo + hi)

@@ -1,0 +1,58 @@
+"""Confidence intervals used by the margins and the comparison table.
+
+- `wilson_interval`: the 95 % Wilson score interval of a success rate k/n (Wilson 1927;
+  Brown, Cai & DasGupta 2001 recommend it over the Wald interval for small n or rates near
+  0 and 1);
+- `t_interval`: mean and 95 % Student-t interval of a few values (the seeds of one
+  controller): mean +- t_{0.975, n-1} s / sqrt(n);
+- `threshold_on_grid`: the largest grid value up to which a rate stays >= 0.5 (r50, p50,
+  sigma50), and its interval from the rate's lower and upper bounds.
+"""
+
+from __future__ import annotations
+
+import math
+
+Z95 = 1.959963984540054  # standard normal 0.975 quantile
+
+
+def wilson_interval(k: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """Wilson score interval of the success probability after k successes in n trials."""
+    if n <= 0:
+        return (0.0, 1.0)
+    if not 0 <= k <= n:
+        raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
+    p = k / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    lo = 0.0 if k == 0 else max(0.0, centre - half)  # exact at the ends (no rounding)
+    hi = 1.0 if k == n else min(1.0, centre + half)
+    return (lo, hi)
+
+
+def t_interval(values, level: float = 0.95) -> dict:
+    """Mean and Student-t interval of ``values`` (NaN and None dropped): {"mean", "low",
+    "high", "n", "method"}. With one value the interval is that value (n = 1, no spread)."""
+    from scipy import stats
+
+    xs = [float(v) for v in values if v is not None and not math.isnan(float(v))]
+    n = len(xs)
+    if n == 0:
+        return {"mean": math.nan, "low": math.nan, "high": math.nan, "n": 0, "method": "t"}
+    mean = sum(xs) / n
+    if n == 1:
+        return {"mean": mean, "low": mean, "high": mean, "n": 1, "method": "t"}
+    sd = math.sqrt(sum((x - mean) ** 2 for x in xs) / (n - 1))
+    half = float(stats.t.ppf(0.5 + level / 2, n - 1)) * sd / math.sqrt(n)
+    return {"mean": mean, "low": mean - half, "high": mean + half, "n": n, "method": "t"}
+
+
+def threshold_on_grid(sizes, rates, level: float = 0.5) -> float:
+    """Largest size up to which ``rates`` stay >= level (0 if the first is below)."""
+    best = 0.0
+    for s, p in zip(sizes, rates, strict=True):
+        if p < level:
+            break
+        best = s
+    return best

@@ -1,0 +1,143 @@
+"""Margins v2: the uncapped bisection, intervals, the validation/test split, the controller
+protocol, the cache key, the compare entries."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from agents import margins
+from agents.compare import parse_entry
+from agents.margins import (
+    BUDGETS,
+    CURVE_SEED,
+    Setup,
+    bisect_threshold,
+    random_directions,
+    run_task,
+    setup_key,
+)
+from agents.policy import ZeroController
+from agents.stats import t_interval, threshold_on_grid, wilson_interval
+from agents.train import VALIDATION_SEED, BasinValidationCallback
+
+
+def test_bisection_grows_past_one_to_a_known_basin_of_five():
+    calls = []
+
+    def ok(s):
+        calls.append(s)
+        return s <= 5.0
+
+    s, capped = bisect_threshold(ok, 1e-3, 1.0, iters=30, grow=True, cap=1000.0)
+    assert not capped and s == pytest.approx(5.0, rel=1e-6) and s <= 5.0
+    assert calls[:4] == [1.0, 2.0, 4.0, 8.0]  # doubling from the last success
+    # without growing, the old behaviour: capped at the bracket's end
+    assert bisect_threshold(ok, 1e-3, 1.0, iters=30) == (1.0, True)
+    # a cap below the edge is reported as reached
+    assert bisect_threshold(ok, 1e-3, 1.0, iters=30, grow=True, cap=3.0) == (3.0, True)
+    assert bisect_threshold(lambda s: False, 1e-3, 1.0, 5, grow=True) == (0.0, False)
+
+
+def test_wilson_interval_known_cases():
+    # Wilson (1927) score interval, 95 %: 5/10 -> [0.2366, 0.7634]; 0/10 -> [0, 0.2775];
+    # 10/10 -> [0.7225, 1]
+    lo, hi = wilson_interval(5, 10)
+    assert (lo, hi) == (pytest.approx(0.2366, abs=1e-4), pytest.approx(0.7634, abs=1e-4))
+    lo, hi = wilson_interval(0, 10)
+    assert lo == 0.0 and hi == pytest.approx(0.2775, abs=1e-4)
+    lo, hi = wilson_interval(10, 10)
+    assert lo == pytest.approx(0.7225, abs=1e-4) and hi == 1.0
+    lo, hi = wilson_interval(50, 100)
+    assert hi - lo < wilson_interval(5, 10)[1] - wilson_interval(5, 10)[0]  # n shrinks it
+    with pytest.raises(ValueError):
+        wilson_interval(11, 10)
+
+
+def test_t_interval_and_grid_threshold():
+    ti = t_interval([1.0, 2.0, 3.0])  # mean 2, s = 1, t_{0.975,2} = 4.3027
+    assert ti["mean"] == 2.0 and ti["n"] == 3
+    assert ti["high"] - 2.0 == pytest.approx(4.302653 / math.sqrt(3), rel=1e-5)
+    assert t_interval([4.0])["low"] == 4.0
+    assert threshold_on_grid([1, 2, 3, 4], [1.0, 0.6, 0.4, 0.7]) == 2
+    assert threshold_on_grid([1, 2], [0.2, 0.9]) == 0.0
+
+
+def test_validation_directions_are_disjoint_from_the_test_set():
+    cb = BasinValidationCallback()
+    val = cb.validation_directions()
+    assert val.shape == (8, 6) and VALIDATION_SEED != CURVE_SEED
+    test = [random_directions(BUDGETS[b].curve_dirs) for b in ("test", "quick", "full")]
+    axes = np.vstack([np.eye(6), -np.eye(6)])
+    unit = lambda a: a / np.linalg.norm(a, axis=1, keepdims=True)  # noqa: E731
+    for t in test + [axes]:
+        cos = unit(val) @ unit(t).T
+        assert np.max(np.abs(cos)) < 0.999  # no validation direction parallel to a test one
+    assert np.array_equal(random_directions(4, seed=CURVE_SEED),
+                          random_directions(4))  # the test set is the default
+
+
+class Proportional:
+    """A controller written outside the package: torque against the spine rate."""
+
+    name = "proportional"
+    env_kwargs = {"max_torque": 40.0}
+
+    def __init__(self):
+        self.apexes = 0
+
+    def __call__(self, obs) -> float:
+        return float(np.clip(-0.05 * obs[6], -1.0, 1.0))
+
+    def fingerprint(self) -> str:
+        return "proportional-0.05"
+
+    def on_apex(self, z, time_since_apex):
+        self.apexes += 1
+
+
+def test_any_controller_with_the_protocol_runs_in_the_loop():
+    ctrl = Proportional()
+    assert margins.as_controller(ctrl) is ctrl
+    loop = margins.ClosedLoop(ctrl, "default")
+    ok, n, failure = loop.run(loop.env.z_ref, loop.env.z_ref, 3)
+    assert failure is None and ctrl.apexes == 3
+    with pytest.raises(ValueError, match="controller"):
+        margins.as_controller(object())
+
+
+def test_passive_theta1_basin_is_no_longer_capped_at_one():
+    from bound_env.params import load_gait
+
+    z = np.asarray(load_gait("default").z0)
+    b = replace(BUDGETS["test"], basin_strides=300)  # e_max 0.878: ~100 strides to return
+    setup = Setup(controller=ZeroController(), gait="default", budget=b, z_star=z, z_cl=z,
+                  key="t-theta1", period=0.39)
+    r = run_task(setup, "basin", (1, 1))
+    assert r["rel"] > 1.0 and not r["capped"]  # theta1 grows past |z*_theta1|
+    assert r["cap_reason"] == "numeric cap" and r["beyond"]["rel"] > r["rel"]
+    r = run_task(setup, "basin", (3, -1))  # xdot: the start is invalid at s = 1 (xdot = 0)
+    assert r["cap"] == pytest.approx(1.0, rel=1e-9) and r["rel"] < 0.1
+    assert r["cap_reason"].startswith("start state invalid")
+
+
+def test_every_setting_is_in_the_cache_key(monkeypatch):
+    c = ZeroController()
+    k0 = setup_key(c, "default", BUDGETS["quick"])
+    assert setup_key(c, "default", replace(BUDGETS["quick"], ceiling_opt=1)) != k0
+    assert setup_key(c, "literal-cycle", BUDGETS["quick"]) != k0
+    monkeypatch.setitem(margins.SETTINGS, "basin_cap", 128.0)
+    assert setup_key(c, "default", BUDGETS["quick"]) != k0
+
+
+def test_compare_entries_take_several_policies():
+    assert parse_entry("learned=runs/s0,runs/s1,runs/s2") == (
+        "learned", ["runs/s0", "runs/s1", "runs/s2"], "default")
+    assert parse_entry("lit=a,b@literal-cycle") == ("lit", ["a", "b"], "literal-cycle")
+    assert parse_entry("p=passive") == ("p", ["passive"], "default")
+    for bad in ("nolabel", "x=", "=a"):
+        with pytest.raises(ValueError, match="entry"):
+            parse_entry(bad)
