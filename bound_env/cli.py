@@ -1,4 +1,10 @@
-"""The ``bound-env`` command line. Each sub-command imports its module only when it runs."""
+"""The ``bound-env`` command line. Each sub-command imports its module only when it runs.
+
+Sub-commands come from three places, in this order: ``stride`` (here), the core modules
+`bound_env.analysis.cli` and `bound_env.render_cli`, and plug-ins outside the package, which
+declare a ``register(subparsers)`` function in the ``bound_env.commands`` entry-point group
+(``agents`` does, in ``pyproject.toml``). The core never names a plug-in and works without it.
+"""
 
 from __future__ import annotations
 
@@ -6,27 +12,18 @@ import argparse
 import json
 import sys
 import time
+from importlib.metadata import entry_points
 
+from .cli_args import add_gait_args, gait_from_args
 
-def _load(args):
-    from .params import load_gait, parse_override
-
-    overrides = dict(parse_override(s) for s in (args.set or []))
-    return load_gait(args.gait, overrides)
-
-
-def _add_gait_args(p, default="paper"):
-    p.add_argument("--gait", default=default,
-                   help="gait file path or name under configs/gaits/ (default: %(default)s)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a gait key, e.g. --set kc=300 --set alpha_deg=2.0")
+PLUGIN_GROUP = "bound_env.commands"  # entry points: name = "module:register"
 
 
 def cmd_stride(args) -> int:
     from .hybrid import simulate_stride
     from .params import parse_z
 
-    gait = _load(args)
+    gait = gait_from_args(args)
     z0 = parse_z(args.z, "--z")
     if z0 is None:
         z0 = gait.z0
@@ -57,7 +54,8 @@ def _fmt(v):
     return "[" + ", ".join(f"{x:.4f}" for x in v) + "]"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(registrars=None) -> argparse.ArgumentParser:
+    """The whole parser; ``registrars`` defaults to `command_registrars()`."""
     parser = argparse.ArgumentParser(
         prog="bound-env",
         description="Passive quadrupedal bounding with a spring-damper spine (Yamasaki et al.)",
@@ -65,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("stride", help="simulate one apex-to-apex stride")
-    _add_gait_args(p)
+    add_gait_args(p, default="paper")
     p.add_argument("--z", help="start apex state v1,...,v6 in [m, deg, deg, m/s, deg/s, deg/s] "
                    "(default: the gait's z_star, else z_published); use --z=-0.1,... for negatives")
     p.add_argument("--repeat", type=int, default=1, help="evaluate the stride N times (timing)")
@@ -75,34 +73,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_stride)
 
-    for register in _EXTRA_COMMANDS:
+    for register in command_registrars() if registrars is None else registrars:
         register(sub)
     return parser
 
 
-def _register_optional():
-    """Sub-commands that live beside their modules (analysis, environment, agents)."""
-    regs = []
-    for mod, attr in (
-        ("bound_env.analysis.cli", "register"),
-        ("bound_env.render_cli", "register"),
-        ("agents.cli", "register"),
-    ):
+def command_registrars() -> list:
+    """``register`` functions of the core sub-command modules and of the installed plug-ins.
+
+    A plug-in whose module is not installed (an entry point left behind) is skipped; an import
+    error inside one (a broken dependency) is raised.
+    """
+    from . import render_cli
+    from .analysis import cli as analysis_cli
+
+    regs = [analysis_cli.register, render_cli.register]
+    for ep in sorted(entry_points(group=PLUGIN_GROUP), key=lambda ep: ep.name):
         try:
-            module = __import__(mod, fromlist=[attr])
+            regs.append(ep.load())
         except ModuleNotFoundError as e:
-            if e.name and mod.startswith(e.name):
-                continue
-            raise
-        regs.append(getattr(module, attr))
+            missing = e.name and (ep.module == e.name or ep.module.startswith(e.name + "."))
+            if not missing:
+                raise
     return regs
 
 
-_EXTRA_COMMANDS: list = []
-
-
 def main(argv=None) -> int:
-    _EXTRA_COMMANDS[:] = _register_optional()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -9,21 +9,13 @@ from __future__ import annotations
 
 import math
 
+from .cli_args import add_gait_args, gait_overrides
+
 
 def register(sub) -> None:
     """Add the ``animate`` sub-command to the ``bound-env`` parser's sub-parsers."""
     p = sub.add_parser("animate", help="write a GIF of the passive gait (zero spine torque)")
-    p.add_argument(
-        "--gait",
-        default="default",
-        help="gait file path or name under configs/gaits/ (default: %(default)s)",
-    )
-    p.add_argument(
-        "--set",
-        action="append",
-        metavar="KEY=VALUE",
-        help="override a gait key, e.g. --set kc=300 --set alpha_deg=2.0",
-    )
+    add_gait_args(p, default="default")
     p.add_argument(
         "--strides",
         type=float,
@@ -102,14 +94,13 @@ def animation_frames(
 
 
 def cmd_animate(args) -> int:
-    from .params import parse_override
     from .render import save_gif
 
     if not args.strides > 0:
         raise ValueError("--strides must be positive")
     if not (args.fps > 0 and args.slowdown > 0):
         raise ValueError("--fps and --slowdown must be positive")
-    overrides = dict(parse_override(s) for s in (args.set or []))
+    overrides = gait_overrides(args)
     frames, period, frame_dt = animation_frames(
         args.gait, overrides, args.strides, args.fps, args.slowdown, args.width, args.height
     )

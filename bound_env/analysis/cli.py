@@ -14,12 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cli_args import add_gait_args, gait_from_args
 from ..params import (
     GAIT_KEYS,
     Z_NAMES,
     Z_PAPER_UNITS,
-    load_gait,
-    parse_override,
     parse_z,
     save_gait,
     z_to_paper,
@@ -116,14 +115,7 @@ def register(sub) -> None:
 
 
 def _gait_args(p, z_and_pins=True):
-    p.add_argument(
-        "--gait",
-        default="default",
-        help="gait file path or name under configs/gaits/ (default: %(default)s)",
-    )
-    p.add_argument(
-        "--set", action="append", metavar="KEY=VALUE", help="override a gait key, e.g. --set kc=300"
-    )
+    add_gait_args(p, default="default")
     p.add_argument(
         "--z0",
         help="start apex state v1,...,v6 in [m, deg, deg, m/s, deg/s, "
@@ -164,8 +156,7 @@ def parse_pins(texts, z0, params) -> list[tuple[str, float]]:
 
 
 def _setup(args):
-    overrides = dict(parse_override(s) for s in (args.set or []))
-    gait = load_gait(args.gait, overrides)
+    gait = gait_from_args(args)
     z = parse_z(args.z0, "--z0")
     return gait, (z if z is not None else gait.z0)
 
