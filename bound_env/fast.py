@@ -2,7 +2,7 @@
 
 Adaptive DOP853 steps (`bound_env._dop853`), guard sign changes checked after every accepted
 step, each crossing located as a root of its guard on the step's 7th-order dense output,
-resets applied by the same compiled `bound_env.hybrid.apply_events` the reference back-end
+resets applied by the same compiled `bound_env.events.apply_events` the reference back-end
 uses. No Python runs between the start and the end of a stride (or of a control interval).
 """
 
@@ -20,7 +20,7 @@ from ._dop853 import (
     step_factor,
 )
 from .dynamics import jit, rhs, total_energy
-from .hybrid import (
+from .events import (
     APEX,
     CONTINUE,
     F_INTEGRATION,
