@@ -30,6 +30,7 @@ MARGIN_KEYS = ("basin", "basin_min", "emax", "eigenvalues", "slope_window_deg", 
 # -- config --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_config_file_parses_in_rl_zoo3_format():
     from stable_baselines3 import PPO
 
@@ -138,6 +139,7 @@ def smoke_run(tmp_path_factory):
     return run
 
 
+@pytest.mark.slow
 def test_training_smoke_run_writes_a_model_that_loads_and_acts(smoke_run):
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
@@ -170,6 +172,7 @@ def test_training_smoke_run_writes_a_model_that_loads_and_acts(smoke_run):
         obs, *_ = env.step(np.array([a_np]))
 
 
+@pytest.mark.slow
 def test_export_ships_the_final_model_unless_told(smoke_run, tmp_path):
     from agents.cli import export_policy
 
@@ -200,6 +203,7 @@ def _dummy_venv(obs_space):
     return DummyVecEnv([make])
 
 
+@pytest.mark.slow
 def test_resume_continues_from_the_last_checkpoint(smoke_run, tmp_path):
     import shutil
 
@@ -290,6 +294,7 @@ def _check_schema(r):
     json.dumps(r)
 
 
+@pytest.mark.slow
 def test_margins_passive_test_budget(tmp_path):
     r = compute_margins("passive", budget="test", workers=1, out=tmp_path)
     _check_schema(r)
@@ -305,6 +310,7 @@ def test_margins_passive_test_budget(tmp_path):
     assert r2["basin"] == r["basin"] and r2["seconds"] < r["seconds"]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not (SHIPPED / "model.zip").is_file(), reason="no shipped policy")
 def test_margins_shipped_policy_test_budget(tmp_path):
     r = compute_margins(str(SHIPPED), budget="test", workers=2, out=tmp_path)

@@ -29,8 +29,8 @@ ALPHA_DEG = 1.9343  # the gait's slope [deg]
 
 
 @pytest.fixture(scope="module")
-def gait():
-    return load_gait("default")
+def gait(default_gait):
+    return default_gait
 
 
 @pytest.fixture(scope="module")

@@ -66,6 +66,7 @@ PROBLEMS = [
 ]
 
 
+@pytest.mark.slow  # each right-hand side compiles its own integrator (~5-10 s)
 @pytest.mark.parametrize("name,rhs,y0,t_end,aux,exact,exact_tol", PROBLEMS,
                          ids=[p[0] for p in PROBLEMS])
 def test_integrate_vs_exact_and_scipy(name, rhs, y0, t_end, aux, exact,
@@ -92,6 +93,7 @@ def test_integrate_vs_exact_and_scipy(name, rhs, y0, t_end, aux, exact,
     assert 0.67 < n_steps / (sol.nfev / 12) < 1.5
 
 
+@pytest.mark.slow
 def test_backward_integration():
     y, t, n_steps, _, status = d.make_dop853(oscillator).integrate(3.0,
                                            oscillator_exact(3.0), -2.0,
@@ -100,6 +102,7 @@ def test_backward_integration():
     np.testing.assert_allclose(y, oscillator_exact(-2.0), rtol=0, atol=1e-10)
 
 
+@pytest.mark.slow
 def test_max_steps_and_step_too_small():
     y0 = np.array([1.0, 0.0])
     _, t, n_steps, n_rej, status = d.make_dop853(oscillator).integrate(0.0, y0, 1000.0,

@@ -175,6 +175,7 @@ def test_start_noise_is_scaled_per_component():
 # -- robustness ------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_random_actions_over_100_seeds_never_raise_and_end_with_a_reason():
     env = make(reset_noise_scale=1.0)
     failures = {}

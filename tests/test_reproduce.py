@@ -14,6 +14,8 @@ from bound_env.analysis.reproduce import run, write_gait_files
 from bound_env.cli import main
 from bound_env.params import load_gait, z_to_paper
 
+pytestmark = pytest.mark.slow  # the quick reproduction run takes ~20 s (idle)
+
 REQUIRED_ROWS = (
     "z*: y_g", "z*: θ1", "z*: θ2", "z*: ẋ_g", "z*: θ̇1", "z*: θ̇2",
     "e_max at the published gait", "strides to converge", "stable α window",

@@ -52,8 +52,8 @@ FAILURE_CASES = {
 
 
 @pytest.fixture(scope="module")
-def gait():
-    return load_gait("paper")
+def gait(paper_gait):
+    return paper_gait
 
 
 def _chain(z, params, n, **kw):

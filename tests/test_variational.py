@@ -44,8 +44,8 @@ def by_modulus(ev):
 
 
 @pytest.fixture(scope="module")
-def gait():
-    return load_gait("default")
+def gait(default_gait):
+    return default_gait
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,66 @@
+"""Shared fixtures: the gait files, the environment, the command line.
+
+Test tiers: ``pytest -m "not slow"`` is the fast tier (physics, environment, command line;
+under a minute); ``pytest`` runs everything, as ``.ci/run`` does. A test that takes more than
+a few seconds is marked ``@pytest.mark.slow``.
+"""
+
+from pathlib import Path
+
+import pytest
+
+from bound_env.params import load_gait
+
+ROOT = Path(__file__).resolve().parent.parent
+ENV_ID = "PassiveBound-v0"
+
+
+@pytest.fixture(scope="session")
+def paper_gait():
+    """``configs/gaits/paper.yaml``: Table II, reproducing reading, the published apex state."""
+    return load_gait("paper")
+
+
+@pytest.fixture(scope="session")
+def default_gait():
+    """``configs/gaits/default.yaml``: the paper's parameters and the model's own fixed point."""
+    return load_gait("default")
+
+
+@pytest.fixture(scope="session")
+def literal_gait():
+    """``configs/gaits/paper-literal.yaml``: Table II read literally."""
+    return load_gait("paper-literal")
+
+
+@pytest.fixture
+def make_env():
+    """``make_env(**kwargs)``: ``gym.make("PassiveBound-v0", **kwargs)``, closed afterwards."""
+    import gymnasium as gym
+
+    import bound_env
+
+    gym.register_envs(bound_env)
+    made = []
+
+    def make(**kwargs):
+        env = gym.make(ENV_ID, **kwargs)
+        made.append(env)
+        return env
+
+    yield make
+    for env in made:
+        env.close()
+
+
+@pytest.fixture
+def cli(capsys):
+    """``cli(*argv)``: run ``bound-env argv`` in-process -> (exit code, stdout, stderr)."""
+    from bound_env.cli import main
+
+    def run(*argv):
+        code = main([str(a) for a in argv])
+        out = capsys.readouterr()
+        return code, out.out, out.err
+
+    return run
