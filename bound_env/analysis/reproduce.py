@@ -41,13 +41,14 @@ import numpy as np
 
 from ..cache import atomic_write, settings_hash
 from ..params import GAITS_DIR, Params, load_gait, save_gait, z_to_paper, z_to_si
-from .fixed_point import find_fixed_point, ladder, make_residual, newton, param_step, slope_secant
+from .continuation import CORRECTOR_MAX_ITER, FixedPointPath, StepControl, arclength, natural
+from .fixed_point import find_fixed_point, ladder, slope_secant
+from .numerics import NEWTON_MAX_ITER, newton
 from .poincare import StrideFailure, apex_energy, stride
 from .stability import DZ, recovery, recovery_all, spine_oscillations, stability
 
 CACHE_VERSION = 1
 FP_TOL = 1e-11  # Newton tolerance for the fixed points reported (|P(z) - z|, SI)
-CORRECTOR_ITER = 12  # Newton iterations per continuation step
 RELAXED_LEG_FRAC = 0.05  # min_leg_frac used to explore the literal reading (diagnostic only)
 Z_NAMES_PAPER = ("y_g [m]", "theta1 [deg]", "theta2 [deg]", "xdot_g [m/s]",
                  "theta1dot [deg/s]", "theta2dot [deg/s]")  # fmt: skip
@@ -191,16 +192,19 @@ def _gait_config(g) -> dict:
 
 
 # --------------------------------------------------------------------------------------------
-# Continuation helpers: natural steps in a parameter (the paper's process, with its fallback
-# ladder) and pseudo-arclength (to follow a branch round a fold)
+# Paths for `continuation.natural` (the paper's process, its fallback ladder as the on_stall
+# hook) and `continuation.arclength` (to follow a branch round a fold)
 # --------------------------------------------------------------------------------------------
 
 
-def _newton_at(params: Params, u0, free, pins, max_iter=CORRECTOR_ITER, tol=FP_TOL):
-    steps = np.concatenate([np.full(6, DZ), [param_step(k, u0[6 + i])
-                                             for i, k in enumerate(free)]])  # fmt: skip
-    return newton(make_residual(params, tuple(free), list(pins), {}), np.asarray(u0, float),
-                  steps, tol=tol, max_iter=max_iter)  # fmt: skip
+def _fixed_path(params_of, free, pins) -> FixedPointPath:
+    """Fixed points along s at the reproduction's tolerance (FP_TOL), default simulation."""
+    return FixedPointPath(params_of, tuple(free), list(pins), {}, FP_TOL)
+
+
+def _newton_at(params: Params, u0, free, pins, max_iter=CORRECTOR_MAX_ITER):
+    """Newton for [z, freed values] at fixed parameters."""
+    return _fixed_path(lambda _s: params, free, pins).correct(0.0, u0, max_iter=max_iter)
 
 
 def natural_path(params: Params, u0, s_to: float, pins, free=("alpha_deg",), h0=0.1,
@@ -209,165 +213,105 @@ def natural_path(params: Params, u0, s_to: float, pins, free=("alpha_deg",), h0=
     """The paper's process (III.D.4 A-F) in s = ln kc: step kc, solve z* and the freed alpha
     with the pins (eq. 27's energy balance is the energy pin), halve the step when Newton
     fails, and below ``h_min`` walk the fallback ladder (touchdown angles +-0.5 deg up to
-    +-4 deg, then kb = kf +-100 N/m), keeping the first change that converges.
+    +-4 deg, then kb = kf +-100 N/m), keeping the first change that converges. The
+    continuation is `continuation.natural`; the ladder is its ``on_stall`` hook.
 
     ``params`` carries the start (kc, alpha); u0 = [z (SI), alpha]. Returns the points as
     (Params, z) pairs plus the ladder changes made and why the path stopped.
     """
     free = tuple(free)
-    s = math.log(params.kc)
-    direction = math.copysign(1.0, s_to - s)
-    out = _newton_at(params, u0, free, pins, max_iter=50)
+    base = {"params": params}  # the ladder replaces it
+    path = _fixed_path(lambda s: base["params"].with_values(kc=math.exp(s)), free, pins)
+    s0 = math.log(params.kc)
+    out = _newton_at(params, u0, free, pins, max_iter=NEWTON_MAX_ITER)
     if not out.converged:
         return {"points": [], "reason": f"no fixed point at the start: {out.reason}",
                 "reached": False, "ladder": []}  # fmt: skip
-    cur = params.with_values(**dict(zip(free, out.u[6:], strict=True)))
-    pts = [(cur, out.u[:6].copy())]
-    hist = [(s, out.u.copy())]  # for the secant predictor (reset after a ladder change)
-    h, changes = h0, []
-    while len(pts) < max_points:
-        remaining = direction * (s_to - s)
-        if remaining <= 1e-12:
-            return {"points": pts, "reason": "reached the target", "reached": True,
-                    "ladder": changes}  # fmt: skip
-        step = min(h, remaining)
-        s_new = s_to if step == remaining else s + direction * step
-        u_last = hist[-1][1]
-        pred = u_last
-        if len(hist) >= 2:
-            (s1, u1), (s2, u2) = hist[-2], hist[-1]
-            pred = u2 + (u2 - u1) * (s_new - s2) / (s2 - s1)
-        p_new = cur.with_values(kc=math.exp(s_new))
-        o = _newton_at(p_new, pred, free, pins)
-        jump = np.max(np.abs(o.u[:6] - pred[:6])) if o.converged else math.inf
-        if o.converged and jump <= max(5.0 * np.max(np.abs(pred[:6] - u_last[:6])), 1e-2):
-            s = s_new
-            cur = p_new.with_values(**dict(zip(free, o.u[6:], strict=True)))
-            pts.append((cur, o.u[:6].copy()))
-            hist.append((s, o.u.copy()))
-            if log:
-                log(f"  kc = {cur.kc:9.2f}  alpha = {o.u[6]:.5f} deg")
-            if o.iterations <= 3:
-                h = min(1.5 * step, h_max)
-            continue
-        h = step / 2.0
-        if h >= h_min:
-            continue
-        if not use_ladder:
-            return {"points": pts, "reason": f"step below {h_min} at kc = {cur.kc:.6g}: "
-                    f"{o.reason}", "reached": False, "ladder": changes}  # fmt: skip
-        # steps E-F: change the touchdown angles, then the leg stiffnesses
+    pts = [(params.with_values(**dict(zip(free, out.u[6:], strict=True))), out.u[:6].copy())]
+    trail = [(s0, out.u.copy())]
+    changes: list = []
+
+    def on_point(s, u, iterations, step):
+        cur = path.params_at(s, u)
+        pts.append((cur, u[:6].copy()))
+        if log:
+            log(f"  kc = {cur.kc:9.2f}  alpha = {u[6]:.5f} deg")
+
+    def ladder_hook(s, u, info, direction):  # steps E-F: touchdown angles, then leg stiffness
+        cur = pts[-1][0]
         s_try = s + direction * 2.0 * h_min
-        found = None
         for ch in ladder(cur)[1:]:
             try:
                 p_try = cur.with_values(kc=math.exp(s_try), **ch)
             except ValueError:
                 continue
-            o = _newton_at(p_try, u_last, free, pins)
+            o = _newton_at(p_try, u, free, pins)
             if o.converged:
-                found = (ch, p_try, o)
                 break
-        if found is None:
-            return {"points": pts, "reason": f"ladder exhausted at kc = {cur.kc:.6g}",
-                    "reached": False, "ladder": changes}  # fmt: skip
-        ch, p_try, o = found
+        else:
+            return f"ladder exhausted at kc = {cur.kc:.6g}"
         changes.append({"kc": p_try.kc, "changes": ch})
         if log:
             log(f"  ladder at kc = {p_try.kc:.2f}: {ch}")
-        s = s_try
-        cur = p_try.with_values(**dict(zip(free, o.u[6:], strict=True)))
-        pts.append((cur, o.u[:6].copy()))
-        hist = [(s, o.u.copy())]
-        h = h0
-    return {"points": pts, "reason": f"stopped after {max_points} points", "reached": False,
-            "ladder": changes}  # fmt: skip
+        base["params"] = p_try
+        pts.append((p_try.with_values(**dict(zip(free, o.u[6:], strict=True))), o.u[:6].copy()))
+        return s_try, o.u.copy()
+
+    control = StepControl(h0, h_max, h_min, guard_first_step=True)
+    stop = natural(path, trail, s_to, control, max_points, on_point=on_point,
+                   on_stall=ladder_hook if use_ladder else None)  # fmt: skip
+    if stop.kind == "reached":
+        reason = "reached the target"
+    elif stop.kind == "stalled":
+        reason = f"step below {h_min} at kc = {pts[-1][0].kc:.6g}: {stop.info}"
+    elif stop.kind == "max_points":
+        reason = f"stopped after {max_points} points"
+    else:
+        reason = stop.kind  # the ladder's message
+    return {"points": pts, "reason": reason, "reached": stop.reached, "ladder": changes}
 
 
 def arclength_path(params_of, s0: float, s1: float, u0, free=(), pins=(), ds=0.05,
                    ds_max=0.2, ds_min=1e-5, max_points=300, stop_below_start=True,
                    log=None) -> dict:  # fmt: skip
     """Pseudo-arclength continuation of [z, freed values] in a scalar s (ln kc, a homotopy
-    parameter, alpha, ...). ``params_of(s)`` gives the parameters at s (freed values are
-    applied on top). Secant predictor, Newton corrector with the arclength condition,
-    step halving on failure; a fold is where ds/d(arclength) changes sign.
+    parameter, alpha, ...) by `continuation.arclength`: ``params_of(s)`` gives the
+    parameters at s (freed values are applied on top); the second point by a natural step
+    of ``ds``; a fold is where ds/d(arclength) changes sign.
 
     Returns {"points": [(s, u)], "folds": [s], "reason", "reached"}.
     """
-    free, pins = tuple(free), list(pins)
-    nu = 6 + len(free)
-
-    def res_at(s):
-        try:
-            p = params_of(s)
-        except ValueError:
-            return lambda u: None
-        return make_residual(p, free, pins, {})
-
-    def res_v(v):
-        return res_at(v[-1])(v[:-1])
-
-    steps_u = np.concatenate([np.full(6, DZ), [param_step(k, u0[6 + i])
-                                               for i, k in enumerate(free)]])  # fmt: skip
-    first = newton(res_at(s0), np.asarray(u0, float), steps_u, tol=FP_TOL)
+    path = _fixed_path(params_of, free, pins)
+    u0 = np.asarray(u0, float)
+    steps_u = path.steps_of(u0)
+    first = newton(path.residual_at(s0), u0, steps_u, tol=FP_TOL)
     if not first.converged:
         return {"points": [], "folds": [], "reason": f"start: {first.reason}",
                 "reached": False}  # fmt: skip
-    pts = [np.append(first.u, s0)]
-    direction = math.copysign(1.0, s1 - s0)
-    h = ds
-    while len(pts) < 2:  # the second point by a natural step
-        o = newton(res_at(s0 + direction * h), pts[0][:nu], steps_u, tol=FP_TOL,
-                   max_iter=CORRECTOR_ITER)  # fmt: skip
-        if o.converged:
-            pts.append(np.append(o.u, s0 + direction * h))
-            break
-        h /= 2.0
-        if h < ds_min:
-            return {"points": [(float(v[-1]), v[:-1]) for v in pts], "folds": [],
-                    "reason": f"no second point: {o.reason}", "reached": False}  # fmt: skip
-    steps = np.append(steps_u, 1e-6)
+    trail = [(s0, first.u)]
+    first_step: list = []
+    stop = natural(path, trail, s1, StepControl(ds, ds, ds_min), max_points=2,
+                   on_point=lambda s, u, iterations, step: first_step.append(abs(step)))
+    if len(trail) < 2:
+        return {"points": [(float(s), u) for s, u in trail], "folds": [],
+                "reason": f"no second point: {stop.info}", "reached": False}  # fmt: skip
     folds: list = []
-    reason, reached = f"stopped after {max_points} points", False
-    while len(pts) < max_points:
-        v1, v0 = pts[-1], pts[-2]
-        chord = v1 - v0
-        t = chord / np.linalg.norm(chord)
 
-        def residual(v, v1=v1, t=t, h=h):
-            r = res_v(v)
-            return None if r is None else np.append(r, t @ (v - v1) - h)
-
-        o = newton(residual, v1 + h * t, steps, tol=FP_TOL, max_iter=CORRECTOR_ITER)
-        if not o.converged:
-            h /= 2.0
-            if h < ds_min:
-                reason = f"step below minimum at s = {v1[-1]:.6g}: {o.reason}"
-                break
-            continue
-        v = o.u
-        if direction * (v[-1] - s1) >= 0.0:  # passed the target: land on it
-            frac = (s1 - v1[-1]) / (v[-1] - v1[-1])
-            o2 = newton(res_at(s1), v1[:nu] + frac * (v[:nu] - v1[:nu]), steps_u, tol=FP_TOL,
-                        max_iter=CORRECTOR_ITER)  # fmt: skip
-            if o2.converged:
-                pts.append(np.append(o2.u, s1))
-                reason, reached = "reached the target", True
-                break
-            h /= 2.0
-            continue
-        if (v[-1] - v1[-1]) * chord[-1] < 0.0:
-            folds.append(float(v1[-1]))
-        pts.append(v)
+    def on_point(s, u, iterations, step, turned):
+        if turned:
+            folds.append(float(trail[-2][0]))
         if log:
-            log(f"  s = {v[-1]:.6g}")
-        if stop_below_start and direction * (v[-1] - s0) < 0.0:
-            reason = f"the branch turned back past the start (s = {v[-1]:.6g})"
-            break
-        if o.iterations <= 3:
-            h = min(1.5 * h, ds_max)
-    return {"points": [(float(v[-1]), v[:-1].copy()) for v in pts], "folds": folds,
-            "reason": reason, "reached": reached}  # fmt: skip
+            log(f"  s = {s:.6g}")
+
+    stop = arclength(path, trail, s1, first_step[0], ds_max, ds_min, np.append(steps_u, DZ),
+                     max_points, stop_past_start=0 if stop_below_start else None,
+                     on_point=on_point)  # fmt: skip
+    reason = {"reached": "reached the target",
+              "stalled": f"step below minimum at s = {stop.s:.6g}: {stop.info}",
+              "turned_back": f"the branch turned back past the start (s = {stop.s:.6g})",
+              "max_points": f"stopped after {max_points} points"}[stop.kind]  # fmt: skip
+    return {"points": [(float(s), np.array(u, copy=True)) for s, u in trail], "folds": folds,
+            "reason": reason, "reached": stop.reached}
 
 
 # --------------------------------------------------------------------------------------------
