@@ -110,13 +110,13 @@ from bound_env.analysis.numerics import (  # noqa: F401 - bisect_threshold: re-e
     sorted_eigenvalues,
 )
 from bound_env.cache import TaskCache, settings_hash
+from bound_env.params import Z_NAMES, Z_SI_UNITS
 
 from .policy import load_controller
 from .stats import threshold_on_grid, wilson_interval
 
 ENV_ID = "PassiveBound-v0"
-Z_LABELS = ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
-Z_UNITS = ("m", "rad", "rad", "m/s", "rad/s", "rad/s")
+Z_LABELS, Z_UNITS = Z_NAMES, Z_SI_UNITS  # apex components and their SI units
 RETURN_TOL = 1e-4  # "returned to the cycle": max-abs apex error below this (SI)
 EVAL_RTOL = 1e-10  # integrator tolerance of every evaluation (training uses the env's 1e-8)
 BASIN_LO, BASIN_HI = 1e-3, 1.0  # first bracket of the relative basin search (then it grows)

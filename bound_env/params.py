@@ -36,6 +36,27 @@ N_PARAMS = 20
 # z on S_apex (eq. 17): [y_g, theta1, theta2, xdot_g, theta1dot, theta2dot].
 Z_NAMES = ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
 Z_PAPER_UNITS = ("m", "deg", "deg", "m/s", "deg/s", "deg/s")
+Z_SI_UNITS = ("m", "rad", "rad", "m/s", "rad/s", "rad/s")
+Z_SYMBOLS = ('y_g', 'θ1', 'θ2', 'ẋ_g', 'θ̇1', 'θ̇2')  # plain text
+Z_TEX = ("y_g", r"\theta_1", r"\theta_2", r"\dot x_g", r"\dot\theta_1", r"\dot\theta_2")  # LaTeX
+
+
+def z_labels(style: str = "text") -> tuple[str, ...]:
+    """Labels of the six components of z, all made from the declarations above.
+
+    ``"text"``: ``θ1 [deg]``; ``"tex"``: ``$\\theta_1^*$ [deg]`` (a fixed point's, for
+    plots); ``"column"``: ``theta1_deg`` (CSV headers); ``"inline"``: ``θ1 deg``.
+    """
+    units = Z_PAPER_UNITS
+    if style == "text":
+        return tuple(f"{s} [{u}]" for s, u in zip(Z_SYMBOLS, units, strict=True))
+    if style == "tex":
+        return tuple(f"${t}^*$ [{u}]" for t, u in zip(Z_TEX, units, strict=True))
+    if style == "column":
+        return tuple(f"{n}_{u.replace('/s', 'ps')}" for n, u in zip(Z_NAMES, units, strict=True))
+    if style == "inline":
+        return tuple(f"{s} {u}" for s, u in zip(Z_SYMBOLS, units, strict=True))
+    raise ValueError(f"z label style must be text, tex, column or inline, got {style!r}")
 _Z_ANGULAR = np.array([False, True, True, False, True, True])
 
 

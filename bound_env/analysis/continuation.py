@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cache import append_line, atomic_write, read_lines
-from ..params import GAIT_KEYS, Params, z_to_paper, z_to_si
+from ..params import GAIT_KEYS, Params, z_labels, z_to_paper, z_to_si
 from .fixed_point import (
     NEWTON_TOL,
     check_free,
@@ -48,8 +48,7 @@ from .numerics import NewtonOutcome, newton
 from .poincare import stride
 from .stability import DZ, eigen_counts, stability
 
-Z_COLUMNS = ("y_g_m", "theta1_deg", "theta2_deg", "xdot_g_mps", "theta1dot_degps",
-             "theta2dot_degps")  # z in the paper's units  # fmt: skip
+Z_COLUMNS = z_labels("column")  # CSV columns of z in the paper's units
 CORRECTOR_MAX_ITER = 12  # Newton iterations per corrector before the step is halved
 GROW = 1.5  # step growth after an easy corrector (<= EASY_ITER iterations)
 EASY_ITER = 3
@@ -651,9 +650,7 @@ def _arclength(job: _Job, pts: list) -> tuple[str, bool]:
 # Plot
 # --------------------------------------------------------------------------------------------
 
-Z_LABELS = (r"$y_g^*$ [m]", r"$\theta_1^*$ [deg]", r"$\theta_2^*$ [deg]",
-            r"$\dot x_g^*$ [m/s]", r"$\dot\theta_1^*$ [deg/s]",
-            r"$\dot\theta_2^*$ [deg/s]")  # fmt: skip
+Z_LABELS = z_labels("tex")
 
 
 def plot_branch(branch: Branch, path) -> Path:
