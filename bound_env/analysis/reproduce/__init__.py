@@ -17,15 +17,16 @@ configuration: budget, gait files, inputs from earlier stages and `CACHE_VERSION
 
 1. ``reproducing``: the published gait under the reproducing reading: one stride from the
    published z*, Newton's fixed point from it, eigenvalues, recovery (Fig. 6), the periodic
-   stride (Fig. 5), spine bends, theta2 amplitude, hip margins, alpha = 1.93 vs 1.9343, c_c.
+   stride (Fig. 5), spine bends, theta2 amplitude, hip margins, the slope as printed in the
+   text vs in the caption, c_c.
 2. ``closest``: the alpha (kc fixed) and the kc (alpha fixed) whose fixed point lies closest
    to the published z* (bounded 1-D search along the branch), the sensitivity of z* to each
    published parameter within its printed rounding, and the paper's slope secant (eq. 27).
 3. ``sweeps``: e_max against alpha and kc the paper's way (Figs. 7-8), windows, ds onset.
 4. ``stiff``: the stiff-spine bound (kc = 20000, one-body-like) and the paths down to
-   kc = 295 (Figs. 3-4): alpha chosen to hold the forward speed, alpha chosen to balance the
-   energy (eq. 27, the paper's process, with its fallback ladder), and the energy level of
-   the published gait followed upwards (pseudo-arclength in ln kc).
+   the published kc (Figs. 3-4): alpha chosen to hold the forward speed, alpha chosen to
+   balance the energy (eq. 27, the paper's process, with its fallback ladder), and the
+   energy level of the published gait followed upwards (pseudo-arclength in ln kc).
 5. ``literal``: the literal reading: the stride from the published z*, Newton from there and
    nearby, the homotopy from the reproducing geometry, the fixed point at the published
    parameters with its eigenvalues, and the paper's path towards stiffer spines.

@@ -8,7 +8,7 @@ from ...params import Params, z_to_paper
 from ..fixed_point import find_fixed_point, slope_secant
 from .claims import CLAIMS, reproducing_gait
 from .points import point_summary, rel_distance
-from .settings import FP_TOL, Budget
+from .settings import CLOSEST_BOUNDS, CLOSEST_KC_XATOL, FP_TOL, Budget
 
 
 def closest_on_branch(p: Params, key: str, bounds, z_start, z_ref_paper, xatol) -> dict:
@@ -44,11 +44,11 @@ def stage_closest(b: Budget, z_star_si, log) -> dict:
     p, zpub = g.params, z_to_paper(g.z_published)
     z_star_si = np.asarray(z_star_si, float)
     out = {"distance_at_published": rel_distance(z_to_paper(z_star_si), zpub)}
-    out["alpha"] = closest_on_branch(p, "alpha_deg", (1.85, 2.00), z_star_si, zpub,
+    out["alpha"] = closest_on_branch(p, "alpha_deg", CLOSEST_BOUNDS["alpha_deg"], z_star_si, zpub,
                                      b.search_xatol)  # fmt: skip
     log(f"  closest alpha = {out['alpha']['value']:.5f} deg, d = {out['alpha']['distance']:.4f}")
-    out["kc"] = closest_on_branch(p, "kc", (286.0, 300.0), z_star_si, zpub,
-                                  100 * b.search_xatol)  # fmt: skip
+    out["kc"] = closest_on_branch(p, "kc", CLOSEST_BOUNDS["kc"], z_star_si, zpub,
+                                  CLOSEST_KC_XATOL * b.search_xatol)  # fmt: skip
     log(f"  closest kc = {out['kc']['value']:.3f}, d = {out['kc']['distance']:.4f}")
     # how far z* moves when each published parameter moves by its printed rounding
     gd = p.to_gait_dict()

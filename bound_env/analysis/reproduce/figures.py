@@ -166,7 +166,7 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
         _scatter_ds(ax, kc, a, ds, color)
     axes[0, 0].axhline(1.0, color="k", lw=0.6, ls="--")
     axes[0, 0].scatter([pub.kc], [CLAIMS.emax], marker="*", s=90, color="k", zorder=4,
-                       label="paper: ≈ 0.9 at the published gait")  # fmt: skip
+                       label=f"paper: ≈ {CLAIMS.emax:g} at the published gait")  # fmt: skip
     axes[1, 1].scatter([pub.kc], [pub.alpha_deg], marker="*", s=90, color="k", zorder=4)
     labels = (r"$e_{max}$", r"$\gamma_b^{td}$ (open), $\gamma_f^{td}$ (filled) [deg]",
               r"$k_b$ (open), $k_f$ (filled) [N/m]", r"slope $\alpha$ [deg]")  # fmt: skip

@@ -41,7 +41,8 @@ def write_gait_files(results: dict, gaits_dir: Path = GAITS_DIR) -> list[Path]:
             z_published=gl.z_published,
             found_by="bound-env reproduce: homotopy from the reproducing reading's fixed "
             "point to the literal geometry (alpha freed, forward speed pinned), alpha "
-            "continued back to 1.9343 deg, Newton at the parameters of paper-literal.yaml; "
+            f"continued back to {gl.params.to_gait_dict()['alpha_deg']:g} deg, Newton at the "
+            "parameters of paper-literal.yaml; "
             "the same point as multi-start Newton around z_published. UNSTABLE: a real "
             "eigenvalue outside the unit circle",
             residual=float(lit["residual"]), eigenvalues=lit["eigenvalues"],

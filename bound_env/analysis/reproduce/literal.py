@@ -14,7 +14,20 @@ from .claims import literal_gait, reproducing_gait
 from .paths import arclength_path, natural_path, refine_emax_crossing
 from .points import point_summary, rel_distance
 from .reproducing import hip_margins
-from .settings import FP_TOL, RELAXED_LEG_FRAC, Budget
+from .settings import (
+    FP_TOL,
+    HOMOTOPY_DS,
+    HOMOTOPY_DS_MAX,
+    LITERAL_ALPHA_DS,
+    LITERAL_ALPHA_DS_MAX,
+    LITERAL_PATH_STEP,
+    LITERAL_RECORD_DT,
+    MULTISTART_REL,
+    MULTISTART_SEED,
+    MULTISTART_WIDE,
+    RELAXED_LEG_FRAC,
+    Budget,
+)
 from .stiff import _path_points
 
 
@@ -44,7 +57,7 @@ def stage_literal(b: Budget, z_star_si, log) -> dict:
     pl, zpub = gl.params, gl.z_published
     relaxed = pl.with_values(min_leg_frac=RELAXED_LEG_FRAC)
     out = {"params": pl.to_gait_dict()}
-    s = stride(zpub, pl, record_dt=1e-3)
+    s = stride(zpub, pl, record_dt=LITERAL_RECORD_DT)
     out["stride_from_published"] = {"failure": s.failure, "phases": s.phases,
                                     "durations": s.durations, "t_end": s.t_end}  # fmt: skip
     out["leg_compression"] = min_leg_fraction(zpub, pl)
@@ -53,9 +66,9 @@ def stage_literal(b: Budget, z_star_si, log) -> dict:
     sec = slope_secant(pl, zpub, max_iter=3)
     out["secant_from_published"] = {"reason": sec.reason, "found": sec.fixed_point_found}
     # multi-start Newton around the published z* (legs may compress to 5 % while searching)
-    rng = np.random.default_rng(0)
-    rel = np.array([0.02, 0.05, 0.05, 0.1, 0.2, 0.3])
-    wide = np.array([0.02, 4.0, 8.0, 0.5, 100.0, 150.0])
+    rng = np.random.default_rng(MULTISTART_SEED)
+    rel = np.array(MULTISTART_REL)
+    wide = np.array(MULTISTART_WIDE)
     found, n_conv = [], 0
     zp = z_to_paper(zpub)
     for i in range(b.literal_starts):
@@ -92,14 +105,14 @@ def stage_literal(b: Budget, z_star_si, log) -> dict:
 
     hom = arclength_path(geom, 0.0, 1.0, np.append(z_star_si, pr.to_gait_dict()["alpha_deg"]),
                          free=("alpha_deg",), pins=[("xdot_g", float(z_star_si[3]))],
-                         ds=0.02, ds_max=0.1)  # fmt: skip
-    out["homotopy"] = {"reason": hom["reason"], "reached": hom["reached"],
-                       "folds": hom["folds"],
+                         ds=HOMOTOPY_DS, ds_max=HOMOTOPY_DS_MAX)  # fmt: skip
+    out["homotopy"] = {"reason": hom.reason, "reached": hom.reached,
+                       "folds": hom.folds,
                        "points": [{"lambda": s, "alpha_deg": float(u[6]),
-                                   "z": z_to_paper(u[:6])} for s, u in hom["points"]]}  # fmt: skip
+                                   "z": z_to_paper(u[:6])} for s, u in hom.points]}  # fmt: skip
     z_lit = None
-    if hom["reached"]:
-        a_end, z_end = float(hom["points"][-1][1][6]), hom["points"][-1][1][:6]
+    if hom.reached:
+        a_end, z_end = float(hom.points[-1][1][6]), hom.points[-1][1][:6]
         log(f"  homotopy reached the literal geometry at alpha = {a_end:.4f} deg")
         pa = relaxed
 
@@ -107,13 +120,13 @@ def stage_literal(b: Budget, z_star_si, log) -> dict:
             return pa.with_values(alpha_deg=a)
 
         arc = arclength_path(alpha_of, a_end, float(pl.to_gait_dict()["alpha_deg"]), z_end,
-                             ds=0.1, ds_max=0.5)  # fmt: skip
-        out["alpha_continuation"] = {"reason": arc["reason"], "reached": arc["reached"],
-                                     "folds": arc["folds"],
+                             ds=LITERAL_ALPHA_DS, ds_max=LITERAL_ALPHA_DS_MAX)  # fmt: skip
+        out["alpha_continuation"] = {"reason": arc.reason, "reached": arc.reached,
+                                     "folds": arc.folds,
                                      "points": [{"alpha_deg": s, "z": z_to_paper(u[:6])}
-                                                for s, u in arc["points"]]}  # fmt: skip
-        if arc["reached"]:
-            z_lit = arc["points"][-1][1][:6]
+                                                for s, u in arc.points]}  # fmt: skip
+        if arc.reached:
+            z_lit = arc.points[-1][1][:6]
     cands = ([z_lit] if z_lit is not None else []) + found
     fp = None
     for z0 in cands:  # at the published parameters with the default leg limit
@@ -138,11 +151,11 @@ def stage_literal(b: Budget, z_star_si, log) -> dict:
     # the paper's path towards stiffer spines: alpha balances the energy (pinned)
     e_l = apex_energy(fp.z, pl)
     res = natural_path(pl, np.append(fp.z, pl.to_gait_dict()["alpha_deg"]),
-                       math.log(b.literal_kc_max), [("energy", e_l)], h0=0.05,
+                       math.log(b.literal_kc_max), [("energy", e_l)], h0=LITERAL_PATH_STEP,
                        h_max=b.path_step_max)  # fmt: skip
     pts = _path_points(res)
-    out["kc_path"] = {"reason": res["reason"], "reached": res["reached"],
-                      "ladder": res["ladder"], "points": pts}  # fmt: skip
+    out["kc_path"] = {"reason": res.reason, "reached": res.reached,
+                      "ladder": res.ladder, "points": pts}  # fmt: skip
     stable = [q["kc"] for q in pts if q["emax"] is not None and q["emax"] < 1.0]
     out["kc_path"]["first_stable_kc"] = min(stable) if stable else None
     # every crossing of e_max = 1 along the path, bisected

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -14,6 +15,17 @@ from ..numerics import NEWTON_MAX_ITER, newton
 from ..poincare import StrideFailure
 from ..stability import DZ, stability
 from .settings import FP_TOL
+
+
+@dataclass
+class PathResult:
+    """A followed path: its points, why it stopped, and what happened on the way."""
+
+    points: list  # natural_path: (Params, z SI); arclength_path: (s, u = [z SI, freed values])
+    reason: str
+    reached: bool  # the target was reached
+    ladder: list = field(default_factory=list)  # natural_path: the fallback changes made
+    folds: list = field(default_factory=list)  # arclength_path: s where the branch turned
 
 
 def _fixed_path(params_of, free, pins) -> FixedPointPath:
@@ -36,7 +48,7 @@ def natural_path(params: Params, u0, s_to: float, pins, free=("alpha_deg",), h0=
     continuation is `continuation.natural`; the ladder is its ``on_stall`` hook.
 
     ``params`` carries the start (kc, alpha); u0 = [z (SI), alpha]. Returns the points as
-    (Params, z) pairs plus the ladder changes made and why the path stopped.
+    (Params, z) pairs plus the ladder changes made and why the path stopped (`PathResult`).
     """
     free = tuple(free)
     base = {"params": params}  # the ladder replaces it
@@ -44,8 +56,7 @@ def natural_path(params: Params, u0, s_to: float, pins, free=("alpha_deg",), h0=
     s0 = math.log(params.kc)
     out = _newton_at(params, u0, free, pins, max_iter=NEWTON_MAX_ITER)
     if not out.converged:
-        return {"points": [], "reason": f"no fixed point at the start: {out.reason}",
-                "reached": False, "ladder": []}  # fmt: skip
+        return PathResult([], f"no fixed point at the start: {out.reason}", False)
     pts = [(params.with_values(**dict(zip(free, out.u[6:], strict=True))), out.u[:6].copy())]
     trail = [(s0, out.u.copy())]
     changes: list = []
@@ -87,7 +98,7 @@ def natural_path(params: Params, u0, s_to: float, pins, free=("alpha_deg",), h0=
         reason = f"stopped after {max_points} points"
     else:
         reason = stop.kind  # the ladder's message
-    return {"points": pts, "reason": reason, "reached": stop.reached, "ladder": changes}
+    return PathResult(pts, reason, stop.reached, ladder=changes)
 
 
 def arclength_path(params_of, s0: float, s1: float, u0, free=(), pins=(), ds=0.05,
@@ -98,22 +109,21 @@ def arclength_path(params_of, s0: float, s1: float, u0, free=(), pins=(), ds=0.0
     parameters at s (freed values are applied on top); the second point by a natural step
     of ``ds``; a fold is where ds/d(arclength) changes sign.
 
-    Returns {"points": [(s, u)], "folds": [s], "reason", "reached"}.
+    Returns a `PathResult` with points [(s, u)] and the folds [s].
     """
     path = _fixed_path(params_of, free, pins)
     u0 = np.asarray(u0, float)
     steps_u = path.steps_of(u0)
     first = newton(path.residual_at(s0), u0, steps_u, tol=FP_TOL)
     if not first.converged:
-        return {"points": [], "folds": [], "reason": f"start: {first.reason}",
-                "reached": False}  # fmt: skip
+        return PathResult([], f"start: {first.reason}", False)
     trail = [(s0, first.u)]
     first_step: list = []
     stop = natural(path, trail, s1, StepControl(ds, ds, ds_min), max_points=2,
                    on_point=lambda s, u, iterations, step: first_step.append(abs(step)))
     if len(trail) < 2:
-        return {"points": [(float(s), u) for s, u in trail], "folds": [],
-                "reason": f"no second point: {stop.info}", "reached": False}  # fmt: skip
+        return PathResult([(float(s), u) for s, u in trail], f"no second point: {stop.info}",
+                          False)  # fmt: skip
     folds: list = []
 
     def on_point(s, u, iterations, step, turned):
@@ -129,8 +139,8 @@ def arclength_path(params_of, s0: float, s1: float, u0, free=(), pins=(), ds=0.0
               "stalled": f"step below minimum at s = {stop.s:.6g}: {stop.info}",
               "turned_back": f"the branch turned back past the start (s = {stop.s:.6g})",
               "max_points": f"stopped after {max_points} points"}[stop.kind]  # fmt: skip
-    return {"points": [(float(s), np.array(u, copy=True)) for s, u in trail], "folds": folds,
-            "reason": reason, "reached": stop.reached}
+    return PathResult([(float(s), np.array(u, copy=True)) for s, u in trail], reason,
+                      stop.reached, folds=folds)
 
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from ...params import Params, z_to_paper
 from ..fixed_point import find_fixed_point
 from ..poincare import apex_energy, stride
-from ..stability import recovery, recovery_all, spine_oscillations
+from ..stability import RECOVERY_REL, recovery, recovery_all, spine_oscillations
 from .claims import CLAIMS, literal_gait, reproducing_gait
 from .points import point_summary
 from .settings import FP_TOL, Budget
@@ -73,7 +73,7 @@ def stage_reproducing(b: Budget, log) -> dict:
     if not fp.converged:  # the integrator's floor: accept the default tolerance
         fp = find_fixed_point(p, zpub)
     log(f"  z* = {np.round(z_to_paper(fp.z), 6).tolist()}  e_max = {fp.emax:.4f}")
-    rec = [recovery(fp.z, p, 0, s * 0.01) for s in (+1.0, -1.0)]
+    rec = [recovery(fp.z, p, 0, s * RECOVERY_REL) for s in (+1.0, -1.0)]
     rec_all = recovery_all(fp.z, p)
     osc = spine_oscillations(fp.z, p)
     per = stride(fp.z, p, record_dt=b.record_dt)

@@ -8,6 +8,19 @@ CACHE_VERSION = 1
 FP_TOL = 1e-11  # Newton tolerance for the fixed points reported (|P(z) - z|, SI)
 RELAXED_LEG_FRAC = 0.05  # min_leg_frac used to explore the literal reading (diagnostic only)
 
+# Continuation settings of the stages (units of each path's own coordinate s)
+STIFF_ALPHA0_DEG = 0.01  # slope [deg] the stiff-spine start's Newton starts from
+ARC_STEP_MAX = 4  # the published energy level: largest arclength step / first step (ln kc)
+HOMOTOPY_DS, HOMOTOPY_DS_MAX = 0.02, 0.1  # literal homotopy, lambda from 0 (reproducing) to 1
+LITERAL_ALPHA_DS, LITERAL_ALPHA_DS_MAX = 0.1, 0.5  # literal: alpha back to the published [deg]
+LITERAL_PATH_STEP = 0.05  # literal: first step of the path to stiffer spines (ln kc)
+CLOSEST_BOUNDS = {"alpha_deg": (1.85, 2.00), "kc": (286.0, 300.0)}  # closest-z* search ranges
+CLOSEST_KC_XATOL = 100  # the kc search tolerance is this x the alpha search's
+MULTISTART_REL = (0.02, 0.05, 0.05, 0.1, 0.2, 0.3)  # literal: relative spread near z_published
+MULTISTART_WIDE = (0.02, 4.0, 8.0, 0.5, 100.0, 150.0)  # ... absolute spread (paper units)
+MULTISTART_SEED = 0
+LITERAL_RECORD_DT = 1e-3  # sampling of the literal stride from z_published [s]
+
 
 @dataclass(frozen=True)
 class Budget:

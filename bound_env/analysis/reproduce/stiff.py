@@ -11,12 +11,12 @@ from ..poincare import apex_energy
 from .claims import reproducing_gait
 from .paths import arclength_path, natural_path, refine_emax_crossing
 from .points import point_summary
-from .settings import FP_TOL, Budget
+from .settings import ARC_STEP_MAX, FP_TOL, STIFF_ALPHA0_DEG, Budget
 
 
-def _path_points(res: dict, log=None) -> list:
+def _path_points(res, log=None) -> list:
     pts = []
-    for p, z in res["points"]:
+    for p, z in res.points:
         pts.append(point_summary(p, z))
     return pts
 
@@ -29,7 +29,7 @@ def stage_stiff(b: Budget, z_star_si, log) -> dict:
     v_star = float(z_star_si[3])
     kc_s = b.kc_stiff
     # the stiff-spine start: published gamma, k; alpha freed, forward speed pinned at z*'s
-    p_s = p0.with_values(kc=kc_s, alpha_deg=0.01)
+    p_s = p0.with_values(kc=kc_s, alpha_deg=STIFF_ALPHA0_DEG)
     st = find_fixed_point(p_s, g.z_published, free=("alpha_deg",), pin=[("xdot_g", v_star)],
                           tol=FP_TOL, recover=False)  # fmt: skip
     out = {"kc_stiff": kc_s, "energy_star": e_star, "xdot_star": v_star}
@@ -45,11 +45,11 @@ def stage_stiff(b: Budget, z_star_si, log) -> dict:
     paths = {}
     for name, pins in (("speed", [("xdot_g", v_star)]), ("energy", [("energy", e_s)])):
         res = natural_path(st.params, u_s, s_to, pins, h0=b.path_step, h_max=b.path_step_max)
-        paths[name] = {"pins": pins, "reason": res["reason"], "reached": res["reached"],
-                       "ladder": res["ladder"], "points": _path_points(res)}
+        paths[name] = {"pins": pins, "reason": res.reason, "reached": res.reached,
+                       "ladder": res.ladder, "points": _path_points(res)}
         end = paths[name]["points"][-1] if paths[name]["points"] else None
         if end:
-            log(f"  path '{name}': {res['reason']}; at kc = {end['kc']:.2f} alpha = "
+            log(f"  path '{name}': {res.reason}; at kc = {end['kc']:.2f} alpha = "
                 f"{end['alpha_deg']:.5f} deg, e_max = {end['emax']:.4f}")
     # the energy level of the published gait followed upwards, round any fold
     p_pub = p0
@@ -60,9 +60,9 @@ def stage_stiff(b: Budget, z_star_si, log) -> dict:
     arc = arclength_path(params_of, math.log(p0.kc), math.log(kc_s),
                          np.append(z_star_si, p0.to_gait_dict()["alpha_deg"]),
                          free=("alpha_deg",), pins=[("energy", e_star)], ds=b.arc_step,
-                         ds_max=4 * b.arc_step)  # fmt: skip
+                         ds_max=ARC_STEP_MAX * b.arc_step)  # fmt: skip
     apts = []
-    for s, u in arc["points"]:
+    for s, u in arc.points:
         pp = p_pub.with_values(kc=math.exp(s), alpha_deg=float(u[6]))
         apts.append(point_summary(pp, u[:6]))
     loss = None
@@ -70,13 +70,13 @@ def stage_stiff(b: Budget, z_star_si, log) -> dict:
         if q0["emax"] is not None and q1["emax"] is not None and q0["emax"] < 1 <= q1["emax"]:
             loss = refine_emax_crossing(p_pub, q0, q1, [("energy", e_star)])
             break
-    paths["energy_star"] = {"pins": [("energy", e_star)], "reason": arc["reason"],
+    paths["energy_star"] = {"pins": [("energy", e_star)], "reason": arc.reason,
                             "stability_loss_kc": loss,
-                            "reached": arc["reached"], "ladder": [],
-                            "folds_kc": [math.exp(s) for s in arc["folds"]],
+                            "reached": arc.reached, "ladder": [],
+                            "folds_kc": [math.exp(s) for s in arc.folds],
                             "points": apts}  # fmt: skip
-    log(f"  published energy level: {arc['reason']}; folds at kc = "
-        f"{[round(math.exp(s), 2) for s in arc['folds']]}")
+    log(f"  published energy level: {arc.reason}; folds at kc = "
+        f"{[round(math.exp(s), 2) for s in arc.folds]}")
     out["paths"] = paths
     # the stiff family at kc_s: fixed points against the pinned forward speed
     fam = []
