@@ -310,3 +310,34 @@ def test_continuation_resumes_after_a_row_cut_short(gait, fixed, tmp_path):
     assert again.reached and [p.value for p in again.points] == [295.0, 296.0, 297.0]
     assert np.array_equal(again.z(), full.z())
     assert [p.value for p in read_branch_csv(csv_path, "kc")] == [295.0, 296.0, 297.0]
+
+
+def test_natural_engine_calls_on_stall_and_goes_on_from_its_point(gait, fixed):
+    """The paper's fallback ladder plugs in as natural()'s on_stall hook: where every
+    correction fails (here kc in (296, 297.2) is made invalid) the hook is called at the last
+    good point; the point it returns restarts the continuation, which then reaches the target."""
+    from bound_env.analysis.continuation import FixedPointPath, StepControl, natural
+
+    def params_of(kc):
+        if 296.0 < kc < 297.2:
+            raise ValueError(f"kc = {kc} is not allowed here")
+        return gait.params.with_values(kc=kc)
+
+    path = FixedPointPath(params_of)
+    calls = []
+
+    def hop(s, u, info, direction):  # a stand-in for the ladder: jump over the gap
+        calls.append((s, direction, info))
+        out = path.correct(297.3, u)
+        return (297.3, out.u) if out.converged else "no way across"
+
+    pts = [(295.0, fixed.z.copy())]
+    stop = natural(path, pts, 297.5, StepControl(1.0, 1.0, 0.3), on_stall=hop)
+    assert stop.reached, stop
+    assert [s for s, _ in pts] == [295.0, 296.0, 297.3, 297.5]
+    assert len(calls) == 1 and calls[0][:2] == (296.0, 1.0) and "not allowed" in calls[0][2]
+    for s, u in pts:
+        assert _residual(u, gait.params.with_values(kc=s)) < 1e-10
+    gave_up = natural(path, [(295.0, fixed.z.copy())], 297.5, StepControl(1.0, 1.0, 0.3),
+                      on_stall=lambda *a: "the ladder is exhausted")  # fmt: skip
+    assert gave_up.kind == "the ladder is exhausted" and not gave_up.reached

@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 
 from ...cache import atomic_write
-from . import figures
-from . import report as report_module
 from .claims import _gait_config, literal_gait, reproducing_gait
 from .closest import stage_closest
+from .figures import write_figures
 from .gaits import write_gait_files
 from .literal import stage_literal
+from .report import write_report
 from .reproducing import stage_reproducing
 from .settings import CACHE_VERSION, FULL, QUICK
 from .stiff import stage_stiff
@@ -49,10 +49,10 @@ def run(out_dir, quick: bool = False, force: bool = False, progress: bool = True
     results["compute_seconds"] = {k: results[k].get("seconds") for k in
                                   ("reproducing", "closest", "sweeps", "stiff", "literal")}
     log("figures")
-    figs = figures.write_figures(results, out_dir / "figures")
+    figs = write_figures(results, out_dir / "figures")
     results["figures"] = [str(p.relative_to(out_dir)) for p in figs]
     results["wall_seconds"] = time.perf_counter() - t0
-    report = report_module.write_report(results, out_dir / "REPRODUCTION.md")
+    report = write_report(results, out_dir / "REPRODUCTION.md")
     atomic_write(out_dir / "results.json", json.dumps(jsonable(
         {k: v for k, v in results.items() if k != "figures"} | {"figures": results["figures"]}
     )))  # fmt: skip
