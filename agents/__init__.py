@@ -7,32 +7,15 @@
   effort of a closed loop, ``bound-env margins``;
 - `agents.compare`: the passive vs learned table in ``docs/MARGINS.md``, ``bound-env compare``.
 
-Importing the package registers ``PassiveBoundLiteral-v0``: ``PassiveBound-v0`` on the
-*literal* reading of Table II, started on that reading's periodic (passively unstable) gait
-(``gait="literal-cycle"``), so that rl-zoo3-style configs can
-key its hyperparameters by their own environment id
-(``rl_zoo3 train --env PassiveBoundLiteral-v0 --gym-packages agents``).
+``PassiveBoundLiteral-v0`` (``PassiveBound-v0`` on the *literal* reading of Table II, started on
+that reading's periodic gait) is registered by `bound_env` itself, beside ``PassiveBound-v0``.
 """
 
-LITERAL_ENV_ID = "PassiveBoundLiteral-v0"
+from bound_env import LITERAL_ENV_ID  # noqa: E402,F401 - kept here for older imports
 
 
 def register_envs() -> None:
-    """Register ``PassiveBoundLiteral-v0`` (idempotent)."""
-    try:
-        from gymnasium.envs.registration import register, registry
-    except ModuleNotFoundError:
-        return
+    """Register ``PassiveBoundLiteral-v0`` (idempotent; `bound_env` registers it on import)."""
     import bound_env
 
-    if LITERAL_ENV_ID in registry:
-        return
-    register(
-        id=LITERAL_ENV_ID,
-        entry_point="bound_env.env:PassiveBoundEnv",
-        kwargs={"gait": "literal-cycle"},
-        max_episode_steps=bound_env.MAX_EPISODE_STEPS,
-    )
-
-
-register_envs()
+    bound_env._register()

@@ -13,9 +13,10 @@ import shutil
 from pathlib import Path
 
 from .margins import Z_LABELS, compute_margins, plot_margins
+from .policy import SHIPPED_DIR
 from .stats import t_interval
 
-POLICIES_DIR = Path(__file__).resolve().parent / "policies"
+POLICIES_DIR = SHIPPED_DIR
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_DOCS = ROOT / "docs"
 DEFAULT_OUT = Path("out") / "margins"

@@ -32,7 +32,9 @@ from typing import Any
 
 import yaml
 
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+from bound_env.resources import configs_dir
+
+CONFIG_DIR = configs_dir()  # the repository's configs/, or the wheel's copy (package data)
 DEFAULT_CONFIG = CONFIG_DIR / "ppo.yaml"
 DEFAULT_ENV_ID = "PassiveBound-v0"
 # Keys of a section that are not PPO constructor arguments.

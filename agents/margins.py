@@ -780,11 +780,12 @@ def setup_key(controller, gait: str, budget: Budget) -> str:
                           "env_kwargs": sorted((str(k), repr(v)) for k, v in env_kwargs.items())})
 
 
-def as_controller(policy):
-    """``"passive"`` or a path -> `agents.policy.load_controller`; an object with the
-    controller protocol (``__call__`` and ``fingerprint``) is used as it is."""
+def as_controller(policy, gait=None):
+    """A name or a path -> `agents.policy.load_controller` (which refuses a trained policy on
+    another ``gait``); an object with the controller protocol (``__call__`` and
+    ``fingerprint``) is used as it is."""
     if isinstance(policy, (str, Path)):
-        return load_controller(policy)
+        return load_controller(policy, gait=gait)
     if callable(policy) and callable(getattr(policy, "fingerprint", None)):
         return policy
     raise ValueError(f"policy must be 'passive', a policy path or a controller with __call__ "
@@ -827,7 +828,7 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
         budget = BUDGETS[budget]
     if workers < 1:
         raise ValueError(f"--workers must be at least 1, got {workers}")
-    controller = as_controller(policy)
+    controller = as_controller(policy, gait)
     g = load_gait(gait)
     z_star = np.asarray(g.z0, dtype=float)
     scale = {"names": list(Z_LABELS), "units": list(Z_UNITS),

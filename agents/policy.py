@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import hashlib
 import pickle
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -94,6 +96,53 @@ class MLPController:
         return h.hexdigest()[:16]
 
 
+# The shipped policies, package data of `agents` (``agents/policies/<name>/``), read with
+# importlib.resources so that an installed wheel finds them too.
+SHIPPED_DIR = Path(str(resources.files("agents") / "policies"))
+
+# Built-in controllers by name: name -> (factory(gait) -> controller, one-line description).
+# ``--policy NAME`` in ``margins``, ``rollout`` and ``compare`` looks names up here first, then
+# among the shipped policies, and only then reads NAME as a path. Modules that add classical
+# controllers call `register_controller`.
+CONTROLLERS: dict[str, tuple[Callable, str]] = {}
+
+
+def register_controller(name: str, factory: Callable, description: str) -> None:
+    """Make ``--policy name`` build ``factory(gait=...)`` (gait: name or path, or None)."""
+    CONTROLLERS[name] = (factory, description)
+
+
+register_controller("passive", lambda gait=None: ZeroController(), "zero spine torque")
+
+
+def shipped_policies() -> dict[str, Path]:
+    """{name: folder} of the policies shipped in ``agents/policies/``."""
+    if not SHIPPED_DIR.is_dir():
+        return {}
+    return {p.name: p for p in sorted(SHIPPED_DIR.iterdir()) if (p / "model.zip").is_file()}
+
+
+def policy_names() -> list[str]:
+    """Every name ``--policy`` accepts besides a path."""
+    return list(CONTROLLERS) + [n for n in shipped_policies() if n not in CONTROLLERS]
+
+
+def resolve_policy(spec: str | Path) -> str | Path:
+    """A built-in controller's name (returned as is), a shipped policy's folder, or a path."""
+    text = str(spec)
+    if text in CONTROLLERS:
+        return text
+    shipped = shipped_policies()
+    if text in shipped:
+        return shipped[text]
+    p = Path(spec)
+    if not p.exists():
+        raise FileNotFoundError(
+            f"policy {text!r} does not exist (give a name: {', '.join(policy_names())}; or a "
+            "run or policy directory with model.zip, or a model .zip)")
+    return p
+
+
 def resolve_policy_files(path: str | Path) -> tuple[Path, Path | None, Path | None]:
     """(model zip, vecnormalize pkl or None, config yaml or None) for a policy directory
     (``model.zip`` inside) or a model zip (its siblings)."""
@@ -139,14 +188,16 @@ def read_run_config(config: Path | None) -> tuple[dict, int | None, list]:
     return kept, run.get("seed"), section.get("env_wrapper") or []
 
 
-def load_controller(path: str | Path) -> MLPController | ZeroController:
-    """``"passive"`` or a saved policy -> a controller (see the module docstring).
+def load_controller(path: str | Path, gait: str | Path | None = None):
+    """A controller from a name (`policy_names`) or a saved policy (see the module docstring).
 
-    Raises FileNotFoundError for a missing path and ValueError for a file that is not a PPO
-    MLP policy for PassiveBound's observation space.
+    ``gait`` is passed to built-in controllers that need one (a trained policy takes its own
+    from its config). Raises FileNotFoundError for a missing path and ValueError for a file
+    that is not a PPO MLP policy for PassiveBound's observation space.
     """
-    if str(path) == "passive":
-        return ZeroController()
+    path = resolve_policy(path)
+    if isinstance(path, str):
+        return CONTROLLERS[path][0](gait=gait)
     model_path, vecnorm_path, config_path = resolve_policy_files(path)
     from stable_baselines3 import PPO
 

@@ -19,11 +19,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .resources import gaits_dir
+
 GAIT_KEYS = (
     "g", "m1", "m2", "l1", "l2", "I1", "I2", "lb_bar", "lf_bar",
     "kb", "kf", "kc", "zeta", "alpha_deg", "gamma_b_deg", "gamma_f_deg",
 )  # fmt: skip
-GAITS_DIR = Path(__file__).resolve().parent.parent / "configs" / "gaits"
+GAITS_DIR = gaits_dir()  # the repository's configs/gaits, or the wheel's copy (package data)
 
 # Layout of the flat float64 parameter vector the compiled dynamics read (see `Params.to_array`).
 P_G, P_ALPHA, P_M1, P_M2, P_L1, P_L2, P_I1, P_I2 = range(8)
