@@ -9,6 +9,8 @@ import time
 from pathlib import Path
 
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
+POLICY_HELP = ("'passive', a shipped policy ('default', 'literal-cycle'), another built-in "
+               "controller, or a path: a run/policy folder, a model .zip, an rl-zoo3 run folder")
 POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv",
                 "eval.png")
 
@@ -45,16 +47,33 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("margins", help="stability margins of the passive gait or a policy")
-    p.add_argument("--policy", default="passive",
-                   help="'passive' or a policy: run/policy directory or model .zip")
+    p.add_argument("--policy", default="passive", help=POLICY_HELP)
     p.add_argument("--budget", choices=("test", "quick", "full"), default="quick")
-    p.add_argument("--gait", default="default", help="gait name or path (default: %(default)s)")
+    p.add_argument("--gait", default=None,
+                   help="gait name or path (default: the policy's own, else 'default')")
+    p.add_argument("--force", action="store_true",
+                   help="evaluate a policy on a gait or without files it was not trained for")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default: 2)")
     p.add_argument("--out", help="directory for margins.json, CSVs, PNGs and the task cache "
                    "(default: out/margins/<policy name>)")
     p.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     p.add_argument("--json", action="store_true", help="print the JSON result")
     p.set_defaults(func=cmd_margins)
+
+    p = sub.add_parser("rollout", help="run a policy for N strides in its own environment")
+    p.add_argument("--policy", default="default", help=POLICY_HELP + " (default: %(default)s)")
+    p.add_argument("--gait", default=None,
+                   help="gait name or path (default: the policy's own, else 'default')")
+    p.add_argument("--strides", type=int, default=50, help="strides to run (default: 50)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the start noise (default: 0)")
+    p.add_argument("--noise", type=float, default=0.0,
+                   help="start noise, the env's reset_noise_scale (default: 0, on the cycle)")
+    p.add_argument("--video", metavar="F.gif|F.mp4", help="record the run")
+    p.add_argument("--out", help="where summary.json goes (default: out/rollout/<policy>)")
+    p.add_argument("--force", action="store_true",
+                   help="run a policy on a gait or without files it was not trained for")
+    p.add_argument("--json", action="store_true", help="print the JSON summary")
+    p.set_defaults(func=cmd_rollout)
 
     p = sub.add_parser("compare", help="passive vs learned margins -> docs/MARGINS.md")
     p.add_argument("--entry", "--policy", action="append", dest="entry",
@@ -69,6 +88,41 @@ def register(sub) -> None:
     p.add_argument("--note", default="", help="a paragraph for the top of the page (e.g. why "
                    "the budget is not the full one)")
     p.set_defaults(func=cmd_compare)
+
+
+def cmd_rollout(args) -> int:
+    from .rollout import rollout, summary_text
+
+    r = rollout(args.policy, gait=args.gait, strides=args.strides, seed=args.seed,
+                noise=args.noise, video=args.video, force=args.force)
+    out = Path(args.out) if args.out else Path("out") / "rollout" / _policy_label(args.policy)
+    path = _write_json(out / "summary.json", r)
+    if args.json:
+        print(json.dumps(r))
+    else:
+        print(summary_text(r))
+        print(f"wrote {path}")
+    return 0
+
+
+def _policy_label(policy: str) -> str:
+    """A folder name for a policy given by name or path."""
+    from .policy import policy_names
+
+    return policy if policy in policy_names() else Path(policy).resolve().name
+
+
+def _write_json(path: Path, data) -> Path:
+    """Write JSON atomically (temp name, then rename), creating the folder."""
+    import os
+
+    if path.parent.exists() and not path.parent.is_dir():
+        raise ValueError(f"--out {path.parent} exists and is not a folder")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    os.replace(tmp, path)
+    return path
 
 
 def cmd_train(args) -> int:
@@ -99,9 +153,13 @@ def export_policy(run_dir, dest, source: str = "final") -> Path:
         raise ValueError(f"export source must be 'final' or 'best', got {source!r}")
     if not (run_dir / "model.zip").is_file():
         raise FileNotFoundError(f"no model.zip in {run_dir}")
-    dest.mkdir(parents=True, exist_ok=True)
     best = run_dir / "best"
     src = best if source == "best" and (best / "model.zip").is_file() else run_dir
+    from .policy import check_policy_files, find_policy_files, write_fingerprint
+
+    files = find_policy_files(src)
+    check_policy_files(files, {}, force=True)  # refuses statistics of another model
+    dest.mkdir(parents=True, exist_ok=True)
     for name in ("model.zip", "vecnormalize.pkl"):
         if (src / name).is_file():
             shutil.copyfile(src / name, dest / name)
@@ -113,16 +171,20 @@ def export_policy(run_dir, dest, source: str = "final") -> Path:
     if (src / "best.json").is_file():
         info.update(json.loads((src / "best.json").read_text()))
     (dest / "exported.json").write_text(json.dumps(info, indent=2) + "\n")
+    write_fingerprint(dest)
     return dest
 
 
 def cmd_margins(args) -> int:
     from .margins import compute_margins, summary_text
+    from .policy import load_controller
 
-    name = "passive" if args.policy == "passive" else Path(args.policy).resolve().name
+    name = _policy_label(args.policy)
     out = Path(args.out) if args.out else Path("out") / "margins" / name
     progress = args.budget == "full" or sys.stderr.isatty()
-    r = compute_margins(args.policy, budget=args.budget, gait=args.gait, workers=args.workers,
+    ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
+    gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"
+    r = compute_margins(ctrl, budget=args.budget, gait=gait, workers=args.workers,
                         out=out, progress=progress, use_cache=not args.no_cache)
     if args.json:
         print(json.dumps(r))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import pickle
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
@@ -143,10 +144,60 @@ def resolve_policy(spec: str | Path) -> str | Path:
     return p
 
 
-def resolve_policy_files(path: str | Path) -> tuple[Path, Path | None, Path | None]:
-    """(model zip, vecnormalize pkl or None, config yaml or None) for a policy directory
-    (``model.zip`` inside) or a model zip (its siblings)."""
+FINGERPRINT_FILE = "fingerprint.json"  # sha256 of the model and its statistics, as one unit
+
+
+@dataclass
+class PolicyFiles:
+    """The files of a saved policy (see `find_policy_files`)."""
+
+    model: Path
+    vecnormalize: Path | None
+    config: Path | None
+    layout: str = "bound_env"  # or "rl-zoo3"
+    env_id: str | None = None  # rl-zoo3: the run's env id (its params folder's name)
+
+    @property
+    def fingerprint(self) -> Path:
+        return self.model.parent / FINGERPRINT_FILE
+
+
+def _zoo_params_folder(folder: Path) -> Path | None:
+    """The params folder (``<env id>/`` with ``config.yml``) of an rl-zoo3 run folder."""
+    subs = [d for d in sorted(folder.iterdir()) if d.is_dir() and (d / "config.yml").is_file()]
+    return subs[0] if len(subs) == 1 else None
+
+
+def find_policy_files(path: str | Path) -> PolicyFiles:
+    """The files of a policy given as a folder or a model zip.
+
+    - this project's layout (``bound-env train`` runs, ``--export`` folders): ``model.zip``,
+      ``vecnormalize.pkl`` and ``config.yaml`` side by side;
+    - rl-zoo3's layout (``logs/ppo/<env id>_<n>/``): the model ``<env id>.zip`` (or
+      ``best_model.zip``), and ``<env id>/config.yml`` + ``<env id>/vecnormalize.pkl`` in a
+      subfolder; the run folder, its params subfolder or the model zip may be given.
+    """
     p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"policy {str(path)!r} does not exist (give a run or policy "
+                                "directory with model.zip, a model .zip, or 'passive')")
+    folder = p if p.is_dir() else p.parent
+    if (folder / "config.yml").is_file() and not (folder / "model.zip").is_file():
+        folder = folder.parent  # the params folder of an rl-zoo3 run was given
+        p = folder if p.is_dir() else p
+    zoo = _zoo_params_folder(folder)
+    if zoo is not None and not (folder / "config.yaml").is_file():
+        if p.is_file():
+            model = p
+        else:
+            cands = [folder / f"{zoo.name}.zip", folder / "best_model.zip"]
+            model = next((c for c in cands if c.is_file()), None)
+            if model is None:
+                raise FileNotFoundError(f"rl-zoo3 run folder {folder} has no {cands[0].name} "
+                                        "or best_model.zip")
+        vn = zoo / "vecnormalize.pkl"
+        return PolicyFiles(model, vn if vn.is_file() else None, zoo / "config.yml", "rl-zoo3",
+                           zoo.name)
     if p.is_dir():
         model = p / "model.zip"
         if not model.is_file():
@@ -154,15 +205,81 @@ def resolve_policy_files(path: str | Path) -> tuple[Path, Path | None, Path | No
             if len(zips) != 1:
                 raise FileNotFoundError(f"no model.zip in policy directory {p}")
             model = zips[0]
-    elif p.is_file():
-        model = p
     else:
-        raise FileNotFoundError(f"policy {str(path)!r} does not exist (give a run or policy "
-                                "directory with model.zip, a model .zip, or 'passive')")
-    folder = model.parent
-    vecnorm = folder / "vecnormalize.pkl"
-    config = folder / "config.yaml"
-    return model, (vecnorm if vecnorm.is_file() else None), (config if config.is_file() else None)
+        model = p
+    vn, cfg = folder / "vecnormalize.pkl", folder / "config.yaml"
+    return PolicyFiles(model, vn if vn.is_file() else None, cfg if cfg.is_file() else None)
+
+
+def resolve_policy_files(path: str | Path) -> tuple[Path, Path | None, Path | None]:
+    """(model zip, vecnormalize pkl or None, config or None): `find_policy_files` as a tuple."""
+    f = find_policy_files(path)
+    return f.model, f.vecnormalize, f.config
+
+
+class _ZooLoader(yaml.SafeLoader):
+    """YAML safe loading plus the one Python tag rl-zoo3 writes (an OrderedDict as pairs)."""
+
+
+_ZooLoader.add_constructor(
+    "tag:yaml.org,2002:python/object/apply:collections.OrderedDict",
+    lambda loader, node: dict(loader.construct_sequence(node.value[0], deep=True)
+                              if isinstance(node, yaml.SequenceNode) else
+                              loader.construct_mapping(node, deep=True).get("args", [[]])[0]),
+)
+
+
+def _read_yaml(path: Path, loader=yaml.SafeLoader):
+    try:
+        data = yaml.load(path.read_text(), Loader=loader)  # noqa: S506 - safe loaders only
+    except (yaml.YAMLError, UnicodeDecodeError) as e:
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ValueError(f"{path}: not a readable YAML file ({msg})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping, got {type(data).__name__}")
+    return data
+
+
+def read_policy_section(files: PolicyFiles) -> tuple[dict, str, int | None]:
+    """(hyperparameter section, env id, seed) of a policy's config; ({}, default id, None)
+    without one."""
+    if files.config is None:
+        return {}, "PassiveBound-v0", None
+    if files.layout == "rl-zoo3":
+        return _read_yaml(files.config, _ZooLoader), files.env_id or "PassiveBound-v0", None
+    data = _read_yaml(files.config)
+    run = data.get("run") or {}
+    env_id = run.get("env_id")
+    section = data.get(env_id) if env_id else None
+    if section is None:  # a plain rl-zoo3-style file with one section
+        sections = {k: v for k, v in data.items() if isinstance(v, dict) and k != "run"}
+        if len(sections) == 1:
+            env_id, section = next(iter(sections.items()))
+        else:
+            section = {}
+    if not isinstance(section, dict):
+        raise ValueError(f"{files.config}: section {env_id!r} is not a mapping")
+    return section, env_id or "PassiveBound-v0", run.get("seed")
+
+
+def section_env_kwargs(section: dict, env_id: str) -> dict:
+    """The environment kwargs that matter for evaluation (`DYNAMICS_KWARGS`): those of the
+    registered env id, then the section's ``env_kwargs``."""
+    env_kwargs = section.get("env_kwargs") or {}
+    if not isinstance(env_kwargs, dict):
+        raise ValueError(f"env_kwargs must be a mapping, got {env_kwargs!r}")
+    if env_id != "PassiveBound-v0":
+        import gymnasium as gym
+
+        import bound_env  # noqa: F401 - registers the env ids
+
+        try:
+            spec_kwargs = gym.spec(env_id).kwargs or {}
+        except gym.error.Error:
+            raise ValueError(f"the policy was trained on {env_id!r}, which is not a "
+                             "registered environment") from None
+        env_kwargs = {**spec_kwargs, **env_kwargs}
+    return {k: v for k, v in env_kwargs.items() if k in DYNAMICS_KWARGS}
 
 
 def read_run_config(config: Path | None) -> tuple[dict, int | None, list]:
@@ -170,58 +287,144 @@ def read_run_config(config: Path | None) -> tuple[dict, int | None, list]:
     run's config.yaml."""
     if config is None:
         return {}, None, []
-    data = yaml.safe_load(config.read_text()) or {}
-    run = data.get("run") or {}
-    env_id = run.get("env_id")
-    section = data.get(env_id) if env_id else None
-    if section is None:  # a plain rl-zoo3 file with one section
-        sections = [v for k, v in data.items() if isinstance(v, dict) and k != "run"]
-        section = sections[0] if len(sections) == 1 else {}
-    env_kwargs = dict(section.get("env_kwargs") or {})
-    if env_id and env_id != "PassiveBound-v0":
-        import gymnasium as gym
-
-        import agents  # noqa: F401 - registers PassiveBoundLiteral-v0
-
-        env_kwargs = {**(gym.spec(env_id).kwargs or {}), **env_kwargs}
-    kept = {k: v for k, v in env_kwargs.items() if k in DYNAMICS_KWARGS}
-    return kept, run.get("seed"), section.get("env_wrapper") or []
+    layout = "rl-zoo3" if config.name == "config.yml" else "bound_env"
+    files = PolicyFiles(config, None, config, layout, config.parent.name)
+    section, env_id, seed = read_policy_section(files)
+    return section_env_kwargs(section, env_id), seed, section.get("env_wrapper") or []
 
 
-def load_controller(path: str | Path, gait: str | Path | None = None):
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with Path(path).open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def write_fingerprint(folder: str | Path, **extra) -> Path:
+    """Bind ``model.zip`` and ``vecnormalize.pkl`` of ``folder`` together: their sha256 in
+    ``fingerprint.json`` (written atomically), checked by `check_policy_files`."""
+    import json
+    import os
+
+    folder = Path(folder)
+    data = {"model.zip": file_sha256(folder / "model.zip")}
+    if (folder / "vecnormalize.pkl").is_file():
+        data["vecnormalize.pkl"] = file_sha256(folder / "vecnormalize.pkl")
+    data.update(extra)
+    path = folder / FINGERPRINT_FILE
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    os.replace(tmp, path)
+    return path
+
+
+def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -> list[str]:
+    """ValueError for a policy whose evaluation would be silently wrong; returns warnings.
+
+    - no config: the env kwargs it was trained with (``max_torque``, ``dt``, wrappers) are
+      unknown (``force`` evaluates it with the env's defaults);
+    - trained with ``normalize`` but no ``vecnormalize.pkl`` beside the model;
+    - a ``fingerprint.json`` (written at export and at the end of training) that does not match
+      the model or the statistics: they belong to different policies.
+    """
+    warnings = []
+    if files.config is None:
+        msg = (f"policy {files.model}: no config.yaml beside it, so the environment it was "
+               "trained on (max_torque, dt, observation filter) is unknown")
+        if not force:
+            raise ValueError(msg + "; pass --force to evaluate it with the env's defaults")
+        warnings.append(msg)
+    if section.get("normalize") and files.vecnormalize is None:
+        where = files.config.parent if files.config is not None else files.model.parent
+        raise ValueError(f"policy {files.model} was trained with normalize="
+                         f"{section['normalize']!r} but {where} has no vecnormalize.pkl")
+    fp = files.fingerprint
+    if fp.is_file():
+        import json
+
+        try:
+            want = json.loads(fp.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            raise ValueError(f"{fp}: not a readable JSON file") from None
+        pairs = [("model.zip", files.model), ("vecnormalize.pkl", files.vecnormalize)]
+        for key, path in pairs:
+            if key in want and (path is None or file_sha256(path) != want[key]):
+                raise ValueError(f"{path or key} does not match {fp} (sha256): the model and "
+                                 "its normalization statistics belong to different policies")
+    elif files.vecnormalize is not None and files.layout == "bound_env":
+        warnings.append(f"{files.model.parent}: no {FINGERPRINT_FILE}, so it cannot be checked "
+                        "that vecnormalize.pkl belongs to this model")
+    return warnings
+
+
+def same_gait(a, b) -> bool:
+    """Whether two gait names/paths give the same parameters and reference apex state."""
+    from bound_env.params import load_gait
+
+    ga, gb = load_gait(a), load_gait(b)
+    return ga.params == gb.params and np.array_equal(ga.z0, gb.z0)
+
+
+def check_gait(controller, gait, force: bool = False) -> None:
+    """ValueError when ``gait`` is not the gait ``controller`` was trained on (``force``
+    allows it on purpose). Built-in controllers have no trained gait and take any."""
+    trained = getattr(controller, "env_kwargs", {}).get("gait")
+    if gait is None or trained is None or force or isinstance(controller, ZeroController):
+        return
+    if not same_gait(trained, gait):
+        raise ValueError(f"policy {controller.name} was trained on gait {trained!r}, not "
+                         f"{str(gait)!r}; pass --force to evaluate it there on purpose")
+
+
+def load_controller(path: str | Path, gait: str | Path | None = None, force: bool = False):
     """A controller from a name (`policy_names`) or a saved policy (see the module docstring).
 
-    ``gait`` is passed to built-in controllers that need one (a trained policy takes its own
-    from its config). Raises FileNotFoundError for a missing path and ValueError for a file
-    that is not a PPO MLP policy for PassiveBound's observation space.
+    ``gait`` is passed to built-in controllers that need one; a trained policy takes its own
+    from its config and refuses another one unless ``force`` (`check_gait`). Raises
+    FileNotFoundError for a missing path and ValueError for a file that is not a PPO MLP
+    policy for PassiveBound's observation space, or would be evaluated wrongly
+    (`check_policy_files`).
     """
     path = resolve_policy(path)
     if isinstance(path, str):
         return CONTROLLERS[path][0](gait=gait)
-    model_path, vecnorm_path, config_path = resolve_policy_files(path)
+    files = find_policy_files(path)
+    model_path, vecnorm_path = files.model, files.vecnormalize
     from stable_baselines3 import PPO
 
     try:
         model = PPO.load(str(model_path), device="cpu")
     except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
         raise ValueError(f"cannot load {model_path} as an SB3 PPO model: {e}") from None
-    env_kwargs, seed, wrappers = read_run_config(config_path)
+    section, env_id, seed = read_policy_section(files)
+    env_kwargs = section_env_kwargs(section, env_id)
+    wrappers = section.get("env_wrapper") or []
     obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
+    for w in check_policy_files(files, section, force):
+        print(f"warning: {w}", file=sys.stderr)
     layers, activation = _extract_actor(model, model_path)
     ctrl = MLPController(name=str(path), layers=layers, activation=activation,
                          env_kwargs=env_kwargs, obs_shape=tuple(model.observation_space.shape),
                          seed=seed, obs_index=obs_index)
     if vecnorm_path is not None:
-        with vecnorm_path.open("rb") as f:
-            vn = pickle.load(f)
+        try:
+            with vecnorm_path.open("rb") as f:
+                vn = pickle.load(f)
+        except Exception as e:  # noqa: BLE001 - a truncated or foreign pickle
+            raise ValueError(f"cannot read {vecnorm_path} as VecNormalize statistics: "
+                             f"{type(e).__name__}: {e}") from None
         if getattr(vn, "norm_obs", False):
-            if tuple(vn.obs_rms.mean.shape) != ctrl.obs_shape:
+            rms = getattr(vn, "obs_rms", None)
+            if rms is None or tuple(np.shape(rms.mean)) != ctrl.obs_shape:
                 raise ValueError(f"{vecnorm_path}: statistics for observations of shape "
-                                 f"{vn.obs_rms.mean.shape}, the model expects {ctrl.obs_shape}")
-            ctrl.obs_mean = np.asarray(vn.obs_rms.mean, dtype=np.float64)
-            ctrl.obs_var = np.asarray(vn.obs_rms.var, dtype=np.float64)
+                                 f"{np.shape(getattr(rms, 'mean', None))}, the model expects "
+                                 f"{ctrl.obs_shape}")
+            ctrl.obs_mean = np.asarray(rms.mean, dtype=np.float64)
+            ctrl.obs_var = np.asarray(rms.var, dtype=np.float64)
             ctrl.epsilon = float(vn.epsilon)
             ctrl.clip_obs = float(vn.clip_obs)
+    check_gait(ctrl, gait, force)
     return ctrl
 
 

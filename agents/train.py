@@ -26,6 +26,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import platform
 import re
 import sys
@@ -106,6 +107,24 @@ def make_vec(env_id: str, spec: TrainSpec, n_envs: int, seed: int, vec_env: str 
 # Callbacks
 # --------------------------------------------------------------------------------------------
 
+
+
+def save_policy(model, folder: Path) -> None:
+    """Save ``model.zip``, its ``vecnormalize.pkl`` (when normalizing) and ``fingerprint.json``
+    binding the two, each under a temporary name and then renamed; the fingerprint last."""
+    from .policy import write_fingerprint
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / "model.zip.tmp.zip"  # SB3 appends .zip to names without it
+    model.save(tmp)
+    os.replace(tmp, folder / "model.zip")
+    vn = model.get_vec_normalize_env()
+    if vn is not None:
+        tmp = folder / "vecnormalize.pkl.tmp"
+        vn.save(str(tmp))
+        os.replace(tmp, folder / "vecnormalize.pkl")
+    write_fingerprint(folder)
 
 class NoiseCurriculumCallback(BaseCallback):
     """Raise the start perturbation of `agents.wrappers.PerturbedStarts` over training.
@@ -252,13 +271,8 @@ class BasinValidationCallback(BaseCallback):
                     f.write("timesteps,basin_min,seconds\n")
                 f.write(f"{self.num_timesteps},{value},{time.perf_counter() - t0:.2f}\n")
             if value > self.best:
-                best = self.run_dir / "best"
-                best.mkdir(exist_ok=True)
-                self.model.save(best / "model.zip")
-                vn = self.model.get_vec_normalize_env()
-                if vn is not None:
-                    vn.save(str(best / "vecnormalize.pkl"))
-                (best / "best.json").write_text(json.dumps(
+                save_policy(self.model, self.run_dir / "best")
+                (self.run_dir / "best" / "best.json").write_text(json.dumps(
                     {"timesteps": self.num_timesteps, "basin_validation": value}) + "\n")
         self.best = max(self.best, value)
         return value
@@ -497,11 +511,9 @@ def train(
     model.learn(total_timesteps=remaining, callback=callbacks, progress_bar=progress_bar,
                 reset_num_timesteps=ckpt is None, tb_log_name="PPO")
     wall = time.perf_counter() - t0
-    model.save(run_dir / "model.zip")
+    save_policy(model, run_dir)
     if (run_dir / "eval.csv").exists():
         plot_eval(run_dir / "eval.csv", run_dir / "eval.png")
-    if spec.normalize_kwargs is not None:
-        model.get_vec_normalize_env().save(str(run_dir / "vecnormalize.pkl"))
     venv.close()
     eval_env.close()
     info_path = run_dir / "run.json"

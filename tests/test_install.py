@@ -123,6 +123,13 @@ def test_installed_package_runs_outside_the_checkout(installed):
     assert 0.8 < margins["emax"] < 0.95  # the passive gait's e_max is 0.878 (README)
     assert (cwd / "out" / "margins" / "passive" / "margins.json").is_file()
 
+    # the acceptance run of the shipped policy: 50 strides, no fall, its mean |tau|
+    r = json.loads(_run([installed["exe"], "rollout", "--policy", "default", "--strides", "50",
+                         "--json"], cwd=cwd, env=env))
+    assert r["strides"] == 50 and r["fell"] is False and r["failure"] is None
+    assert r["max_torque"] == 80.0 and 0.0 < r["mean_abs_tau"] < 80.0
+    assert (cwd / "out" / "rollout" / "default" / "summary.json").is_file()
+
     # compiled code is cached under the user cache, never inside site-packages
     assert not list(site.rglob("*.nbi"))
     assert list((installed["tmp"] / "cache" / "bound_env" / "numba").rglob("*.nbi"))

@@ -1,0 +1,192 @@
+"""Run a policy in the environment it was trained for: `load_policy` and ``bound-env rollout``.
+
+A trained policy needs more than its ``model.zip``: the environment kwargs it was trained
+with (``max_torque``, ``dt``, the gait), the observation wrappers of its config
+(`agents.wrappers.ObservationFilter`) and its ``VecNormalize`` statistics. `load_policy` reads
+them all (with the checks of `agents.policy.load_controller`) and returns an environment
+factory and an action function that belong together::
+
+    from agents.rollout import load_policy
+
+    make_env, act = load_policy("default")        # a shipped name, or a policy/run folder
+    env = make_env()                               # gym.make(...) + the policy's wrappers
+    obs, info = env.reset(seed=0)
+    obs, reward, terminated, truncated, info = env.step(act(obs))
+
+Only the wrappers that change what the policy sees or does (observation and action
+wrappers) are applied; training-only wrappers such as `agents.wrappers.PerturbedStarts`
+(the start distribution) are not: the env's own ``reset_noise_scale`` sets the start.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from .policy import (
+    MLPController,
+    check_gait,
+    find_policy_files,
+    load_controller,
+    read_policy_section,
+    resolve_policy,
+)
+
+ENV_ID = "PassiveBound-v0"  # the env class; the policy's env id only adds its registered kwargs
+
+
+def _policy_wrappers(path) -> list:
+    """[(class, kwargs)] of the observation/action wrappers in a saved policy's config."""
+    import gymnasium as gym
+
+    from .config import _entries, get_class_by_name
+
+    section, _, _ = read_policy_section(find_policy_files(path))
+    out = []
+    for name, kwargs in _entries(section.get("env_wrapper")):
+        cls = get_class_by_name(name)
+        if issubclass(cls, (gym.ObservationWrapper, gym.ActionWrapper)):
+            out.append((cls, kwargs))
+    return out
+
+
+def load_policy(path, gait=None, force: bool = False):
+    """``(env_factory, act)`` for a policy name (`agents.policy.policy_names`) or folder.
+
+    ``env_factory(**kwargs)`` makes the environment the policy was trained for (its env kwargs
+    and observation wrappers; ``kwargs`` add to or override them, e.g. ``render_mode``,
+    ``reset_noise_scale``, ``max_episode_steps``). ``act(obs)`` is the deterministic action
+    (float32, shape (1,)) for an observation of that environment, normalized with the policy's
+    statistics. ``gait`` evaluates on another gait (refused for a trained policy unless
+    ``force``); built-in controllers (``passive``, ...) run on ``gait`` or the default one.
+    """
+    import gymnasium as gym
+
+    import bound_env
+
+    gym.register_envs(bound_env)
+    ctrl = load_controller(path, gait=gait, force=force)
+    resolved = resolve_policy(path)
+    wrappers = [] if isinstance(resolved, str) else _policy_wrappers(resolved)
+    env_kwargs = dict(ctrl.env_kwargs)
+    if gait is not None:
+        env_kwargs["gait"] = str(gait)
+    if isinstance(ctrl, MLPController):
+        inner = replace(ctrl, obs_index=None)  # the env below applies the ObservationFilter
+    else:
+        inner = ctrl
+
+    def env_factory(**kwargs):
+        env = gym.make(ENV_ID, **{**env_kwargs, **kwargs})
+        for cls, kw in wrappers:
+            env = cls(env, **kw)
+        return env
+
+    def act(obs) -> np.ndarray:
+        return np.array([inner(obs)], dtype=np.float32)
+
+    env_factory.env_kwargs = env_kwargs
+    act.controller = ctrl
+    return env_factory, act
+
+
+def rollout(policy="default", gait=None, strides: int = 50, seed: int = 0, noise: float = 0.0,
+            video: str | Path | None = None, force: bool = False) -> dict:
+    """One episode of ``strides`` strides (or until a fall); a JSON-able summary.
+
+    Keys: ``policy``, ``gait``, ``env_kwargs``, ``seed``, ``noise`` (the env's
+    ``reset_noise_scale``), ``strides`` (completed), ``requested_strides``, ``fell`` and
+    ``failure`` (the simulator's reason, or null), ``apex_error`` (per stride: the largest
+    |z - z*| / apex_scales component, where z* is the gait's fixed point), ``mean_abs_tau``
+    (N m, average over control intervals of equal length), ``max_torque`` (N m), ``steps``,
+    ``time`` (s), ``video`` (path or null).
+    """
+    from bound_env.task import NO_APEX_TIME
+
+    if not (isinstance(strides, int) and 1 <= strides <= 100_000):
+        raise ValueError(f"--strides must be an integer from 1 to 100000, got {strides!r}")
+    if not (math.isfinite(noise) and 0.0 <= noise <= 10.0):
+        raise ValueError(f"--noise must be a number from 0 to 10, got {noise!r}")
+    if video is not None and Path(video).suffix.lower() not in (".gif", ".mp4"):
+        raise ValueError(f"--video must end in .gif or .mp4, got {str(video)!r}")
+    make_env, act = load_policy(policy, gait=gait, force=force)
+    dt = float(make_env.env_kwargs.get("dt", 0.01))
+    max_steps = strides * (int(math.ceil(NO_APEX_TIME / dt)) + 2)
+    env = make_env(reset_noise_scale=float(noise), max_episode_steps=max_steps,
+                   render_mode="rgb_array" if video else None)
+    frames = []
+    task = env.unwrapped.task
+    z_ref, scales = np.asarray(task.z_ref), np.asarray(task.apex_scales)
+    obs, info = env.reset(seed=seed)
+    failure, errors, taus, steps = info.get("failure"), [], [], 0
+    if video:
+        frames.append(env.render())
+    while failure is None and len(errors) < strides:
+        obs, _, terminated, truncated, info = env.step(act(obs))
+        steps += 1
+        taus.append(abs(float(info["tau"])))
+        if video:
+            frames.append(env.render())
+        if "apex_z" in info:
+            errors.append(float(np.max(np.abs((np.asarray(info["apex_z"]) - z_ref) / scales))))
+        if terminated:
+            failure = info.get("failure") or "terminated"
+        elif truncated:
+            break
+    env.close()
+    if video:
+        write_video(frames, video, fps=round(1 / dt))
+    return {
+        "policy": str(policy), "gait": str(make_env.env_kwargs.get("gait", "default")),
+        "env_kwargs": _jsonable(make_env.env_kwargs), "seed": seed, "noise": noise,
+        "requested_strides": strides, "strides": len(errors), "fell": failure is not None,
+        "failure": failure, "apex_error": errors,
+        "mean_abs_tau": float(np.mean(taus)) if taus else 0.0,
+        "max_torque": float(task.max_torque), "steps": steps, "time": steps * dt,
+        "video": str(video) if video else None,
+    }  # fmt: skip
+
+
+def _jsonable(d: dict) -> dict:
+    return json.loads(json.dumps(d, default=lambda v: np.asarray(v).tolist()))
+
+
+def write_video(frames, path, fps: int) -> Path:
+    """A GIF (Pillow, always available) or an MP4 (needs imageio-ffmpeg or moviepy)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    if path.suffix.lower() == ".gif":
+        from bound_env.render import save_gif
+
+        save_gif(frames, tmp, fps=min(fps, 50))
+    else:
+        try:
+            import imageio.v2 as imageio
+        except ModuleNotFoundError:
+            raise ValueError("--video F.mp4 needs imageio with ffmpeg (pip install "
+                             "imageio-ffmpeg); --video F.gif works without it") from None
+        try:
+            imageio.mimwrite(tmp, frames, fps=fps)
+        except Exception as e:  # noqa: BLE001 - no ffmpeg backend
+            raise ValueError(f"cannot write {path}: {e}; use --video F.gif") from None
+    os.replace(tmp, path)
+    return path
+
+
+def summary_text(r: dict) -> str:
+    err = r["apex_error"]
+    last = f"{err[-1]:.3g}" if err else "-"
+    fell = f"fell: {r['failure']}" if r["fell"] else "no fall"
+    return (f"{r['policy']} on gait {r['gait']}: {r['strides']}/{r['requested_strides']} "
+            f"strides, {fell}; apex error (apex_scales units) last {last}, max "
+            f"{max(err) if err else float('nan'):.3g}; mean |tau| {r['mean_abs_tau']:.3g} N m "
+            f"of {r['max_torque']:g}")
+
+
+__all__ = ["check_gait", "load_policy", "rollout"]

@@ -1,0 +1,144 @@
+"""Running a trained policy: `bound-env rollout`, `load_policy`, and the refusals that keep
+evaluation from being silently wrong (missing or foreign statistics, another gait)."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from collections import OrderedDict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from agents.policy import find_policy_files, load_controller, shipped_policies
+from agents.rollout import load_policy, rollout
+from bound_env.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture
+def policy_copy(tmp_path):
+    """A writable copy of the shipped default policy."""
+    dest = tmp_path / "pol"
+    shutil.copytree(shipped_policies()["default"], dest)
+    return dest
+
+
+def test_shipped_policies_by_name_and_fingerprinted():
+    shipped = shipped_policies()
+    assert set(shipped) >= {"default", "literal-cycle"}
+    for folder in shipped.values():
+        assert (folder / "fingerprint.json").is_file()
+        load_controller(folder)  # passes every check (fingerprint, normalization, config)
+
+
+def test_rollout_reports_strides_torque_and_apex_error(tmp_path, capsys):
+    assert main(["rollout", "--policy", "default", "--strides", "3", "--json",
+                 "--out", str(tmp_path / "r")]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["strides"] == 3 and r["fell"] is False and r["failure"] is None
+    assert len(r["apex_error"]) == 3
+    # the policy uses its own max_torque (80 N m, from its config), not the env default (40)
+    assert r["max_torque"] == 80.0 and 0 < r["mean_abs_tau"] < 80.0
+    assert json.loads((tmp_path / "r" / "summary.json").read_text()) == r
+
+
+def test_passive_rollout_applies_no_torque():
+    r = rollout("passive", strides=2)
+    assert r["strides"] == 2 and r["mean_abs_tau"] == 0.0
+    assert max(r["apex_error"]) < 1e-6  # it starts on the passive cycle
+
+
+def test_rollout_records_a_gif(tmp_path):
+    r = rollout("passive", strides=1, video=tmp_path / "v" / "run.gif")
+    assert Path(r["video"]).stat().st_size > 1000
+
+
+def test_load_policy_matches_plain_sb3_and_readme_example_runs():
+    from stable_baselines3 import PPO
+
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    example = next(b for b in blocks if "VecNormalize.load" in b)
+    scope: dict = {}
+    exec(example.replace("range(400)", "range(60)"), scope)  # noqa: S102 - the README's code
+    assert scope["done"].shape == (1,)
+    # the README's SB3 route and load_policy's act give the same actions
+    make_env, act = load_policy("default")
+    venv = scope["venv"]
+    model = PPO.load(scope["folder"] / "model.zip", device="cpu")
+    env = make_env()
+    obs, _ = env.reset(seed=1)
+    for _ in range(30):
+        sb3, _ = model.predict(venv.normalize_obs(obs[None]), deterministic=True)
+        ours = act(obs)
+        assert ours.shape == (1,) and ours.dtype == np.float32
+        assert np.allclose(sb3[0], ours, atol=1e-5)
+        obs, *_ = env.step(ours)
+
+
+def test_refuses_missing_statistics(policy_copy, capsys):
+    (policy_copy / "vecnormalize.pkl").unlink()
+    with pytest.raises(ValueError, match="no vecnormalize.pkl"):
+        load_controller(policy_copy)
+    assert main(["margins", "--policy", str(policy_copy), "--budget", "test"]) == 2
+    assert "vecnormalize.pkl" in capsys.readouterr().err
+
+
+def test_refuses_statistics_of_another_policy(policy_copy, capsys):
+    other = shipped_policies()["literal-cycle"] / "vecnormalize.pkl"
+    shutil.copyfile(other, policy_copy / "vecnormalize.pkl")
+    with pytest.raises(ValueError, match="different policies"):
+        load_controller(policy_copy)
+    assert main(["rollout", "--policy", str(policy_copy), "--strides", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "different policies" in err and "Traceback" not in err
+
+
+def test_refuses_corrupt_statistics(policy_copy):
+    (policy_copy / "fingerprint.json").unlink()
+    (policy_copy / "vecnormalize.pkl").write_bytes(b"\x80\x04garbage")
+    with pytest.raises(ValueError, match="cannot read"):
+        load_controller(policy_copy)
+
+
+def test_refuses_missing_config(policy_copy):
+    (policy_copy / "config.yaml").unlink()
+    with pytest.raises(ValueError, match="config.yaml"):
+        load_controller(policy_copy)
+    with pytest.raises(ValueError, match="config.yaml"):  # no config: the env is unknown
+        load_controller(policy_copy, force=True)
+
+
+def test_refuses_another_gait_unless_forced(capsys):
+    with pytest.raises(ValueError, match="trained on gait"):
+        load_controller("literal-cycle", gait="default")
+    assert main(["rollout", "--policy", "literal-cycle", "--gait", "default", "--strides",
+                 "1"]) == 2
+    assert "--force" in capsys.readouterr().err
+    ctrl = load_controller("literal-cycle", gait="default", force=True)
+    assert ctrl.env_kwargs["gait"] == "literal-cycle"
+    load_controller("default", gait=ROOT / "configs" / "gaits" / "default.yaml")  # same gait
+
+
+def test_rl_zoo3_run_folder_is_read(tmp_path):
+    """rl-zoo3's layout: <run>/<env id>.zip and <run>/<env id>/{config.yml, vecnormalize.pkl},
+    the config dumped as an OrderedDict by PyYAML."""
+    src = shipped_policies()["default"]
+    run = tmp_path / "PassiveBound-v0_1"
+    params = run / "PassiveBound-v0"
+    params.mkdir(parents=True)
+    shutil.copyfile(src / "model.zip", run / "PassiveBound-v0.zip")
+    shutil.copyfile(src / "vecnormalize.pkl", params / "vecnormalize.pkl")
+    section = yaml.safe_load((src / "config.yaml").read_text())["PassiveBound-v0"]
+    (params / "config.yml").write_text(yaml.dump(OrderedDict(sorted(section.items()))))
+    assert "OrderedDict" in (params / "config.yml").read_text()
+    files = find_policy_files(run)
+    assert files.layout == "rl-zoo3" and files.model.name == "PassiveBound-v0.zip"
+    want = load_controller("default").fingerprint()
+    for given in (run, params, run / "PassiveBound-v0.zip"):
+        assert load_controller(given).fingerprint() == want
