@@ -16,6 +16,8 @@ POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eva
 
 
 def register(sub) -> None:
+    from bound_env.parallel import add_scheduler_args
+
     from .config import DEFAULT_CONFIG, DEFAULT_ENV_ID
 
     p = sub.add_parser("train", help="train a PPO spine controller (runs/<name>/)")
@@ -54,6 +56,7 @@ def register(sub) -> None:
     p.add_argument("--force", action="store_true",
                    help="evaluate a policy on a gait or without files it was not trained for")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default: 2)")
+    add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", help="directory for margins.json, CSVs, PNGs and the task cache "
                    "(default: out/margins/<policy name>)")
     p.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
@@ -83,11 +86,16 @@ def register(sub) -> None:
                         "t interval over them); repeatable (default: the shipped policies)")
     p.add_argument("--budget", choices=("test", "quick", "full"), default="full")
     p.add_argument("--workers", type=int, default=2)
+    add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", default="out/margins", help="per-entry results and caches")
     p.add_argument("--docs", default=None, help="where MARGINS.md and its PNGs go (default: docs/)")
     p.add_argument("--note", default="", help="a paragraph for the top of the page (e.g. why "
                    "the budget is not the full one)")
     p.set_defaults(func=cmd_compare)
+
+    from .basin_cli import register as register_basin_map
+
+    register_basin_map(sub)
 
 
 def cmd_rollout(args) -> int:
@@ -185,7 +193,8 @@ def cmd_margins(args) -> int:
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
     gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"
     r = compute_margins(ctrl, budget=args.budget, gait=gait, workers=args.workers,
-                        out=out, progress=progress, use_cache=not args.no_cache)
+                        out=out, progress=progress, use_cache=not args.no_cache,
+                        scheduler=args.scheduler)
     if args.json:
         print(json.dumps(r))
     else:
@@ -203,6 +212,7 @@ def cmd_compare(args) -> int:
         entries = ([] if any(e[1] == ["passive"] and e[2] == "default" for e in parsed)
                    else [entries[0]]) + parsed
     path = compare(entries, budget=args.budget, workers=args.workers, out=args.out,
-                   docs=args.docs or DEFAULT_DOCS, progress=sys.stderr.isatty(), note=args.note)
+                   docs=args.docs or DEFAULT_DOCS, progress=sys.stderr.isatty(), note=args.note,
+                   scheduler=args.scheduler)
     print(f"wrote {path}")
     return 0

@@ -7,10 +7,13 @@ table and the plots (``docs/margins_*.png``) and copies each policy's training c
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import shutil
 from pathlib import Path
+
+from bound_env.parallel import open_pool
 
 from .margins import Z_LABELS, compute_margins, plot_margins
 from .policy import SHIPPED_DIR
@@ -55,29 +58,34 @@ def _slug(text: str) -> str:
 
 def compare(entries=None, budget: str = "full", workers: int = 2, out: str | Path = DEFAULT_OUT,
             docs: str | Path = DEFAULT_DOCS, progress: bool = True, executor=None,
-            note: str = "") -> Path:
+            note: str = "", scheduler: str | None = None) -> Path:
     """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path.
 
     An entry is (label, policies, gait); an old-style (label, policy, gait) is accepted. Each
     policy of an entry is one seed of the same recipe: the page reports per measure the mean
     and a 95 % Student-t interval over them, and every seed's value in a collapsible detail.
+    One executor (``executor``, else `bound_env.parallel.open_pool` of ``scheduler`` and
+    ``workers``) serves every entry.
     """
     entries = [(lab, [pol] if isinstance(pol, str) else list(pol), gait)
                for lab, pol, gait in (entries or default_entries())]
     out, docs = Path(out), Path(docs)
     docs.mkdir(parents=True, exist_ok=True)
     groups = []
-    for label, policies, gait in entries:
-        runs = []
-        for policy in policies:
-            sub = out / _slug(label) if len(policies) == 1 else \
-                out / _slug(label) / _slug(Path(policy).name)
-            r = compute_margins(policy, budget=budget, gait=gait, workers=workers,
-                                executor=executor, out=sub, progress=progress)
-            r["label"] = label
-            r["source"] = policy
-            runs.append(r)
-        groups.append({"label": label, "gait": gait, "policies": policies, "runs": runs})
+    with contextlib.ExitStack() as stack:
+        if executor is None:
+            executor = stack.enter_context(open_pool(scheduler, workers)).executor
+        for label, policies, gait in entries:
+            runs = []
+            for policy in policies:
+                sub = out / _slug(label) if len(policies) == 1 else \
+                    out / _slug(label) / _slug(Path(policy).name)
+                r = compute_margins(policy, budget=budget, gait=gait, workers=workers,
+                                    executor=executor, out=sub, progress=progress)
+                r["label"] = label
+                r["source"] = policy
+                runs.append(r)
+            groups.append({"label": label, "gait": gait, "policies": policies, "runs": runs})
     firsts = [g["runs"][0] for g in groups]
     plots = plot_margins(firsts, docs, prefix="margins_")
     curves = []

@@ -92,11 +92,10 @@ a changed setting never returns a stale result.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
+import contextlib
 import csv
 import json
 import math
-import sys
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -110,6 +109,12 @@ from bound_env.analysis.numerics import (  # noqa: F401 - bisect_threshold: re-e
     sorted_eigenvalues,
 )
 from bound_env.cache import TaskCache, settings_hash
+from bound_env.parallel import (
+    SerialExecutor,  # noqa: F401 - its old home, kept as an alias
+    TasksFailed,
+    open_pool,
+    run_tasks,
+)
 from bound_env.params import Z_NAMES, Z_SI_UNITS
 
 from .policy import load_controller
@@ -717,18 +722,6 @@ def run_task(setup: Setup, name: str, args: tuple) -> dict:
 # --------------------------------------------------------------------------------------------
 
 
-class SerialExecutor(cf.Executor):
-    """Runs each task at submit time, in this process (``--workers 1``)."""
-
-    def submit(self, fn, /, *args, **kwargs):
-        fut = cf.Future()
-        try:
-            fut.set_result(fn(*args, **kwargs))
-        except BaseException as e:  # noqa: BLE001 - delivered through the future
-            fut.set_exception(e)
-        return fut
-
-
 def task_key(setup_key: str, name: str, args: tuple) -> str:
     """Cache key of one task: the setup's settings hash, the task name and its arguments."""
     return f"{setup_key}/{name}/{json.dumps(list(args))}"
@@ -736,30 +729,28 @@ def task_key(setup_key: str, name: str, args: tuple) -> str:
 
 def _run_all(executor, setup: Setup, jobs: list, cache: TaskCache, progress: bool,
              desc: str) -> dict:
-    """Run (name, args) jobs through the executor, using and filling the cache."""
-    results, pending = {}, {}
+    """Run (name, args) jobs through the executor, using and filling the cache. A task that
+    raises is reported (key and arguments) without stopping the others; then `TasksFailed`."""
+    results, tasks = {}, {}
     for name, args in jobs:
         key = task_key(setup.key, name, args)
         hit = cache.get(key)
         if hit is not None:
             results[(name, args)] = hit
         else:
-            pending[executor.submit(run_task, setup, name, args)] = (name, args, key)
-    bar = None
-    if progress and pending:
-        from tqdm.auto import tqdm
+            tasks[key] = (run_task, (setup, name, args), (name, args))
 
-        bar = tqdm(total=len(jobs), initial=len(results), desc=desc, file=sys.stderr)
-    for fut in cf.as_completed(pending):
-        name, args, key = pending[fut]
-        res = fut.result()
+    def keep(key, res):
         if "error" not in res:
             cache.put(key, res)
-        results[(name, args)] = res
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
+
+    done, failures = run_tasks(executor, tasks, progress and bool(tasks), desc, keep,
+                               done_before=len(results))
+    for key, res in done.items():
+        results[tasks[key][2]] = res
+    if failures:
+        raise TasksFailed(failures, len(jobs), "; the others are cached: rerun to retry"
+                          if cache.path is not None else "")
     return results
 
 
@@ -812,13 +803,15 @@ def cycle_scale(gait: str) -> np.ndarray:
 
 def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str = "default",
                     workers: int = 1, executor=None, out: str | Path | None = None,
-                    progress: bool = False, use_cache: bool = True) -> dict:
+                    progress: bool = False, use_cache: bool = True,
+                    scheduler: str | None = None) -> dict:
     """All margins of ``policy`` (``"passive"``, a path, or a controller) as a JSON-able dict.
 
     ``policy`` may be any object with the controller protocol (module docstring).
-    ``executor``: any `concurrent.futures.Executor`-like object; default: a process pool of
-    ``workers`` processes (in-process when ``workers == 1``). ``out``: directory for the
-    CSV/PNG outputs and the task cache.
+    ``executor``: any `concurrent.futures.Executor`-like object; default: the one
+    `bound_env.parallel.open_pool` builds from ``scheduler`` and ``workers`` (a process pool
+    of ``workers`` processes, in-process when ``workers == 1``, or Dask). ``out``: directory
+    for the CSV/PNG outputs and the task cache.
     """
     from bound_env.params import load_gait
 
@@ -839,11 +832,10 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
     cache = TaskCache(out_dir / "cache.jsonl" if (out_dir is not None and use_cache) else None)
     setup = Setup(controller=controller, gait=gait, budget=budget, z_star=z_star,
                   key=setup_key(controller, gait, budget))
-    own = executor is None
-    if own:
-        executor = SerialExecutor() if workers == 1 else cf.ProcessPoolExecutor(workers)
     t0 = time.perf_counter()
-    try:
+    with contextlib.ExitStack() as stack:
+        if executor is None:
+            executor = stack.enter_context(open_pool(scheduler, workers)).executor
         cyc = _run_all(executor, setup, [("cycle", ())], cache, False, "cycle")[("cycle", ())]
         if "error" in cyc:
             raise RuntimeError(f"no closed-loop cycle: {cyc['error']}")
@@ -858,9 +850,6 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
         jobs += [("push", ("th1dot", v, j)) for j, v in enumerate(budget.push_th1dot)]
         res = _run_all(executor, setup, jobs, cache, progress,
                        f"margins {controller_name(controller)}")
-    finally:
-        if own:
-            executor.shutdown()
     result = assemble(controller, gait, budget, z_star, cyc, res, scale)
     result["seconds"] = time.perf_counter() - t0
     if out_dir is not None:

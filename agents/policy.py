@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+import numba as nb
 import numpy as np
 import yaml
 
@@ -45,6 +46,10 @@ class ZeroController:
 
     def __call__(self, obs: np.ndarray) -> float:
         return 0.0
+
+    def batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions for a batch of observations (one row each)."""
+        return np.zeros(len(obs))
 
     def fingerprint(self) -> str:
         return "passive"
@@ -83,6 +88,22 @@ class MLPController:
         W, b = self.layers[-1]
         return float(np.clip((W @ x + b)[0], -1.0, 1.0))
 
+    def batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions for a batch of observations (one row each), as ``__call__`` row by row (to
+        rounding). Each row is computed alone, in a fixed order, without BLAS threads: a row's
+        action does not depend on the other rows or on the machine's load."""
+        act = _ACTIVATIONS[self.activation]
+        x = np.asarray(obs, dtype=np.float64)
+        if self.obs_index is not None:
+            x = x[:, self.obs_index]
+        if self.obs_mean is not None:
+            x = np.clip((x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
+                        -self.clip_obs, self.clip_obs)
+        for W, b in self.layers[:-1]:
+            x = act(_affine_rows(x, W, b))
+        W, b = self.layers[-1]
+        return np.clip(_affine_rows(x, W, b)[:, 0], -1.0, 1.0)
+
     def fingerprint(self) -> str:
         h = hashlib.sha256()
         for W, b in self.layers:
@@ -95,6 +116,20 @@ class MLPController:
             h.update(self.obs_var.tobytes())
         h.update(repr(sorted(self.env_kwargs.items())).encode())
         return h.hexdigest()[:16]
+
+
+@nb.njit(cache=True, fastmath=True)
+def _affine_rows(x, W, b):
+    """x @ W.T + b, one row at a time (row i depends on x[i] only; fixed summation order
+    for a given build, vectorized)."""
+    out = np.empty((x.shape[0], W.shape[0]))
+    for i in range(x.shape[0]):
+        for j in range(W.shape[0]):
+            acc = b[j]
+            for k in range(W.shape[1]):
+                acc += W[j, k] * x[i, k]
+            out[i, j] = acc
+    return out
 
 
 # The shipped policies, package data of `agents` (``agents/policies/<name>/``), read with

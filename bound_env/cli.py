@@ -101,9 +101,11 @@ def command_registrars() -> list:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from .parallel import TasksFailed
+
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError) as e:
+    except (ValueError, FileNotFoundError, TasksFailed) as e:
         print(f"bound-env {args.command}: error: {e}", file=sys.stderr)
         return 2
 

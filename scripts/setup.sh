@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Create or reuse .venv at the repo root and install the project with its dev tools.
+# Create or reuse .venv at the repo root and install the project with its dev tools and the
+# optional Dask extra (the tests run real Dask clusters).
 # Re-running is cheap: the install is skipped while pyproject.toml is unchanged.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -13,6 +14,6 @@ want=$(sha256sum pyproject.toml | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ] || ! .venv/bin/python -c "import bound_env" 2>/dev/null; then
   echo "[setup] installing bound_env and its dependencies into .venv (torch==2.13.0, CPU)" >&2
   .venv/bin/python -m pip install -q --upgrade pip >&2
-  .venv/bin/python -m pip install -q -e ".[dev]" >&2
+  .venv/bin/python -m pip install -q -e ".[dev,dask]" >&2
   echo "$want" > "$stamp"
 fi

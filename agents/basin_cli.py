@@ -1,0 +1,70 @@
+"""``bound-env basin-map`` (registered with `agents.cli`): the basin atlas of
+`bound_env.analysis.basin` for the passive gait or a trained policy."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def register(sub) -> None:
+    from bound_env.analysis.basin import DEFAULT_CHUNK, DEFAULT_GRID, DEFAULT_STRIDES
+    from bound_env.parallel import add_scheduler_args
+
+    p = sub.add_parser("basin-map", help="2-D basin map (basin.npz, basin.png) of the passive "
+                       "gait or a policy")
+    p.add_argument("--policy", default="passive",
+                   help="'passive', a shipped policy's name or a policy: run/policy directory "
+                        "or model .zip")
+    p.add_argument("--axes", default="xdot_g,y_g",
+                   help="two apex components: y_g, theta1, theta2, xdot_g, theta1dot, "
+                        "theta2dot (default: %(default)s)")
+    p.add_argument("--grid", type=int, default=DEFAULT_GRID, help="points per axis "
+                   "(default: %(default)s)")
+    p.add_argument("--range", dest="ranges", metavar="LO,HI,LO,HI",
+                   help="ranges of the two axes in the paper's units [m, deg, deg, m/s, deg/s, "
+                        "deg/s] (default: z* plus or minus a fixed half-width per component)")
+    p.add_argument("--gait", default=None,
+                   help="gait name or path (default: the policy's own, else 'default')")
+    p.add_argument("--strides", type=int, default=DEFAULT_STRIDES,
+                   help="strides allowed to return (default: %(default)s)")
+    p.add_argument("--chunk", type=int, default=DEFAULT_CHUNK,
+                   help="starts per task (default: %(default)s)")
+    p.add_argument("--no-overlay", action="store_true",
+                   help="do not compute the passive map to overlay its boundary")
+    add_scheduler_args(p, workers_default=2)
+    p.add_argument("--out", required=True, help="directory for basin.npz, basin.png and the "
+                   "chunk cache")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=cmd_basin_map)
+
+
+def resolve(policy: str, gait: str | None):
+    """(controller, or None for the compiled passive path; label; gait)."""
+    if policy == "passive":
+        return None, "passive", gait or "default"
+    from .cli import _policy_label
+    from .policy import load_controller
+
+    ctrl = load_controller(policy, gait=gait)
+    if not callable(getattr(ctrl, "batch", None)) or not hasattr(ctrl, "env_kwargs"):
+        raise ValueError(f"--policy {policy}: basin-map needs 'passive' or a controller with "
+                         "batch(observations) (a trained policy)")
+    return ctrl, _policy_label(policy), gait or ctrl.env_kwargs.get("gait") or "default"
+
+
+def cmd_basin_map(args) -> int:
+    from bound_env.analysis.basin import basin_map, summary_text
+
+    controller, label, gait = resolve(args.policy, args.gait)
+    s = basin_map(controller, label, axes=args.axes, grid=args.grid, ranges=args.ranges,
+                  gait=gait, max_strides=args.strides, chunk=args.chunk,
+                  scheduler=args.scheduler, workers=args.workers, out=args.out,
+                  progress=sys.stderr.isatty(), overlay_passive=not args.no_overlay)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(summary_text(s))
+        print(f"wrote {Path(args.out) / 'basin.npz'} and {Path(args.out) / 'basin.png'}")
+    return 0

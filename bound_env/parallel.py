@@ -1,0 +1,230 @@
+"""Executors for embarrassingly parallel work: in-process, a local process pool, or Dask.
+
+Everything that fans out tasks (margins, compare, sweep, basin-map, multi-seed training)
+sees only a `concurrent.futures`-style executor (``submit`` returning futures) built here
+from the command line's ``--scheduler`` and ``--workers``:
+
+| ``--scheduler`` | executor |
+| --- | --- |
+| (none), ``--workers 1`` | `SerialExecutor`: each task runs at submit time, in this process |
+| (none), ``--workers N`` | `concurrent.futures.ProcessPoolExecutor` with N processes (no Dask) |
+| ``local`` (``local:N``) | `distributed.LocalCluster`: one 1-thread worker process per core (N) |
+| ``tcp://HOST:PORT`` | a `distributed.Client` connected to a running ``dask scheduler`` |
+
+Dask is an optional extra (``pip install -e ".[dask]"``); only the last two rows import it.
+A Dask worker that dies (e.g. SIGKILL) has its tasks rescheduled on the other workers by the
+scheduler (``distributed.scheduler.allowed-failures``, 3 by default); `run_tasks` reports a
+task that raises with its key and arguments and carries on with the others.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import os
+import sys
+from dataclasses import dataclass
+
+DASK_HINT = 'pip install -e ".[dask]"'
+LOCAL = "local"
+CONNECT_TIMEOUT_S = 20  # connecting to a remote scheduler
+
+
+class SerialExecutor(cf.Executor):
+    """Runs each task at submit time, in this process (``--workers 1``)."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        fut = cf.Future()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except BaseException as e:  # noqa: BLE001 - delivered through the future
+            fut.set_exception(e)
+        return fut
+
+
+def cpu_count() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def add_scheduler_args(p, workers_default: int | None = 2) -> None:
+    """``--scheduler`` (and ``--workers`` unless ``workers_default`` is None) on a parser."""
+    p.add_argument("--scheduler", metavar="local|tcp://HOST:PORT",
+                   help="run the tasks on Dask: 'local' starts a LocalCluster with one worker "
+                        "process per core ('local:N': N workers), tcp://HOST:PORT connects to a "
+                        f"running scheduler (needs {DASK_HINT}); default: a local process pool")
+    if workers_default is not None:
+        p.add_argument("--workers", type=int, default=workers_default,
+                       help="worker processes of the local pool, without --scheduler "
+                            "(default: %(default)s)")
+
+
+def check_scheduler(scheduler: str | None) -> None:
+    """ValueError unless ``scheduler`` is None, ``local``, ``local:N`` or an address."""
+    if scheduler is None:
+        return
+    if scheduler == LOCAL:
+        return
+    if scheduler.startswith(LOCAL + ":"):
+        n = scheduler.split(":", 1)[1]
+        if not n.isdigit() or int(n) < 1:
+            raise ValueError(f"--scheduler {scheduler!r}: 'local:N' needs N >= 1 workers")
+        return
+    if "://" not in scheduler or not scheduler.split("://", 1)[1]:
+        raise ValueError(f"--scheduler must be 'local', 'local:N' or an address like "
+                         f"tcp://HOST:PORT, got {scheduler!r}")
+
+
+def _import_distributed():
+    try:
+        import distributed
+    except ModuleNotFoundError:
+        raise ValueError(f"--scheduler needs Dask distributed, which is not installed: "
+                         f"{DASK_HINT}") from None
+    return distributed
+
+
+def _has_dashboard() -> bool:
+    try:
+        import bokeh  # noqa: F401 - the Dask dashboard needs it
+    except ModuleNotFoundError:
+        return False
+    return True
+
+
+@dataclass
+class Pool:
+    """An executor and what to say about it (``describe``)."""
+
+    executor: cf.Executor
+    kind: str  # "serial", "processes", "dask"
+    workers: int
+    dashboard: str | None = None
+    address: str | None = None
+    client: object = None
+
+    def describe(self) -> str:
+        if self.kind == "serial":
+            return "in this process"
+        if self.kind == "processes":
+            return f"local process pool, {self.workers} workers"
+        text = f"Dask scheduler {self.address}, {self.workers} workers"
+        return text + (f", dashboard {self.dashboard}" if self.dashboard else "")
+
+
+@contextlib.contextmanager
+def open_pool(scheduler: str | None = None, workers: int = 1, quiet: bool = False):
+    """The executor for ``--scheduler`` / ``--workers`` (see the module docstring); shut
+    down (cluster included) on leaving the block. Prints where the tasks run (and the Dask
+    dashboard link when there is one) to stderr unless ``quiet``."""
+    check_scheduler(scheduler)
+    if scheduler is None:
+        if int(workers) < 1:
+            raise ValueError(f"--workers must be at least 1, got {workers}")
+        if workers == 1:
+            yield Pool(SerialExecutor(), "serial", 1)
+            return
+        ex = cf.ProcessPoolExecutor(int(workers))
+        try:
+            yield Pool(ex, "processes", int(workers))
+        finally:
+            ex.shutdown(wait=True, cancel_futures=True)
+        return
+    distributed = _import_distributed()
+    cluster = None
+    with contextlib.ExitStack() as stack:
+        if scheduler.startswith(LOCAL):
+            n = int(scheduler.split(":", 1)[1]) if ":" in scheduler else cpu_count()
+            cluster = stack.enter_context(distributed.LocalCluster(
+                n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                dashboard_address=":0",  # a free port: other clusters may run beside
+            ))  # fmt: skip
+            client = stack.enter_context(distributed.Client(cluster))
+        else:
+            try:
+                client = distributed.Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+            except (OSError, TimeoutError) as e:
+                raise ValueError(f"--scheduler {scheduler}: cannot connect ({e})") from None
+            stack.callback(client.close)
+        info = client.scheduler_info()
+        n = len(info.get("workers", {}))
+        served = "dashboard" in info.get("services", {}) and _has_dashboard()
+        pool = Pool(client.get_executor(pure=False), "dask", n,
+                    dashboard=client.dashboard_link if served else None,
+                    address=client.scheduler.address, client=client)
+        if not quiet:
+            print(f"[parallel] {pool.describe()}", file=sys.stderr, flush=True)
+        yield pool
+
+
+class TasksFailed(RuntimeError):
+    """Some tasks of a run failed (each was reported as it failed); the others completed."""
+
+    def __init__(self, failures: list, total: int, hint: str = ""):
+        self.failures = failures
+        first = failures[0]
+        super().__init__(f"{len(failures)} of {total} tasks failed (first: {first}){hint}")
+
+
+@dataclass
+class TaskFailure:
+    """A task that raised (or whose workers kept dying): its key, arguments and error."""
+
+    key: str
+    args: tuple
+    error: str
+
+    def __str__(self) -> str:
+        return f"task {self.key} {self.args!r}: {self.error}"
+
+
+def run_tasks(executor, tasks: dict, progress: bool = False, desc: str = "",
+              on_result=None, done_before: int = 0) -> tuple[dict, list[TaskFailure]]:
+    """Submit every ``{key: (fn, args)}`` (or ``(fn, args, shown)``: ``shown`` is what a
+    failure reports instead of ``args``) and collect the results as they complete.
+
+    ``on_result(key, result)`` runs in this process for each result as it arrives (e.g. a
+    cache write, so that an interrupted run resumes). One progress bar counts completed
+    tasks (``done_before`` of them already done, e.g. cached). A task that raises does not
+    stop the others: it is printed to stderr with its key and arguments and returned in the
+    list of failures. Returns (results by key, failures)."""
+    results: dict = {}
+    failures: list[TaskFailure] = []
+    if not tasks:
+        return results, failures
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(tasks) + done_before, initial=done_before, desc=desc or None,
+                   file=sys.stderr)
+    pending = {}
+    try:
+        for key, (fn, args, *_) in tasks.items():
+            pending[executor.submit(fn, *args)] = key
+        for fut in cf.as_completed(pending):
+            key = pending[fut]
+            try:
+                res = fut.result()
+            except Exception as e:  # noqa: BLE001 - reported, the run goes on
+                shown = tasks[key][2] if len(tasks[key]) > 2 else tasks[key][1]
+                fail = TaskFailure(key, shown, f"{type(e).__name__}: {e}")
+                failures.append(fail)
+                msg = f"[{desc or 'tasks'}] failed: {fail}"
+                (bar.write(msg, file=sys.stderr) if bar is not None else
+                 print(msg, file=sys.stderr, flush=True))  # fmt: skip
+            else:
+                results[key] = res
+                if on_result is not None:
+                    on_result(key, res)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+        for fut in pending:
+            fut.cancel()
+    return results, failures
