@@ -50,7 +50,7 @@ def register(sub) -> None:
 
     p = sub.add_parser("margins", help="stability margins of the passive gait or a policy")
     p.add_argument("--policy", default="passive", help=POLICY_HELP)
-    p.add_argument("--budget", choices=("test", "quick", "full"), default="quick")
+    p.add_argument("--budget", choices=("test", "quick", "standard", "full"), default="quick")
     p.add_argument("--gait", default=None,
                    help="gait name or path (default: the policy's own, else 'default')")
     p.add_argument("--force", action="store_true",
@@ -84,7 +84,7 @@ def register(sub) -> None:
                    help="a column besides passive: one controller, or several made the same "
                         "way (seeds), e.g. learned=runs/s0,runs/s1,runs/s2 (mean and 95%% "
                         "t interval over them); repeatable (default: the shipped policies)")
-    p.add_argument("--budget", choices=("test", "quick", "full"), default="full")
+    p.add_argument("--budget", choices=("test", "quick", "standard", "full"), default="full")
     p.add_argument("--workers", type=int, default=2)
     add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", default="out/margins", help="per-entry results and caches")

@@ -175,6 +175,16 @@ BUDGETS = {
                    (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0), 64,
                    ceiling_strides=2, ceiling_iters=8, ceiling_random=48, ceiling_opt=48,
                    terrain_sigmas=_TERRAIN_FULL, terrain_runs=64, terrain_strides=100),
+    # ~1/3 of the full budget's cost where it matters (fewer curve sizes and push samples,
+    # fewer terrain levels), the same definitions otherwise: 256 random directions, 300
+    # strides to return, 64 rough-terrain runs of 100 strides
+    "standard": Budget("standard", 10, 300,
+                       (0.01, 0.02, 0.03, 0.05, 0.08, 0.12, 0.2, 0.35, 0.6), 256, 10, 50,
+                       (0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.6, 0.8),
+                       (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0), 32,
+                       ceiling_strides=2, ceiling_iters=8, ceiling_random=48, ceiling_opt=48,
+                       terrain_sigmas=(0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0),
+                       terrain_runs=64, terrain_strides=100),
 }
 # Window scans: first offset from nominal, doubling up to the limit.
 WINDOW_SCAN = {"alpha_deg": (0.005, 4.0), "kc": (0.5, 256.0)}
