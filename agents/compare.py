@@ -121,9 +121,9 @@ MEASURES = [
      lambda r: r.get("basin_min_cycle"), 3, True),
     ("basin_share_min", "basin_share_min (basin / ceiling, worst direction)",
      lambda r: r.get("basin_share_min"), 3, False),
-    ("r50", "random-direction **r50** (P(return) ≥ 0.5 up to; zstar scale)",
+    ("r50", "random-direction **r50** (P(return) crosses 0.5; zstar scale)",
      lambda r: r["basin_curve"]["r50"], 3, True),
-    ("terrain_sigma50_deg", "rough terrain **σ50** [deg] (≥ half of the runs survive)",
+    ("terrain_sigma50_deg", "rough terrain **σ50** [deg] (survival crosses 1/2)",
      lambda r: r.get("terrain_sigma50_deg"), 3, True),
     ("emax", "**emax** (closed-loop apex map)", lambda r: r["emax"], 4, False),
     ("slope_lo", "slope window α, low edge [deg] (survive 50 strides)",
@@ -338,7 +338,7 @@ integrator tolerance {settings['rtol']:g}, "returned" = max-abs apex error below
 its seeds** (t with n − 1 degrees of freedom; with 3 seeds the interval is wide, and it is
 the honest one); the per-seed values are in the collapsible details below the table. A
 single-seed or passive column shows its value; for r50 and σ50 it adds the interval that the
-95 % Wilson intervals of the success rates give (same rule applied to the lower and upper
+95 % Wilson intervals of the success rates give (the same crossing of their lower and upper
 bounds). Ratios (×) are each seed's value over the default-gait passive value, averaged the
 same way. No learned column was selected on these yardsticks unless its provenance below
 says so.
@@ -377,12 +377,16 @@ says so.
   ceiling.
 - **Random directions.** {base['runs'][0]['basin_curve']['directions']} directions (seed
   {base['runs'][0]['basin_curve'].get('direction_seed', '?')}) uniform on the sphere, scaled to max
-  |u_i| = 1, sizes in the zstar scale; 95 % Wilson intervals per point.
+  |u_i| = 1, sizes in the zstar scale; 95 % Wilson intervals per point. r50 is where P(return)
+  first falls below 0.5, interpolated linearly in log r between the two sizes around the
+  crossing (the JSON keeps the grid value as `r50_grid`).
 - **Rough terrain.** The slope becomes α_k = α + σ ξ_k at every apex (ξ_k standard normal
   from the env's RNG; `slope_noise_deg`), the ground tilting under the robot in flight about
-  the point below its centre of mass (`bound_env/terrain.py`). σ50 = the largest σ on the
-  grid at which at least half of {terrain.get('runs', '?')} runs (env seeds
-  {terrain.get('seeds', ['?'])[0]}…) survive {terrain.get('strides', '?')} strides.
+  the point below its centre of mass (`bound_env/terrain.py`). σ50 = the σ at which the
+  fraction of {terrain.get('runs', '?')} runs (env seeds {terrain.get('seeds', ['?'])[0]}…) that
+  survive {terrain.get('strides', '?')} strides first falls below one half (log-interpolated
+  like r50; the JSON keeps the largest grid σ with survival ≥ 1/2 as
+  `terrain_sigma50_grid_deg`).
 
 Windows: the connected range around the nominal value (α = {r0['slope_nominal_deg']:.4f}°,
 k_c = {r0['kc_nominal']:g} N m/rad) in which the loop started at z_cl survives 50

@@ -57,13 +57,17 @@ Measures (JSON keys)
   random direction: z_cl + r |z*| * u with u uniform on the sphere and scaled to max |u_i| = 1
   (so r is the largest relative perturbation of any component, in the ``zstar`` scale); the
   same directions (seed ``CURVE_SEED``) for every size and every controller; 95 % Wilson
-  intervals per point (``ci_low``, ``ci_high``); ``r50`` = the largest size up to which
-  P(return) >= 0.5, ``r50_ci`` the same rule applied to the interval's bounds.
+  intervals per point (``ci_low``, ``ci_high``); ``r50`` = the size at which P(return) first
+  falls below 0.5, interpolated linearly in log r between the two sizes around the crossing
+  (``r50_grid``: the largest grid size up to which P >= 0.5, the earlier definition, which
+  depends on the grid); ``r50_ci`` = the same crossing of the interval's bounds.
 - ``terrain``: survival of ``terrain_runs`` runs of ``terrain_strides`` strides from z_cl on
   rough terrain (``slope_noise_deg`` = sigma: the slope changes by sigma xi at every apex,
   `bound_env.terrain`), each run one long episode with its own seed (``TERRAIN_SEED`` + k),
-  against sigma [deg], with Wilson intervals; ``terrain_sigma50_deg`` = the largest sigma up
-  to which at least half survive (``terrain_sigma50_ci_deg`` from the interval's bounds).
+  against sigma [deg], with Wilson intervals; ``terrain_sigma50_deg`` = the sigma at which the
+  survival first falls below one half (log-interpolated as r50; ``terrain_sigma50_grid_deg``:
+  the largest grid sigma with survival >= 1/2; ``terrain_sigma50_ci_deg`` from the interval's
+  bounds).
 - ``slope_window_deg``, ``kc_window``: the range of slope alpha (deg), and separately of
   spine stiffness k_c (N m/rad), containing the nominal value over which the loop started at
   z_cl survives ``window_strides`` strides (50) without a fall (``gait_overrides``); edges by
@@ -118,7 +122,7 @@ from bound_env.parallel import (
 from bound_env.params import Z_NAMES, Z_SI_UNITS
 
 from .policy import load_controller
-from .stats import threshold_on_grid, wilson_interval
+from .stats import crossing_on_grid, threshold_on_grid, wilson_interval
 
 ENV_ID = "PassiveBound-v0"
 Z_LABELS, Z_UNITS = Z_NAMES, Z_SI_UNITS  # apex components and their SI units
@@ -886,9 +890,11 @@ def _rate_curve(xs, items) -> dict:
     rates = [c["success"] for c in items]
     ci = [wilson_interval(a, b) for a, b in zip(k, n, strict=True)]
     lo, hi = [c[0] for c in ci], [c[1] for c in ci]
+    x50 = crossing_on_grid(xs, rates)
     return {"success": rates, "k": k, "n": n, "ci_low": lo, "ci_high": hi,
-            "x50": threshold_on_grid(xs, rates),
-            "x50_ci": [threshold_on_grid(xs, lo), threshold_on_grid(xs, hi)],
+            "x50": x50,
+            "x50_ci": [min(x50, crossing_on_grid(xs, lo)), max(x50, crossing_on_grid(xs, hi))],
+            "x50_grid": threshold_on_grid(xs, rates),
             "x50_at_grid_end": bool(rates and rates[-1] >= 0.5)}
 
 
@@ -950,6 +956,7 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
                         "n": ccurve["n"], "ci_low": ccurve["ci_low"],
                         "ci_high": ccurve["ci_high"], "interval": "95% Wilson",
                         "r50": ccurve["x50"], "r50_ci": ccurve["x50_ci"],
+                        "r50_grid": ccurve["x50_grid"],
                         "r50_at_grid_end": ccurve["x50_at_grid_end"],
                         "directions": budget.curve_dirs, "direction_seed": CURVE_SEED,
                         "scale": "zstar"},
@@ -961,6 +968,7 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
                     "mean_strides": [t["mean_strides"] for t in terr],
                     "failures": [t["failures"] for t in terr]},
         "terrain_sigma50_deg": tcurve["x50"],
+        "terrain_sigma50_grid_deg": tcurve["x50_grid"],
         "terrain_sigma50_ci_deg": tcurve["x50_ci"],
         "terrain_sigma50_at_grid_end": tcurve["x50_at_grid_end"],
         "emax": cyc["emax"],

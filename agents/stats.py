@@ -5,8 +5,10 @@
   0 and 1);
 - `t_interval`: mean and 95 % Student-t interval of a few values (the seeds of one
   controller): mean +- t_{0.975, n-1} s / sqrt(n);
-- `threshold_on_grid`: the largest grid value up to which a rate stays >= 0.5 (r50, p50,
-  sigma50), and its interval from the rate's lower and upper bounds.
+- `threshold_on_grid`: the largest grid value up to which a rate stays >= 0.5 (p50);
+- `crossing_on_grid`: where a rate first falls below 0.5, interpolated linearly in log x
+  between the two grid points around the crossing (r50, sigma50); applied to the rate's
+  lower and upper interval bounds it gives the crossing's interval.
 """
 
 from __future__ import annotations
@@ -56,3 +58,19 @@ def threshold_on_grid(sizes, rates, level: float = 0.5) -> float:
             break
         best = s
     return best
+
+
+def crossing_on_grid(xs, rates, level: float = 0.5) -> float:
+    """Where ``rates`` (against increasing positive ``xs``) first drop below ``level``:
+    interpolated linearly in log x between the last point >= level and the first point
+    below it; 0 if the first point is already below; the last x if none is."""
+    prev = None
+    for x, p in zip(xs, rates, strict=True):
+        if p < level:
+            if prev is None:
+                return 0.0
+            x0, p0 = prev
+            t = (p0 - level) / (p0 - p)
+            return math.exp(math.log(x0) + t * (math.log(x) - math.log(x0)))
+        prev = (x, p)
+    return float(xs[-1]) if len(xs) else 0.0

@@ -21,7 +21,7 @@ from agents.margins import (
     setup_key,
 )
 from agents.policy import ZeroController
-from agents.stats import t_interval, threshold_on_grid, wilson_interval
+from agents.stats import crossing_on_grid, t_interval, threshold_on_grid, wilson_interval
 from agents.train import VALIDATION_SEED, BasinValidationCallback
 
 
@@ -64,6 +64,11 @@ def test_t_interval_and_grid_threshold():
     assert t_interval([4.0])["low"] == 4.0
     assert threshold_on_grid([1, 2, 3, 4], [1.0, 0.6, 0.4, 0.7]) == 2
     assert threshold_on_grid([1, 2], [0.2, 0.9]) == 0.0
+    # the crossing of 0.5, log-linear between the grid points around it: 0.75 -> 0.25 at
+    # x = 1 -> 4 crosses halfway, at x = 2
+    assert crossing_on_grid([1.0, 4.0, 8.0], [0.75, 0.25, 0.0]) == pytest.approx(2.0)
+    assert crossing_on_grid([1.0, 2.0], [0.4, 0.1]) == 0.0
+    assert crossing_on_grid([1.0, 2.0], [0.9, 0.6]) == 2.0
 
 
 def test_validation_directions_are_disjoint_from_the_test_set():
