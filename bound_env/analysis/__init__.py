@@ -12,11 +12,16 @@ Modules, read top to bottom:
   per stride (Fig. 5).
 - `fixed_point`: Newton-Raphson for P(z) = z with free parameters and pins, the paper's
   slope secant (eq. 27) and its search process (III.D.4).
-- `continuation`: natural and pseudo-arclength continuation in kc or alpha with fold,
-  period-doubling and Neimark-Sacker flags (Figs. 3-4).
+- `continuation`: the one continuation engine (`natural` with an ``on_stall`` hook for the
+  paper's fallback ladder, pseudo-arclength `arclength`) along any scalar path, and
+  `continue_branch` in kc or alpha with fold, period-doubling and Neimark-Sacker flags
+  (Figs. 3-4).
 - `sweeps`: e_max against alpha and kc the paper's way, stability windows (Figs. 7-8).
-- `reproduce`, `reproduce_report`: ``bound-env reproduce``, every published number measured
-  again (Figs. 3-8, REPRODUCTION.md).
+- `numerics`: finite-difference Jacobian, Newton, fixed points of a map, eigenvalue sort,
+  bisection, on any map ``f(z) -> z | None`` (the agents' margins use them too).
+- `reproduce` (a package; `reproduce_report` is its old name for the figures and report):
+  ``bound-env reproduce``, every published number measured again (Figs. 3-8,
+  REPRODUCTION.md).
 - `cli`: ``bound-env fixed-point``, ``bound-env continue``, ``bound-env sweep``,
   ``bound-env reproduce``.
 """
