@@ -35,15 +35,26 @@ Units: z in SI inside, paper units [m, deg, deg, m/s, deg/s, deg/s] in the cache
 """
 
 
-from .claims import literal_gait, reproducing_gait
+from .claims import CLAIMS, literal_gait, published, reproducing_gait
+from .closest import closest_on_branch, stage_closest
 from .gaits import write_gait_files
-from .paths import arclength_path, natural_path, refine_emax_crossing
+from .literal import min_leg_fraction, stage_literal
+from .paths import PathResult, arclength_path, natural_path, refine_emax_crossing
 from .pipeline import run
-from .points import point_summary, rel_distance
-from .settings import FP_TOL, FULL, QUICK, Budget
+from .points import eig_list, point_summary, rel_distance
+from .reproducing import hip_margins, stage_reproducing
+from .settings import CACHE_VERSION, FP_TOL, FULL, QUICK, RELAXED_LEG_FRAC, Budget
+from .stiff import stage_stiff
+from .store import Cache, config_hash, jsonable
+from .windows import stage_sweeps
+
+ROUNDING = CLAIMS.param_half_digit  # its name when this was one module
 
 __all__ = [
-    "FP_TOL", "FULL", "QUICK", "Budget", "arclength_path", "literal_gait", "natural_path",
-    "point_summary", "refine_emax_crossing", "rel_distance", "reproducing_gait", "run",
-    "write_gait_files",
+    "CACHE_VERSION", "CLAIMS", "FP_TOL", "FULL", "QUICK", "RELAXED_LEG_FRAC", "ROUNDING",
+    "Budget", "Cache", "PathResult", "arclength_path", "closest_on_branch", "config_hash",
+    "eig_list", "hip_margins", "jsonable", "literal_gait", "min_leg_fraction", "natural_path",
+    "point_summary", "published", "refine_emax_crossing", "rel_distance", "reproducing_gait",
+    "run", "stage_closest", "stage_literal", "stage_reproducing", "stage_stiff",
+    "stage_sweeps", "write_gait_files",
 ]  # fmt: skip
