@@ -1,7 +1,10 @@
 """Stability margins of a closed loop, passive or learned, on the same yardsticks.
 
-``bound-env margins --policy passive|PATH`` evaluates the zero action or a trained policy
-(deterministic, with its ``VecNormalize`` observation normalization) on PassiveBound.
+``bound-env margins --policy passive|lqr|deadbeat|damping|SPEC.yaml|PATH`` evaluates the zero
+action, a classical controller (`bound_env.control`, designed for ``--gait``) or a trained
+policy (deterministic, with its ``VecNormalize`` observation normalization) on PassiveBound.
+A controller with an ``on_apex(z, time_since_apex)`` method is told every apex state (at the
+reset onto the apex with 0.0, and after a step whose info has ``apex_z``).
 
 The closed-loop apex map
 ------------------------

@@ -17,6 +17,7 @@ import pickle
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from importlib import resources
 from pathlib import Path
 
@@ -149,6 +150,21 @@ def register_controller(name: str, factory: Callable, description: str) -> None:
 
 
 register_controller("passive", lambda gait=None: ZeroController(), "zero spine torque")
+
+
+def _classical(name: str, gait=None):
+    """A classical controller of `bound_env.control` (a name or a spec .yaml), designed for
+    ``gait`` (default: the spec's)."""
+    from bound_env.control import load_controller as load_classical
+
+    return load_classical(name, gait=None if gait is None else str(gait))
+
+
+# the classical stride-level controllers, specs in configs/controllers/
+for _name, _what in (("lqr", "stride-to-stride LQR on the linearized stride map"),
+                     ("deadbeat", "one-stride deadbeat on the linearized stride map"),
+                     ("damping", "extra spine damping tau = -c theta2dot")):
+    register_controller(_name, partial(_classical, _name), _what)
 
 
 def shipped_policies() -> dict[str, Path]:
@@ -421,6 +437,8 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     policy for PassiveBound's observation space, or would be evaluated wrongly
     (`check_policy_files`).
     """
+    if Path(str(path)).suffix in (".yaml", ".yml"):  # a classical controller's spec file
+        return _classical(str(path), gait)
     path = resolve_policy(path)
     if isinstance(path, str):
         return CONTROLLERS[path][0](gait=gait)

@@ -1,0 +1,72 @@
+"""Classical (model-based) spine controllers on the stride map: LQR, deadbeat, damping.
+
+They live in `bound_env` rather than `agents` because they are part of the model's analysis:
+they need the simulator and its linearization (NumPy, SciPy), never torch or
+Stable-Baselines3, and `bound_env` must not import `agents`. The agents' tools (margins,
+compare) find them by name through `load_controller`.
+
+    from bound_env.control import load_controller
+    ctrl = load_controller("lqr")            # configs/controllers/lqr.yaml, or a path
+    u = ctrl.stride_action(z)                # PassiveBoundStride-v0 action at apex state z
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .controllers import DampingFeedback, StrideFeedback
+from .design import Linearization, deadbeat_gain, linearize, lqr_gain, spectral_radius
+from .spec import CONTROLLERS_DIR, ControllerSpec, load_spec, read_gain, weights
+
+__all__ = [
+    "CONTROLLERS_DIR", "ControllerSpec", "DampingFeedback", "Linearization", "StrideFeedback",
+    "controller_names", "deadbeat_gain", "is_controller", "linearize", "load_controller",
+    "load_spec", "lqr_gain", "spectral_radius",
+]  # fmt: skip
+
+
+def controller_names() -> list[str]:
+    """Names of the shipped specs (``configs/controllers/*.yaml``)."""
+    return sorted(p.stem for p in CONTROLLERS_DIR.glob("*.yaml"))
+
+
+def is_controller(policy) -> bool:
+    """Whether ``policy`` (a string) names a controller spec: a shipped name or a .yaml."""
+    s = str(policy)
+    return s in controller_names() or Path(s).suffix in (".yaml", ".yml")
+
+
+def load_controller(spec, gait: str | None = None):
+    """A controller from a spec (name or path, or a `ControllerSpec`), designed for ``gait``
+    (default: the spec's). LQR and deadbeat linearize the stride map there (~0.1 s)."""
+    from ..stride_task import StrideTask
+
+    s = spec if isinstance(spec, ControllerSpec) else load_spec(spec)
+    gait = str(gait) if gait is not None else s.gait
+    if s.controller == "damping":
+        return DampingFeedback(s.name, s.c, s.max_torque, s.dt, gait)
+    task = StrideTask(gait=gait, basis=s.basis, K=s.K, max_torque=s.max_torque,
+                      rtol=1e-12)
+    K = task.K
+    lin = linearize(task.sim, task.z_ref, s.jacobian)
+    A_n, B_n = lin.normalized(task.apex_scales)
+    G = read_gain(s, K, s.basis)
+    design = {"A": lin.A.tolist(), "B": lin.B.tolist(), "jacobian": s.jacobian,
+              "rho_open": spectral_radius(lin.A)}
+    if G is None:
+        if s.controller == "lqr":
+            Q, R = weights(s.path, "Q", s.Q, 6), weights(s.path, "R", s.R, K)
+            G_n = lqr_gain(A_n, B_n, Q, R)
+            design.update(Q=np.diag(Q).tolist(), R=np.diag(R).tolist())
+        else:
+            G_n = deadbeat_gain(A_n, B_n)
+        G = G_n / task.apex_scales[None, :]  # u = -G_n S dz, S = diag(1/s)
+        design["source"] = "designed"
+    else:
+        design["source"] = "gain"
+    design["rho_closed"] = spectral_radius(lin.A - lin.B @ G)
+    return StrideFeedback(name=s.name, kind=s.controller, gain=G, z_ref=task.z_ref,
+                          basis=task.basis, max_torque=s.max_torque, dt=s.dt, gait=gait,
+                          design=design)

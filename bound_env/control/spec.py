@@ -1,0 +1,168 @@
+"""Controller spec files: small YAML files under ``configs/controllers/``.
+
+A spec names the controller and its design settings, e.g. ``configs/controllers/lqr.yaml``::
+
+    controller: lqr      # lqr | deadbeat | damping
+    basis: windows       # torque basis of the stride (bound_env.stride_task.BASES)
+    K: 6                 # number of basis functions
+    Q: 1.0               # weight(s) on the normalized apex error (z - z*)/s: a number or 6
+    R: 1.0               # weight(s) on the coefficients u: a number or K
+    max_torque: 80.0     # saturation [N m]
+
+Every key (`SPEC_KEYS`) has a default; a key the controller does not use, or an unknown one,
+is an error naming the file and the key.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+CONTROLLERS_DIR = Path(__file__).resolve().parent.parent.parent / "configs" / "controllers"
+KINDS = ("lqr", "deadbeat", "damping")
+COMMON_KEYS = ("controller", "gait", "max_torque", "dt")
+SPEC_KEYS = {
+    "lqr": COMMON_KEYS + ("basis", "K", "Q", "R", "jacobian", "gain"),
+    "deadbeat": COMMON_KEYS + ("basis", "K", "jacobian", "gain"),
+    "damping": COMMON_KEYS + ("c",),
+}
+DEFAULT_MAX_TORQUE = 80.0  # [N m]: the saturation of the learned policies
+DEFAULT_DT = 0.01  # control interval of the step env [s]
+
+
+@dataclass
+class ControllerSpec:
+    """A parsed spec (see the module docstring)."""
+
+    controller: str
+    path: Path | None = None
+    gait: str = "default"
+    max_torque: float = DEFAULT_MAX_TORQUE
+    dt: float = DEFAULT_DT
+    basis: str = "windows"
+    K: int | None = 4
+    Q: object = 1.0
+    R: object = 1.0
+    jacobian: str = "fd"
+    gain: object = None  # an explicit gain (K x 6, SI): a nested list or a file
+    c: float = 0.0  # damping [N m s/rad]
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.path.stem if self.path is not None else self.controller
+
+
+def resolve_spec_path(spec: str | Path) -> Path:
+    """A path to a YAML file, or a name under ``configs/controllers/`` (``"lqr"``)."""
+    p = Path(spec)
+    if p.suffix in (".yaml", ".yml"):
+        if not p.is_file():
+            raise FileNotFoundError(f"controller spec {str(spec)!r} does not exist")
+        return p
+    cand = CONTROLLERS_DIR / f"{spec}.yaml"
+    if not cand.is_file():
+        known = sorted(q.stem for q in CONTROLLERS_DIR.glob("*.yaml"))
+        raise FileNotFoundError(f"no controller spec {str(spec)!r}: give a .yaml file or one "
+                                f"of {known}")
+    return cand
+
+
+def _positive(path, key, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: {key} must be a number, got {value!r}") from None
+    if not np.isfinite(v) or v <= 0:
+        raise ValueError(f"{path}: {key} must be finite and positive, got {value!r}")
+    return v
+
+
+def load_spec(spec: str | Path) -> ControllerSpec:
+    """Read and check a spec file (name or path); ValueError naming the file and the key."""
+    path = resolve_spec_path(spec)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise ValueError(f"{path}: not valid YAML ({str(e).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: must be a mapping of keys to values")
+    kind = data.get("controller")
+    if kind not in KINDS:
+        raise ValueError(f"{path}: controller must be one of {KINDS}, got {kind!r}")
+    allowed = SPEC_KEYS[kind]
+    for key in data:
+        if key not in allowed:
+            raise ValueError(f"{path}: unknown key {key!r} for a {kind} controller "
+                             f"(allowed: {', '.join(allowed)})")
+    out = ControllerSpec(controller=kind, path=path)
+    for key, value in data.items():
+        setattr(out, key, value)
+    out.max_torque = _positive(path, "max_torque", out.max_torque)
+    out.dt = _positive(path, "dt", out.dt)
+    out.gait = str(out.gait)
+    if kind == "damping":
+        try:
+            out.c = float(out.c)
+        except (TypeError, ValueError):
+            raise ValueError(f"{path}: c must be a number, got {out.c!r}") from None
+        if not np.isfinite(out.c) or out.c < 0:
+            raise ValueError(f"{path}: c must be finite and >= 0, got {out.c!r}")
+    if "K" in data and data["K"] is not None and (
+            isinstance(data["K"], bool) or not isinstance(data["K"], int)):
+        raise ValueError(f"{path}: K must be an integer, got {data['K']!r}")
+    if out.jacobian not in ("fd", "variational"):
+        raise ValueError(f"{path}: jacobian must be 'fd' or 'variational', got {out.jacobian!r}")
+    return out
+
+
+def weights(path, key: str, value, n: int) -> np.ndarray:
+    """A diagonal weight matrix (n x n) from a number or n numbers, all >= 0 (R: > 0)."""
+    try:
+        w = np.array(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: {key} must be a number or {n} numbers, got {value!r}") \
+            from None
+    if w.size == 1:
+        w = np.full(n, w[0])
+    if w.size != n:
+        raise ValueError(f"{path}: {key} must be a number or {n} numbers, got {w.size}")
+    if not np.all(np.isfinite(w)) or np.any(w < 0) or (key == "R" and np.any(w <= 0)):
+        raise ValueError(f"{path}: {key} must be finite and {'> 0' if key == 'R' else '>= 0'}, "
+                         f"got {value!r}")
+    return np.diag(w)
+
+
+def read_gain(spec: ControllerSpec, K: int, basis: str) -> np.ndarray | None:
+    """The explicit gain of the spec (K x 6, SI) or None; ValueError if its shape does not
+    match the basis."""
+    g = spec.gain
+    if g is None:
+        return None
+    if isinstance(g, str):
+        p = Path(g)
+        if not p.is_absolute() and spec.path is not None:
+            p = spec.path.parent / p
+        if not p.is_file():
+            raise FileNotFoundError(f"{spec.path}: gain file {str(p)!r} does not exist")
+        if p.suffix == ".npy":
+            g = np.load(p)
+        elif p.suffix == ".json":
+            import json
+
+            g = json.loads(p.read_text())
+        else:
+            g = np.loadtxt(p, delimiter=",", ndmin=2)
+    try:
+        G = np.array(g, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{spec.path}: gain must be a K x 6 matrix of numbers") from None
+    if G.shape != (K, 6):
+        raise ValueError(f"{spec.path}: gain has shape {G.shape}, but basis {basis!r} with "
+                         f"K={K} needs a ({K}, 6) gain (one row per basis function)")
+    if not np.all(np.isfinite(G)):
+        raise ValueError(f"{spec.path}: gain must be finite")
+    return G
