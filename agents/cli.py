@@ -83,7 +83,9 @@ def register(sub) -> None:
                    metavar="LABEL=PATH[,PATH...][@GAIT]",
                    help="a column besides passive: one controller, or several made the same "
                         "way (seeds), e.g. learned=runs/s0,runs/s1,runs/s2 (mean and 95%% "
-                        "t interval over them); repeatable (default: the shipped policies)")
+                        "t interval over them), or a classical controller: lqr, deadbeat, "
+                        "damping or a spec .yaml (a bare name is its own label); repeatable "
+                        "(default: the shipped policies and lqr, deadbeat, damping)")
     p.add_argument("--budget", choices=("test", "quick", "standard", "full"), default="full")
     p.add_argument("--workers", type=int, default=2)
     add_scheduler_args(p, workers_default=None)

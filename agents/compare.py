@@ -23,6 +23,7 @@ POLICIES_DIR = SHIPPED_DIR
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_DOCS = ROOT / "docs"
 DEFAULT_OUT = Path("out") / "margins"
+CLASSICAL = ("lqr", "deadbeat", "damping")  # controller specs in configs/controllers/
 
 
 def default_entries() -> list[tuple[str, list[str], str]]:
@@ -32,6 +33,8 @@ def default_entries() -> list[tuple[str, list[str], str]]:
         if (POLICIES_DIR / name / "model.zip").is_file():
             entries.append(("learned", [str(POLICIES_DIR / name)], "default"))
             break
+    # the classical stride-level controllers (bound_env.control, configs/controllers/)
+    entries += [(name, [name], "default") for name in CLASSICAL]
     if (POLICIES_DIR / "literal-cycle" / "model.zip").is_file():
         entries.append(("passive literal", ["passive"], "literal-cycle"))
         entries.append(("learned literal", [str(POLICIES_DIR / "literal-cycle")],
@@ -41,7 +44,14 @@ def default_entries() -> list[tuple[str, list[str], str]]:
 
 def parse_entry(text: str) -> tuple[str, list[str], str]:
     """``LABEL=PATH[,PATH...]`` or ``LABEL=PATH[,PATH...]@GAIT``: one controller made several
-    times (e.g. one policy per training seed), or ``passive``, or a controller name."""
+    times (e.g. one policy per training seed), or ``passive``, or a controller name; a bare
+    classical controller name ``NAME`` or ``NAME@GAIT`` (``lqr``) is its own label."""
+    from bound_env.control import is_controller
+
+    name, _, gait = text.partition("@")
+    if "=" not in text and is_controller(name.strip()):
+        label = name.strip() if not gait.strip() else f"{name.strip()} {gait.strip()}"
+        return label, [name.strip()], (gait.strip() or "default")
     if "=" not in text:
         raise ValueError(f"--entry {text!r} must look like LABEL=PATH[,PATH...][@GAIT]")
     label, rest = text.split("=", 1)

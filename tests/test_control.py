@@ -183,3 +183,30 @@ def test_margins_schema_and_acceptance_numbers(tmp_path):
     assert res["lqr"]["emax"] <= 0.7
     assert res["deadbeat"]["emax"] < 0.1
     assert res["lqr"]["effort"] < 1e-6  # zero torque on the cycle
+
+
+def test_a_long_step_env_episode_with_notify_apex_follows_the_stride_env():
+    """Over a whole episode (not one stride per episode), the controller told every apex by
+    notify_apex brings a perturbed start back to the cycle in the step env too."""
+    from bound_env.control import notify_apex
+
+    ctrl = load_controller("lqr")
+    env = gym.make("PassiveBound-v0", max_torque=80.0, rtol=1e-10).unwrapped
+    z0 = Z_STAR * (1 + np.array([0.0, 0.0, 0.0, -0.05, 0.0, 0.0]))  # outside the passive basin
+    obs, info = env.reset(options={"apex_state": z0})
+    notify_apex(ctrl, obs, info)
+    apexes = []
+    for _ in range(1200):
+        obs, _, terminated, _, info = env.step(np.array([ctrl(obs)], np.float32))
+        notify_apex(ctrl, obs, info)
+        assert not terminated
+        if "apex_z" in info:
+            apexes.append(info["apex_z"])
+    assert len(apexes) >= 25
+    assert np.max(np.abs(apexes[-1] - Z_STAR) / np.abs(Z_STAR)) < 1e-3
+    env.reset(options={"apex_state": z0})  # the passive gait falls from there
+    for _ in range(1200):
+        if env.step(np.zeros(1, np.float32))[2]:
+            break
+    else:
+        raise AssertionError("the passive gait survived a start outside its basin")

@@ -8,6 +8,10 @@ compare) find them by name through `load_controller`.
     from bound_env.control import load_controller
     ctrl = load_controller("lqr")            # configs/controllers/lqr.yaml, or a path
     u = ctrl.stride_action(z)                # PassiveBoundStride-v0 action at apex state z
+
+In the step env (PassiveBound-v0, unwrapped observation) a loop calls
+``notify_apex(ctrl, obs, info)`` after ``reset`` and after every ``step``, and ``ctrl(obs)``
+for each action (`bound_env.control.controllers` describes the protocol).
 """
 
 from __future__ import annotations
@@ -16,14 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .controllers import DampingFeedback, StrideFeedback
+from .controllers import DampingFeedback, StrideFeedback, notify_apex
 from .design import Linearization, deadbeat_gain, linearize, lqr_gain, spectral_radius
 from .spec import CONTROLLERS_DIR, ControllerSpec, load_spec, read_gain, weights
 
 __all__ = [
     "CONTROLLERS_DIR", "ControllerSpec", "DampingFeedback", "Linearization", "StrideFeedback",
     "controller_names", "deadbeat_gain", "is_controller", "linearize", "load_controller",
-    "load_spec", "lqr_gain", "spectral_radius",
+    "load_spec", "lqr_gain", "notify_apex", "spectral_radius",
 ]  # fmt: skip
 
 

@@ -36,6 +36,20 @@ OBS_Z = tuple(OBS_NAMES[1:].index(n) for n in ("y_g", "theta1", "theta2", "xdot_
                                                 "theta1dot", "theta2dot"))
 
 
+def notify_apex(controller, obs, info) -> None:
+    """The loop side of the ``on_apex`` protocol, for any rollout of PassiveBound-v0: call it
+    after ``reset`` and after every ``step`` with that call's observation and info. It calls
+    ``controller.on_apex`` when the info marks an apex (``start_z`` after a reset, ``apex_z``
+    after a step); controllers without ``on_apex`` are left alone."""
+    on_apex = getattr(controller, "on_apex", None)
+    if on_apex is None:
+        return
+    if "apex_z" in info:
+        on_apex(np.asarray(info["apex_z"], dtype=float), float(obs[OBS_TIME]))
+    elif "start_z" in info:
+        on_apex(np.asarray(info["start_z"], dtype=float), 0.0)
+
+
 @dataclass
 class StrideFeedback:
     """u = sat(-G (z - z*)), chosen once per stride at the apex (LQR, deadbeat)."""
