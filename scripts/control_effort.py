@@ -16,7 +16,6 @@ import argparse
 import csv
 import io
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from agents.margins import (
     random_directions,
 )
 from agents.policy import load_controller
+from bound_env.cache import atomic_write
 from bound_env.params import load_gait
 
 SIZES = (0.02, 0.05)  # relative perturbation sizes (the passive basin_min is ~0.02)
@@ -87,9 +87,7 @@ def main(argv=None) -> int:
     w.writerows(rows)
     for name, text in (("effort.csv", buf.getvalue()),
                        ("effort.json", json.dumps(rows, indent=2) + "\n")):
-        tmp = out / (name + ".tmp")
-        tmp.write_text(text)
-        os.replace(tmp, out / name)
+        atomic_write(out / name, text)
     return 0
 
 

@@ -13,11 +13,11 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import os
 import sys
 from pathlib import Path
 
 from agents.margins import compute_margins
+from bound_env.cache import atomic_write
 from bound_env.control import ControllerSpec, load_controller
 
 XD = [1.0, 1.0, 1.0, 10.0, 1.0, 1.0]  # Q weighting forward speed 10x
@@ -36,12 +36,6 @@ SETTINGS = [  # (label, spec keyword arguments)
 COLUMNS = ("label", "rho_design", "emax", "basin_min", "basin_min_direction", "r50",
            "push_xdot_p50", "push_th1dot_p50", "slope_lo", "slope_hi", "kc_lo", "kc_hi",
            "effort")
-
-
-def _write(path: Path, text: str) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def main(argv=None) -> int:
@@ -76,7 +70,7 @@ def main(argv=None) -> int:
     w = csv.DictWriter(buf, COLUMNS)
     w.writeheader()
     w.writerows(rows)
-    _write(out / "table.csv", buf.getvalue())
+    atomic_write(out / "table.csv", buf.getvalue())
     base = rows[0]["basin_min"]
     lines = ["| setting | ρ(A−BG) design | emax | basin_min (× passive) | r50 | push p50 "
              "Δẋ / Δθ̇1 | α window [deg] | k_c window |", "| --- |" + " --- |" * 7]
@@ -87,7 +81,7 @@ def main(argv=None) -> int:
             f"{r['r50']:g} | {r['push_xdot_p50']:g} / {r['push_th1dot_p50']:g} | "
             f"{r['slope_lo']:.2f}–{r['slope_hi']:.2f} | {r['kc_lo']:.0f}–{r['kc_hi']:.0f} |"
         )
-    _write(out / "table.md", "\n".join(lines) + "\n")
+    atomic_write(out / "table.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0
 

@@ -43,19 +43,15 @@ class Linearization:
 
 
 def central_jacobian(f, x0, steps) -> np.ndarray:
-    """Jacobian of f at x0 by central differences with per-component ``steps``; ValueError
-    if f fails (returns None) at a probe."""
-    x0 = np.asarray(x0, dtype=float)
-    cols = []
-    for i, h in enumerate(steps):
-        e = np.zeros_like(x0)
-        e[i] = h
-        fp, fm = f(x0 + e), f(x0 - e)
-        if fp is None or fm is None:
-            raise ValueError(f"the stride map fails within {h:g} of the linearization point "
-                             f"(component {i}): no linearization there")
-        cols.append((np.asarray(fp) - np.asarray(fm)) / (2.0 * h))
-    return np.array(cols).T
+    """Jacobian of f at x0 by central differences (`bound_env.analysis.numerics.fd_jacobian`);
+    ValueError if f fails (returns None) at a probe."""
+    from ..analysis.numerics import MapFailure, fd_jacobian
+
+    try:
+        return fd_jacobian(f, x0, steps, one_sided=False)
+    except MapFailure as e:
+        raise ValueError(f"the stride map fails near the linearization point ({e}): no "
+                         "linearization there") from None
 
 
 def linearize(sim, z_ref, jacobian: str = "fd") -> Linearization:
