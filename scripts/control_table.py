@@ -23,6 +23,7 @@ from bound_env.control import ControllerSpec, load_controller
 XD = [1.0, 1.0, 1.0, 10.0, 1.0, 1.0]  # Q weighting forward speed 10x
 SETTINGS = [  # (label, spec keyword arguments)
     ("passive", None),
+    ("learned (agents/policies/default)", "agents/policies/default"),
     ("lqr windows K=4 R=1", dict(basis="windows", K=4, R=1.0)),
     ("lqr windows K=6 R=0.1", dict(basis="windows", K=6, R=0.1)),
     ("lqr windows K=8 R=1", dict(basis="windows", K=8, R=1.0)),
@@ -49,15 +50,15 @@ def main(argv=None) -> int:
     rows = []
     for label, kw in SETTINGS:
         print(f"[{len(rows) + 1}/{len(SETTINGS)}] {label}", file=sys.stderr, flush=True)
-        if kw is None:
-            policy, rho = "passive", float("nan")
+        if kw is None or isinstance(kw, str):
+            policy, rho = kw or "passive", float("nan")
         else:
             kw = dict(kw)
             policy = load_controller(ControllerSpec(kw.pop("controller", "lqr"), **kw))
             policy.name = label
             rho = policy.design["rho_closed"]
         r = compute_margins(policy, budget=args.budget, workers=args.workers,
-                            out=out / label.replace(" ", "_").replace("=", ""))
+                            out=out / label.split(" (")[0].replace(" ", "_").replace("=", ""))
         rows.append({
             "label": label, "rho_design": rho, "emax": r["emax"], "basin_min": r["basin_min"],
             "basin_min_direction": r["basin_min_direction"], "r50": r["basin_curve"]["r50"],
