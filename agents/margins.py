@@ -3,8 +3,7 @@
 ``bound-env margins --policy passive|lqr|deadbeat|damping|SPEC.yaml|PATH`` evaluates the zero
 action, a classical controller (`bound_env.control`, designed for ``--gait``) or a trained
 policy (deterministic, with its ``VecNormalize`` observation normalization) on PassiveBound.
-A controller with an ``on_apex(z, time_since_apex)`` method is told every apex state (at the
-reset onto the apex with 0.0, and after a step whose info has ``apex_z``).
+A controller's optional ``on_apex(z, time_since_apex)`` is described under "Controllers".
 
 The closed-loop apex map
 ------------------------
