@@ -10,7 +10,8 @@ from pathlib import Path
 
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_HELP = ("'passive', a shipped policy ('default', 'literal-cycle'), another built-in "
-               "controller, or a path: a run/policy folder, a model .zip, an rl-zoo3 run folder")
+               "controller ('lqr', 'deadbeat', 'damping': bound_env.control, or a controller "
+               "spec .yaml), or a path: a run/policy folder, a model .zip, an rl-zoo3 run folder")
 POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv",
                 "eval.png")
 

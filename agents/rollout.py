@@ -122,12 +122,17 @@ def rollout(policy="default", gait=None, strides: int = 50, seed: int = 0, noise
     frames = []
     task = env.unwrapped.task
     z_ref, scales = np.asarray(task.z_ref), np.asarray(task.apex_scales)
+    # stride-level controllers (bound_env.control) are told every apex state
+    from bound_env.control import notify_apex
+
     obs, info = env.reset(seed=seed)
+    notify_apex(act.controller, obs, info)
     failure, errors, taus, steps = info.get("failure"), [], [], 0
     if video:
         frames.append(env.render())
     while failure is None and len(errors) < strides:
         obs, _, terminated, truncated, info = env.step(act(obs))
+        notify_apex(act.controller, obs, info)
         steps += 1
         taus.append(abs(float(info["tau"])))
         if video:

@@ -210,3 +210,14 @@ def test_a_long_step_env_episode_with_notify_apex_follows_the_stride_env():
             break
     else:
         raise AssertionError("the passive gait survived a start outside its basin")
+
+
+def test_rollout_runs_the_controllers_by_name():
+    """``bound-env rollout --policy lqr``: the stride-level controller is told every apex and
+    brings a start the passive gait falls from back to the cycle."""
+    from agents.rollout import rollout
+
+    lqr = rollout("lqr", strides=40, seed=3, noise=1.0)
+    passive = rollout("passive", strides=40, seed=3, noise=1.0)
+    assert passive["fell"] and not lqr["fell"] and lqr["strides"] == 40
+    assert lqr["apex_error"][-1] < 1e-6 and lqr["max_torque"] == 80.0
