@@ -37,9 +37,12 @@ def register(sub) -> None:
     p.add_argument("--runs-dir", default="runs")
     p.add_argument("--vec-env", choices=("auto", "dummy", "subproc"), default="auto",
                    help="auto: SubprocVecEnv when n_envs > 1 (default: %(default)s)")
-    p.add_argument("--eval-freq", type=int, default=100_000, help="timesteps between evaluations")
-    p.add_argument("--n-eval-episodes", type=int, default=10)
-    p.add_argument("--save-freq", type=int, default=200_000, help="timesteps between checkpoints")
+    p.add_argument("--eval-freq", type=int, default=None,
+                   help="timesteps between evaluations (default: 100000; on --resume the run's)")
+    p.add_argument("--n-eval-episodes", type=int, default=None,
+                   help="episodes per evaluation (default: 10; on --resume the run's)")
+    p.add_argument("--save-freq", type=int, default=None,
+                   help="timesteps between checkpoints (default: 200000; on --resume the run's)")
     p.add_argument("--export", metavar="DIR",
                    help="afterwards copy the policy files to DIR (e.g. agents/policies/default)")
     p.add_argument("--export-from", choices=("final", "best"), default="final",
@@ -144,14 +147,21 @@ def cmd_train(args) -> int:
     run = train(
         config=args.config, env_id=args.env_id, name=args.name, seed=args.seed, n_timesteps=n,
         sets=args.set, resume=args.resume, runs_dir=args.runs_dir, vec_env=args.vec_env,
-        eval_freq=args.eval_freq, n_eval_episodes=args.n_eval_episodes,
-        save_freq=args.save_freq, progress_bar=not args.no_progress,
+        eval_freq=_default(args.eval_freq, 100_000, args.resume),
+        n_eval_episodes=_default(args.n_eval_episodes, 10, args.resume),
+        save_freq=_default(args.save_freq, 200_000, args.resume),
+        progress_bar=not args.no_progress,
     )  # fmt: skip
     print(f"run {run}  ({time.perf_counter() - t0:.0f} s)")
     if args.export:
         dest = export_policy(run, args.export, source=args.export_from)
         print(f"exported to {dest}")
     return 0
+
+
+def _default(value, default, resume: bool):
+    """A schedule option: as given; else on --resume the run's own (None), else ``default``."""
+    return value if value is not None or resume else default
 
 
 def export_policy(run_dir, dest, source: str = "final") -> Path:

@@ -11,9 +11,20 @@ A run is fully described by its config section and its seed, and keeps everythin
 ``eval.csv``, ``eval.png`` the evaluation curve (deterministic policy, curriculum's final noise)
 ``tb/``                    TensorBoard logs
 ``checkpoints/``           ``rl_model_<N>_steps.zip`` + ``rl_model_vecnormalize_<N>_steps.pkl``
+                           + ``rl_model_<N>_steps.json`` (manifest, written last)
 ``monitor/``               SB3 ``Monitor`` files of the training environments
 ``basin_validation.csv``   `BasinValidationCallback` scores; ``best/`` its best checkpoint
 =========================  ===========================================================
+
+**Crash safety.** Every file is written under a temporary name and renamed. A checkpoint is
+complete or absent: the model, then its statistics, then a manifest with the sha256 of both;
+``--resume`` takes the newest checkpoint whose manifest matches (a kill during a write leaves
+an incomplete one, skipped with a warning). A resume continues the run: the monitor logs are
+appended to, ``run.json`` gets one session per start or resume (a killed session keeps
+``"to": null``), evaluations and checkpoints keep their schedule in timesteps (stored in
+``config.yaml``'s ``run:`` entry), and the rows of ``eval.csv``/``basin_validation.csv``
+written after the resumed checkpoint are dropped and computed again, so the curve has neither
+gaps nor duplicates. A truncated ``config.yaml`` or ``run.json`` is a one-line error.
 
 ``--export DIR`` (CLI) copies the policy files to DIR, taking the model from ``best/`` when
 the run kept one. ``--resume`` continues from the last checkpoint with its ``VecNormalize``
@@ -35,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 from .config import (
     DEFAULT_CONFIG,
@@ -50,6 +61,10 @@ RUNS_DIR = Path("runs")
 EVAL_FIELDS = ("timesteps", "mean_reward", "std_reward", "mean_length", "mean_strides",
                "fall_rate", "noise_scale", "wall_time_s")
 _CKPT = re.compile(r"rl_model_(\d+)_steps\.zip$")
+# Test hook: "SECONDS" or "SECONDS@TIMESTEPS", a sleep inside a checkpoint write (of every
+# checkpoint, or of the one at TIMESTEPS), between the model and its statistics: the window in
+# which a kill used to leave a checkpoint without its normalization.
+CHECKPOINT_SLEEP_ENV = "BOUND_ENV_TEST_CHECKPOINT_SLEEP"
 
 
 # --------------------------------------------------------------------------------------------
@@ -58,7 +73,7 @@ _CKPT = re.compile(r"rl_model_(\d+)_steps\.zip$")
 
 
 def make_env(env_id: str, env_kwargs: dict | None = None, spec: TrainSpec | None = None,
-             seed: int | None = None, monitor_file: str | None = None):
+             seed: int | None = None, monitor_file: str | None = None, append: bool = False):
     """One environment: ``gymnasium.make`` -> ``Monitor`` -> the config's ``env_wrapper``s.
 
     Module-level (and importing ``bound_env``) so that `SubprocVecEnv` workers can rebuild it.
@@ -73,7 +88,8 @@ def make_env(env_id: str, env_kwargs: dict | None = None, spec: TrainSpec | None
     gym.register_envs(bound_env)
     register_envs()
     env = gym.make(env_id, **(env_kwargs or {}))
-    env = Monitor(env, filename=monitor_file, info_keywords=("stride",))
+    env = Monitor(env, filename=monitor_file, info_keywords=("stride",),
+                  override_existing=not append)  # a resumed run appends to its monitor logs
     if spec is not None:
         env = spec.wrap(env)
     if seed is not None:
@@ -82,7 +98,7 @@ def make_env(env_id: str, env_kwargs: dict | None = None, spec: TrainSpec | None
 
 
 def make_vec(env_id: str, spec: TrainSpec, n_envs: int, seed: int, vec_env: str = "auto",
-             monitor_dir: Path | None = None):
+             monitor_dir: Path | None = None, append: bool = False):
     """``n_envs`` environments in a `SubprocVecEnv` (n_envs > 1) or a `DummyVecEnv`."""
     from functools import partial
 
@@ -91,7 +107,7 @@ def make_vec(env_id: str, spec: TrainSpec, n_envs: int, seed: int, vec_env: str 
     fns = []
     for i in range(n_envs):
         mon = str(monitor_dir / str(i)) if monitor_dir is not None else None
-        fns.append(partial(make_env, env_id, spec.env_kwargs, spec, seed + i, mon))
+        fns.append(partial(make_env, env_id, spec.env_kwargs, spec, seed + i, mon, append))
     kind = vec_env if vec_env != "auto" else ("subproc" if n_envs > 1 else "dummy")
     if kind == "subproc":
         venv = SubprocVecEnv(fns)
@@ -286,8 +302,11 @@ class CSVEvalCallback(EvalCallback):
     """
 
     def __init__(self, *args, csv_path: Path, png_path: Path, noise_scale: float = math.nan,
-                 **kwargs):
+                 every: int | None = None, done: int = 0, **kwargs):
         super().__init__(*args, **kwargs)
+        # the schedule counts timesteps (every ``every``), so a resumed run continues it
+        self.every = int(every) if every else None
+        self._last_k = done // self.every if self.every else 0
         self.csv_path, self.png_path = Path(csv_path), Path(png_path)
         self.noise_scale = noise_scale
         self._falls: list[bool] = []
@@ -302,10 +321,20 @@ class CSVEvalCallback(EvalCallback):
             self._strides.append(int(info.get("stride", 0)))
 
     def _on_step(self) -> bool:
-        due = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
+        if self.every:
+            k = self.num_timesteps // self.every
+            due = k > self._last_k
+            if not due:
+                return True
+            self._last_k = k
+            saved, self.eval_freq = self.eval_freq, 1  # SB3 evaluates when n_calls % freq == 0
+        else:
+            due = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
         if due:
             self._falls, self._strides = [], []
         cont = super()._on_step()
+        if self.every:
+            self.eval_freq = saved
         if due and self.evaluations_results:
             rewards = np.asarray(self.evaluations_results[-1], dtype=float)
             lengths = np.asarray(self.evaluations_length[-1], dtype=float)
@@ -388,17 +417,159 @@ def plot_eval(csv_path: Path, png_path: Path, title: str | None = None) -> None:
 # --------------------------------------------------------------------------------------------
 
 
+def checkpoint_paths(folder: Path, n: int) -> tuple[Path, Path, Path]:
+    """(model zip, VecNormalize pkl, manifest) of the checkpoint at ``n`` timesteps."""
+    folder = Path(folder)
+    return (folder / f"rl_model_{n}_steps.zip", folder / f"rl_model_vecnormalize_{n}_steps.pkl",
+            folder / f"rl_model_{n}_steps.json")
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    with tmp.open("w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def save_checkpoint(model, folder: Path, n: int) -> Path:
+    """A checkpoint that is complete or absent: the model, then its VecNormalize statistics,
+    each under a temporary name and renamed, then a manifest (sha256 of both) written last.
+    `last_checkpoint` only takes checkpoints whose manifest matches their files."""
+    from .policy import file_sha256
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    zip_path, pkl_path, manifest = checkpoint_paths(folder, n)
+    tmp = folder / f".rl_model_{n}_steps.tmp.zip"
+    model.save(tmp)
+    os.replace(tmp, zip_path)
+    hook = os.environ.get(CHECKPOINT_SLEEP_ENV, "")  # "SECONDS" or "SECONDS@TIMESTEPS"
+    sleep, _, at = hook.partition("@")
+    sleep = float(sleep) if sleep and (not at or int(at) == n) else 0.0
+    if sleep > 0:  # test hook: a reproducible window between the model and its statistics
+        print(f"[checkpoint hook] {n} steps: model written, sleeping {sleep:g} s",
+              file=sys.stderr, flush=True)
+        time.sleep(sleep)
+    entry = {"timesteps": int(n), "model": zip_path.name, "model_sha256": file_sha256(zip_path)}
+    vn = model.get_vec_normalize_env()
+    if vn is not None:
+        tmp = folder / f".rl_model_vecnormalize_{n}_steps.pkl.tmp"
+        vn.save(str(tmp))
+        os.replace(tmp, pkl_path)
+        entry.update(vecnormalize=pkl_path.name, vecnormalize_sha256=file_sha256(pkl_path),
+                     obs_count=float(vn.obs_rms.count))
+    _atomic_write_text(manifest, json.dumps(entry, indent=2) + "\n")
+    return zip_path
+
+
+def _complete(zip_path: Path, pkl_path: Path, manifest: Path) -> bool:
+    """Whether a checkpoint's manifest is readable and matches its files."""
+    from .policy import file_sha256
+
+    try:
+        entry = json.loads(manifest.read_text())
+        if not zip_path.is_file() or file_sha256(zip_path) != entry["model_sha256"]:
+            return False
+        if "vecnormalize_sha256" in entry:
+            return pkl_path.is_file() and file_sha256(pkl_path) == entry["vecnormalize_sha256"]
+        return True
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
 def last_checkpoint(run_dir: Path) -> tuple[Path, Path | None, int] | None:
-    """(model zip, VecNormalize pkl or None, timesteps) of the newest checkpoint, or None."""
-    best = None
-    for p in (Path(run_dir) / "checkpoints").glob("rl_model_*_steps.zip"):
-        m = _CKPT.search(p.name)
-        if m and (best is None or int(m.group(1)) > best[2]):
-            best = (p, None, int(m.group(1)))
-    if best is None:
-        return None
-    pkl = best[0].parent / f"rl_model_vecnormalize_{best[2]}_steps.pkl"
-    return best[0], (pkl if pkl.exists() else None), best[2]
+    """(model zip, VecNormalize pkl or None, timesteps) of the newest *complete* checkpoint.
+
+    A checkpoint is complete when its manifest (written last by `save_checkpoint`) matches
+    its files; incomplete ones (a kill during the write) are skipped with a warning. Runs
+    from before manifests existed: the newest checkpoint whose zip is readable.
+    """
+    import zipfile
+
+    folder = Path(run_dir) / "checkpoints"
+    found = sorted(((int(m.group(1)), p) for p in folder.glob("rl_model_*_steps.zip")
+                    if (m := _CKPT.search(p.name))), reverse=True)
+    legacy = not any(folder.glob("rl_model_*_steps.json"))
+    for n, zip_path in found:
+        _, pkl_path, manifest = checkpoint_paths(folder, n)
+        if legacy:
+            if zipfile.is_zipfile(zip_path):
+                return zip_path, (pkl_path if pkl_path.exists() else None), n
+        elif _complete(zip_path, pkl_path, manifest):
+            return zip_path, (pkl_path if pkl_path.exists() else None), n
+        print(f"warning: skipping incomplete checkpoint {zip_path} (interrupted while it was "
+              "written)", file=sys.stderr)
+    return None
+
+
+class AtomicCheckpointCallback(BaseCallback):
+    """`save_checkpoint` every ``save_freq`` timesteps (counted in timesteps, so a resumed run
+    keeps the schedule)."""
+
+    def __init__(self, save_freq: int, save_path: Path, done: int = 0, verbose: int = 0):
+        super().__init__(verbose)
+        self.save_freq, self.save_path = max(int(save_freq), 1), Path(save_path)
+        self._last_k = done // self.save_freq
+
+    def _on_step(self) -> bool:
+        k = self.num_timesteps // self.save_freq
+        if k > self._last_k:
+            self._last_k = k
+            save_checkpoint(self.model, self.save_path, self.num_timesteps)
+        return True
+
+
+def truncate_csv(path: Path, max_timesteps: int, column: str = "timesteps") -> None:
+    """Keep the header and the complete rows with ``column`` <= ``max_timesteps`` (rows after a
+    resumed checkpoint are computed again; a row cut short by a kill is dropped)."""
+    path = Path(path)
+    if not path.is_file():
+        return
+    lines = path.read_text().splitlines()
+    if not lines:
+        return
+    header = lines[0].split(",")
+    keep = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        try:
+            ok = len(cells) == len(header) and float(cells[header.index(column)]) <= max_timesteps
+        except ValueError:
+            ok = False
+        if ok:
+            keep.append(line)
+    _atomic_write_text(path, "\n".join(keep) + "\n")
+
+
+def read_run_files(run_dir: Path) -> tuple[dict, dict]:
+    """(config.yaml, run.json) of a run, with a one-line error for a missing, truncated or
+    malformed file."""
+    saved = run_dir / "config.yaml"
+    if not saved.is_file():
+        raise FileNotFoundError(f"--resume: no run at {run_dir} (missing config.yaml)")
+    try:
+        data = yaml.safe_load(saved.read_text())
+        env_id = data["run"]["env_id"]
+        int(data["run"]["seed"])
+        if not isinstance(data[env_id], dict):
+            raise TypeError
+    except (yaml.YAMLError, UnicodeDecodeError, KeyError, TypeError, ValueError):
+        raise ValueError(f"{saved} is truncated or malformed (it needs a 'run:' entry with "
+                         "env_id and seed, and that env id's section)") from None
+    info_path = run_dir / "run.json"
+    info = {}
+    if info_path.is_file():
+        try:
+            info = json.loads(info_path.read_text())
+            if not isinstance(info, dict):
+                raise ValueError
+        except (ValueError, UnicodeDecodeError):
+            raise ValueError(f"{info_path} is truncated or malformed JSON; repair it or move "
+                             "it away to resume") from None
+    return data, info
 
 
 def resolve_section(config: str | Path, env_id: str, sets: list[str] | None,
@@ -419,9 +590,9 @@ def train(
     resume: bool = False,
     runs_dir: str | Path = RUNS_DIR,
     vec_env: str = "auto",
-    eval_freq: int = 20_000,
-    n_eval_episodes: int = 10,
-    save_freq: int = 50_000,
+    eval_freq: int | None = None,
+    n_eval_episodes: int | None = None,
+    save_freq: int | None = None,
     progress_bar: bool = True,
     verbose: int = 0,
 ) -> Path:
@@ -433,32 +604,55 @@ def train(
 
     name = name or f"{env_id}_s{seed}"
     run_dir = Path(runs_dir) / name
+    prev_info: dict = {}
+    schedule = {"eval_freq": eval_freq, "save_freq": save_freq,
+                "n_eval_episodes": n_eval_episodes}
     if resume:
-        saved = run_dir / "config.yaml"
-        if not saved.is_file():
-            raise FileNotFoundError(f"--resume: no run at {run_dir} (missing config.yaml)")
-        data = yaml.safe_load(saved.read_text())
+        data, prev_info = read_run_files(run_dir)
         env_id = data["run"]["env_id"]
         seed = int(data["run"]["seed"])
         hp = data[env_id]
+        for key, value in schedule.items():  # the run's own schedule unless given again
+            if value is None:
+                schedule[key] = data["run"].get(key)
         if n_timesteps is not None:
             hp["n_timesteps"] = int(n_timesteps)
         ckpt = last_checkpoint(run_dir)
         if ckpt is None:
-            raise FileNotFoundError(f"--resume: no checkpoint under {run_dir / 'checkpoints'}")
+            raise FileNotFoundError(f"--resume: no complete checkpoint under "
+                                    f"{run_dir / 'checkpoints'}")
     else:
         hp = resolve_section(config, env_id, sets, n_timesteps)
         if (run_dir / "model.zip").exists() or last_checkpoint(run_dir) is not None:
             raise ValueError(f"run {run_dir} exists; use --resume or another --name")
         ckpt = None
+    for key, default in (("eval_freq", 20_000), ("save_freq", 50_000), ("n_eval_episodes", 10)):
+        schedule[key] = int(schedule[key] if schedule[key] is not None else default)
+        if schedule[key] < 1:
+            raise ValueError(f"{key} must be at least 1, got {schedule[key]}")
+    eval_freq, save_freq = schedule["eval_freq"], schedule["save_freq"]
+    n_eval_episodes = schedule["n_eval_episodes"]
     spec = preprocess(hp)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "monitor").mkdir(exist_ok=True)
-    write_config(run_dir / "config.yaml", env_id, hp, seed)
+    write_config(run_dir / "config.yaml", env_id, hp, seed, schedule)
+    done = ckpt[2] if ckpt is not None else 0
+    if ckpt is not None:  # what was written after the checkpoint is computed again
+        truncate_csv(run_dir / "eval.csv", done)
+        truncate_csv(run_dir / "basin_validation.csv", done)
+    info_path = run_dir / "run.json"
+    sessions = list(prev_info.get("sessions", [])) if resume else []
+    sessions.append({"from": done, "to": None, "wall_time_s": None,
+                     "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "resumed": bool(resume)})
+    info = {**(prev_info if resume else {}), "env_id": env_id, "seed": seed,
+            "n_timesteps": spec.n_timesteps, "sessions": sessions,
+            "command": " ".join(sys.argv)}  # fmt: skip
+    _atomic_write_text(info_path, json.dumps(info, indent=2) + "\n")
 
     th.set_num_threads(1)
     set_random_seed(seed)
-    venv = make_vec(env_id, spec, spec.n_envs, seed, vec_env, run_dir / "monitor")
+    venv = make_vec(env_id, spec, spec.n_envs, seed, vec_env, run_dir / "monitor",
+                    append=ckpt is not None)
     eval_env = make_vec(env_id, spec, 1, seed + 10_000, "dummy")
     callbacks, curriculum_end = [], math.nan
     for cls, kwargs in spec.callbacks:
@@ -489,23 +683,20 @@ def train(
 
     if ckpt is not None:
         model = PPO.load(str(ckpt[0]), env=venv, device="cpu", tensorboard_log=str(run_dir / "tb"))
-        done = ckpt[2]
         model.num_timesteps = done
     else:
         model = PPO(env=venv, seed=seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
                     verbose=verbose, **spec.algo_kwargs)
-        done = 0
     n_envs = spec.n_envs
-    callbacks.append(CheckpointCallback(
-        save_freq=max(save_freq // n_envs, 1), save_path=str(run_dir / "checkpoints"),
-        name_prefix="rl_model", save_vecnormalize=spec.normalize_kwargs is not None,
-    ))  # fmt: skip
+    # evaluation before the checkpoint of the same step, so a checkpoint never precedes an
+    # evaluation it should include; both count timesteps, so a resume keeps their schedules
     callbacks.append(CSVEvalCallback(
         eval_env, n_eval_episodes=n_eval_episodes, eval_freq=max(eval_freq // n_envs, 1),
-        log_path=str(run_dir), best_model_save_path=None, deterministic=True,
+        log_path=None, best_model_save_path=None, deterministic=True,
         csv_path=run_dir / "eval.csv", png_path=run_dir / "eval.png", noise_scale=curriculum_end,
-        warn=False, verbose=verbose,
+        every=eval_freq, done=done, warn=False, verbose=verbose,
     ))  # fmt: skip
+    callbacks.append(AtomicCheckpointCallback(save_freq, run_dir / "checkpoints", done=done))
     remaining = max(0, spec.n_timesteps - done)
     t0 = time.perf_counter()
     model.learn(total_timesteps=remaining, callback=callbacks, progress_bar=progress_bar,
@@ -516,18 +707,14 @@ def train(
         plot_eval(run_dir / "eval.csv", run_dir / "eval.png")
     venv.close()
     eval_env.close()
-    info_path = run_dir / "run.json"
-    prev = json.loads(info_path.read_text()) if info_path.exists() and resume else {}
-    info = {
-        "env_id": env_id, "seed": seed, "n_timesteps": spec.n_timesteps,
+    sessions[-1].update(to=int(model.num_timesteps), wall_time_s=wall)
+    info.update({
         "timesteps_done": int(model.num_timesteps), "n_envs": n_envs,
-        "wall_time_s": prev.get("wall_time_s", 0.0) + wall,
-        "sessions": prev.get("sessions", []) + [{"from": done, "to": int(model.num_timesteps),
-                                                  "wall_time_s": wall}],
-        "command": " ".join(sys.argv), "python": platform.python_version(),
+        "wall_time_s": sum(x.get("wall_time_s") or 0.0 for x in sessions),
+        "sessions": sessions, "python": platform.python_version(),
         "versions": _versions(), "machine": f"{platform.machine()}, {_ncpu()} cores",
-    }  # fmt: skip
-    info_path.write_text(json.dumps(info, indent=2) + "\n")
+    })  # fmt: skip
+    _atomic_write_text(info_path, json.dumps(info, indent=2) + "\n")
     return run_dir
 
 
@@ -554,7 +741,9 @@ def _versions() -> dict:
             "gymnasium": gymnasium.__version__, "numpy": np.__version__}
 
 
-def write_config(path: Path, env_id: str, hp: dict, seed: int) -> None:
-    """The resolved section in rl-zoo3's format, plus a ``run:`` entry (env id, seed)."""
-    data = {env_id: hp, "run": {"env_id": env_id, "seed": int(seed)}}
-    path.write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+def write_config(path: Path, env_id: str, hp: dict, seed: int,
+                 schedule: dict | None = None) -> None:
+    """The resolved section in rl-zoo3's format, plus a ``run:`` entry (env id, seed, and the
+    evaluation and checkpoint schedule), written atomically."""
+    data = {env_id: hp, "run": {"env_id": env_id, "seed": int(seed), **(schedule or {})}}
+    _atomic_write_text(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
