@@ -7,6 +7,7 @@ the fast back-end is `bound_env.fast`. `simulate_stride` switches between the tw
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -139,6 +140,49 @@ def phases_from_events(events: list, t_end: float) -> tuple[list, list]:
 # --------------------------------------------------------------------------------------------
 
 
+# Bounds of one reference stride, the same as the fast back-end's (`bound_env.fast`), so that
+# neither back-end can hang: a stiff or degenerate model ends as "integration_failed".
+REFERENCE_MAX_STEPS = 200_000  # accepted steps over the whole stride
+REFERENCE_H_MIN = 1e-14  # smallest step [s]
+REFERENCE_WALL_S = 10.0  # wall-clock guard [s] per stride (a normal stride takes ~6 ms)
+
+
+class _OverBudget(Exception):
+    """Raised inside the right-hand side when a reference stride passes its wall-clock guard."""
+
+
+def _bounded_dop853(budget: dict):
+    """scipy's DOP853 that fails (``integration_failed``) past the bounds above."""
+    from scipy.integrate import DOP853
+
+    class BoundedDOP853(DOP853):
+        def _step_impl(self):
+            ok, message = super()._step_impl()
+            budget["steps"] += 1
+            if not ok:
+                return ok, message
+            if budget["steps"] > REFERENCE_MAX_STEPS:
+                return False, f"more than {REFERENCE_MAX_STEPS} steps"
+            if self.h_abs < REFERENCE_H_MIN:
+                return False, f"step below {REFERENCE_H_MIN:g} s"
+            return True, None
+
+    return BoundedDOP853
+
+
+def _warm_up(y, aux, flags) -> None:
+    """Call every compiled function of the reference loop once on copies (compiling or loading
+    them), so that the wall-clock guard measures integration only."""
+    y, aux, flags = y.copy(), aux.copy(), flags.copy()
+    g, fired = np.zeros(N_GUARDS), np.zeros(N_GUARDS, dtype=np.bool_)
+    rhs(0.0, y, aux, np.empty(8))
+    guard_values(y, aux, flags, g)
+    coincident(g, g, fired)
+    apply_events(y, aux, flags, fired)
+    total_energy(y, aux)
+    phase_index(aux)
+
+
 def _events_for(aux, flags):
     """solve_ivp event functions for the guards of the current condition (all terminal)."""
     buf = np.empty(N_GUARDS)
@@ -177,17 +221,27 @@ def simulate_reference(
         samples.append((t, y.copy(), PHASES[phase_index(aux)], total_energy(y, aux)))
     out = np.empty(8)
 
+    _warm_up(y, aux, flags)  # compiled code is loaded before the wall-clock guard starts
+    budget = {"steps": 0, "evals": 0, "deadline": time.perf_counter() + REFERENCE_WALL_S}
+
     def f(t, y):
+        budget["evals"] += 1
+        if budget["evals"] % 128 == 0 and time.perf_counter() > budget["deadline"]:
+            raise _OverBudget
         rhs(t, y, aux, out)
         return out.copy()
 
+    method = _bounded_dop853(budget)
     for _ in range(10_000):  # bound on the number of transitions
         evs = _events_for(aux, flags)
         y0_seg = y
-        sol = solve_ivp(
-            f, (t, t_end), y, method="DOP853", rtol=rtol, atol=atol, events=evs,
-            dense_output=record_dt is not None,
-        )  # fmt: skip
+        try:
+            sol = solve_ivp(
+                f, (t, t_end), y, method=method, rtol=rtol, atol=atol, events=evs,
+                dense_output=record_dt is not None,
+            )  # fmt: skip
+        except _OverBudget:
+            return F_INTEGRATION, t, y, events, samples
         if sol.status < 0:
             return F_INTEGRATION, t, y, events, samples
         t_new, y_new = float(sol.t[-1]), sol.y[:, -1].copy()
