@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+from bound_env.cli_args import out_dir, strict_json
+
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_HELP = ("'passive', a shipped policy ('default', 'literal-cycle'), another built-in "
                "controller ('lqr', 'deadbeat', 'damping': bound_env.control, or a controller "
@@ -17,6 +19,7 @@ POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eva
 
 
 def register(sub) -> None:
+    from bound_env.cli_args import add_progress_args, number
     from bound_env.parallel import add_scheduler_args
 
     from .config import DEFAULT_CONFIG, DEFAULT_ENV_ID
@@ -28,7 +31,7 @@ def register(sub) -> None:
                    help="section of the config and Gymnasium id (default: %(default)s)")
     p.add_argument("--name", help="run name: runs/<name>/ (default: <env-id>_s<seed>)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-timesteps", type=float, help="override n_timesteps")
+    p.add_argument("--n-timesteps", type=number(float, 1, 1e10), help="override n_timesteps")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a hyperparameter (YAML value; dotted keys descend, e.g. "
                         "env_kwargs.max_torque=20)")
@@ -49,7 +52,7 @@ def register(sub) -> None:
                    help="export the final model (default: no selection), or the checkpoint "
                         "with the best validation score (validation set disjoint from the "
                         "margins' test set: see configs/ppo.yaml)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_args(p)
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("margins", help="stability margins of the passive gait or a policy")
@@ -59,21 +62,24 @@ def register(sub) -> None:
                    help="gait name or path (default: the policy's own, else 'default')")
     p.add_argument("--force", action="store_true",
                    help="evaluate a policy on a gait or without files it was not trained for")
-    p.add_argument("--workers", type=int, default=2, help="worker processes (default: 2)")
+    p.add_argument("--workers", type=number(int, 1, 256), default=2,
+                   help="worker processes (default: 2)")
     add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", help="directory for margins.json, CSVs, PNGs and the task cache "
                    "(default: out/margins/<policy name>)")
     p.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     p.add_argument("--json", action="store_true", help="print the JSON result")
+    add_progress_args(p)
     p.set_defaults(func=cmd_margins)
 
     p = sub.add_parser("rollout", help="run a policy for N strides in its own environment")
     p.add_argument("--policy", default="default", help=POLICY_HELP + " (default: %(default)s)")
     p.add_argument("--gait", default=None,
                    help="gait name or path (default: the policy's own, else 'default')")
-    p.add_argument("--strides", type=int, default=50, help="strides to run (default: 50)")
+    p.add_argument("--strides", type=number(int, 1, 100_000), default=50,
+                   help="strides to run (default: 50)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start noise (default: 0)")
-    p.add_argument("--noise", type=float, default=0.0,
+    p.add_argument("--noise", type=number(float, 0, 10), default=0.0,
                    help="start noise, the env's reset_noise_scale (default: 0, on the cycle)")
     p.add_argument("--video", metavar="F.gif|F.mp4", help="record the run")
     p.add_argument("--out", help="where summary.json goes (default: out/rollout/<policy>)")
@@ -91,10 +97,13 @@ def register(sub) -> None:
                         "damping or a spec .yaml (a bare name is its own label); repeatable "
                         "(default: the shipped policies and lqr, deadbeat, damping)")
     p.add_argument("--budget", choices=("test", "quick", "standard", "full"), default="full")
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--workers", type=number(int, 1, 256), default=2)
     add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", default="out/margins", help="per-entry results and caches")
-    p.add_argument("--docs", default=None, help="where MARGINS.md and its PNGs go (default: docs/)")
+    p.add_argument("--docs", default=None, metavar="DIR",
+                   help="where MARGINS.md and its PNGs go (default: the --out folder; give "
+                        "--docs docs to update the repository's page)")
+    add_progress_args(p)
     p.add_argument("--note", default="", help="a paragraph for the top of the page (e.g. why "
                    "the budget is not the full one)")
     p.set_defaults(func=cmd_compare)
@@ -112,7 +121,7 @@ def cmd_rollout(args) -> int:
     out = Path(args.out) if args.out else Path("out") / "rollout" / _policy_label(args.policy)
     path = _write_json(out / "summary.json", r)
     if args.json:
-        print(json.dumps(r))
+        print(strict_json(r))
     else:
         print(summary_text(r))
         print(f"wrote {path}")
@@ -130,9 +139,7 @@ def _write_json(path: Path, data) -> Path:
     """Write JSON atomically (temp name, then rename), creating the folder."""
     import os
 
-    if path.parent.exists() and not path.parent.is_dir():
-        raise ValueError(f"--out {path.parent} exists and is not a folder")
-    path.parent.mkdir(parents=True, exist_ok=True)
+    out_dir(path.parent)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(data, indent=2) + "\n")
     os.replace(tmp, path)
@@ -201,15 +208,15 @@ def cmd_margins(args) -> int:
     from .policy import load_controller
 
     name = _policy_label(args.policy)
-    out = Path(args.out) if args.out else Path("out") / "margins" / name
-    progress = args.budget == "full" or sys.stderr.isatty()
+    out = out_dir(args.out or Path("out") / "margins" / name)
+    progress = (args.budget == "full" or sys.stderr.isatty()) and not args.no_progress
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
     gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"
     r = compute_margins(ctrl, budget=args.budget, gait=gait, workers=args.workers,
                         out=out, progress=progress, use_cache=not args.no_cache,
                         scheduler=args.scheduler)
     if args.json:
-        print(json.dumps(r))
+        print(strict_json(r))
     else:
         print(summary_text(r))
         print(f"outputs in {out}")
@@ -217,7 +224,7 @@ def cmd_margins(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from .compare import DEFAULT_DOCS, compare, default_entries, parse_entry
+    from .compare import compare, default_entries, parse_entry
 
     entries = default_entries()
     if args.entry:
@@ -225,7 +232,8 @@ def cmd_compare(args) -> int:
         entries = ([] if any(e[1] == ["passive"] and e[2] == "default" for e in parsed)
                    else [entries[0]]) + parsed
     path = compare(entries, budget=args.budget, workers=args.workers, out=args.out,
-                   docs=args.docs or DEFAULT_DOCS, progress=sys.stderr.isatty(), note=args.note,
+                   docs=out_dir(args.docs or args.out, "--docs"),
+                   progress=sys.stderr.isatty() and not args.no_progress, note=args.note,
                    scheduler=args.scheduler)
     print(f"wrote {path}")
     return 0

@@ -544,6 +544,18 @@ def truncate_csv(path: Path, max_timesteps: int, column: str = "timesteps") -> N
     _atomic_write_text(path, "\n".join(keep) + "\n")
 
 
+def _continue_evaluations(cb: EvalCallback, path: Path, done: int) -> None:
+    """Preload an EvalCallback's arrays from its ``evaluations.npz`` (rows up to ``done``)."""
+    try:
+        with np.load(path) as d:
+            keep = d["timesteps"] <= done
+            cb.evaluations_timesteps = d["timesteps"][keep].tolist()
+            cb.evaluations_results = d["results"][keep].tolist()
+            cb.evaluations_length = d["ep_lengths"][keep].tolist()
+    except (OSError, KeyError, ValueError):
+        pass  # absent or cut short by a kill: it restarts (eval.csv is the record)
+
+
 def read_run_files(run_dir: Path) -> tuple[dict, dict]:
     """(config.yaml, run.json) of a run, with a one-line error for a missing, truncated or
     malformed file."""
@@ -570,6 +582,21 @@ def read_run_files(run_dir: Path) -> tuple[dict, dict]:
             raise ValueError(f"{info_path} is truncated or malformed JSON; repair it or move "
                              "it away to resume") from None
     return data, info
+
+
+def check_algo_kwargs(algo_kwargs: dict, algo_class) -> None:
+    """ValueError naming hyperparameters the algorithm's constructor does not take (a typo in
+    the config or in ``--set`` would otherwise be a TypeError deep inside SB3)."""
+    import inspect
+
+    params = inspect.signature(algo_class.__init__).parameters
+    if any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        return
+    unknown = sorted(set(algo_kwargs) - set(params) - {"policy"})
+    if unknown:
+        known = sorted(k for k in params if k not in ("self", "env", "policy"))
+        raise ValueError(f"unknown hyperparameter(s) {unknown} for {algo_class.__name__}; "
+                         f"known: {known}")
 
 
 def resolve_section(config: str | Path, env_id: str, sets: list[str] | None,
@@ -633,6 +660,7 @@ def train(
     eval_freq, save_freq = schedule["eval_freq"], schedule["save_freq"]
     n_eval_episodes = schedule["n_eval_episodes"]
     spec = preprocess(hp)
+    check_algo_kwargs(spec.algo_kwargs, PPO)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "monitor").mkdir(exist_ok=True)
     write_config(run_dir / "config.yaml", env_id, hp, seed, schedule)
@@ -692,11 +720,13 @@ def train(
     # evaluation it should include; both count timesteps, so a resume keeps their schedules
     callbacks.append(CSVEvalCallback(
         eval_env, n_eval_episodes=n_eval_episodes, eval_freq=max(eval_freq // n_envs, 1),
-        log_path=None, best_model_save_path=None, deterministic=True,
+        log_path=str(run_dir), best_model_save_path=None, deterministic=True,
         csv_path=run_dir / "eval.csv", png_path=run_dir / "eval.png", noise_scale=curriculum_end,
         every=eval_freq, done=done, warn=False, verbose=verbose,
     ))  # fmt: skip
     callbacks.append(AtomicCheckpointCallback(save_freq, run_dir / "checkpoints", done=done))
+    if ckpt is not None:  # SB3's evaluations.npz continues too (its rows up to the checkpoint)
+        _continue_evaluations(callbacks[-2], run_dir / "evaluations.npz", done)
     remaining = max(0, spec.n_timesteps - done)
     t0 = time.perf_counter()
     model.learn(total_timesteps=remaining, callback=callbacks, progress_bar=progress_bar,

@@ -1,10 +1,13 @@
-"""Command-line arguments shared by the ``bound-env`` sub-commands (``--gait``, ``--set``).
+"""Command-line arguments shared by the ``bound-env`` sub-commands (``--gait``, ``--set``,
+``--no-progress``) and the output conventions they share (strict JSON, ``--out`` folders).
 
 Every sub-command that reads a gait file takes the same two flags, added by `add_gait_args`
 and read back by `gait_from_args`; only the default gait differs per command.
 """
 
 from __future__ import annotations
+
+import json
 
 
 def add_gait_args(parser, default="paper"):
@@ -27,3 +30,73 @@ def gait_from_args(args):
     from .params import load_gait
 
     return load_gait(args.gait, gait_overrides(args))
+
+
+def add_progress_args(parser):
+    """``--no-progress`` (alias ``--quiet``): silence progress bars and progress lines."""
+    parser.add_argument("--no-progress", "--quiet", dest="no_progress", action="store_true",
+                        help="no progress output (alias: --quiet)")
+
+
+def strict_json(obj) -> str:
+    """JSON text with no NaN/Infinity tokens: a non-finite number becomes null, and its path is
+    listed under ``"nonfinite"`` (the reason: "nan", "inf" or "-inf")."""
+    import math
+
+    reasons: dict[str, str] = {}
+
+    def clean(v, path):
+        if isinstance(v, float) and not math.isfinite(v):
+            reasons[path or "."] = "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
+            return None
+        if isinstance(v, dict):
+            return {k: clean(x, f"{path}.{k}" if path else str(k)) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [clean(x, f"{path}[{i}]") for i, x in enumerate(v)]
+        if hasattr(v, "tolist") and not isinstance(v, (str, bytes)):  # numpy scalars/arrays
+            return clean(v.tolist(), path)
+        return v
+
+    out = clean(obj, "")
+    if reasons and isinstance(out, dict):
+        out["nonfinite"] = {**(out.get("nonfinite") or {}), **reasons}
+    return json.dumps(out, allow_nan=False)
+
+
+def out_dir(path, flag: str = "--out"):
+    """``path`` as a folder, created with its parents; ValueError (one line) when a file is
+    in the way."""
+    from pathlib import Path
+
+    p = Path(path)
+    for q in (p, *p.parents):
+        if q.exists() and not q.is_dir():
+            raise ValueError(f"{flag} {path}: {q} exists and is not a folder")
+    p.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def number(kind=float, lo=None, hi=None, lo_open=False, allow_zero=True):
+    """An argparse ``type``: a finite number of ``kind`` within [lo, hi] (``lo_open``: > lo),
+    so that a bad value is a one-line usage error naming the flag (exit 2)."""
+    import argparse
+    import math
+
+    def parse(text):
+        try:
+            v = kind(text)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(f"not {'an integer' if kind is int else 'a number'}:"
+                                             f" {text!r}") from None
+        if isinstance(v, float) and not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+        if lo is not None and (v < lo or (lo_open and v == lo)):
+            raise argparse.ArgumentTypeError(f"must be {'>' if lo_open else '>='} {lo}, got {v}")
+        if hi is not None and v > hi:
+            raise argparse.ArgumentTypeError(f"must be <= {hi}, got {v}")
+        if not allow_zero and v == 0:
+            raise argparse.ArgumentTypeError("must not be 0")
+        return v
+
+    parse.__name__ = kind.__name__  # argparse names the type in its messages
+    return parse

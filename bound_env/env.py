@@ -40,7 +40,12 @@ def check_action(action, n: int = 1) -> np.ndarray:
 
     Out-of-range values are not an error: the task clips them to [-1, 1].
     """
-    a = np.asarray(action, dtype=np.float64)
+    if action is None:
+        raise ValueError(f"action must hold {n} real number(s), got None")
+    raw = np.asarray(action)
+    if raw.dtype.kind not in "biuf":  # complex, strings, objects: never coerced silently
+        raise ValueError(f"action must hold {n} real number(s), got {action!r}")
+    a = raw.astype(np.float64)
     if a.size != n:
         raise ValueError(f"action must hold {n} number(s), got shape {a.shape}")
     a = a.reshape(n)
@@ -51,7 +56,7 @@ def check_action(action, n: int = 1) -> np.ndarray:
 
 def _action_value(action) -> float:
     """`check_action` for one robot, as a Python float (a fast path for the usual arrays)."""
-    if type(action) is np.ndarray and action.shape == (1,):
+    if type(action) is np.ndarray and action.shape == (1,) and action.dtype.kind == "f":
         x = float(action[0])
         if math.isfinite(x):
             return x

@@ -229,6 +229,8 @@ def resolve_gait_path(gait: str | Path) -> Path:
     p = Path(gait)
     if p.is_file():
         return p
+    if p.is_dir():
+        raise ValueError(f"gait {str(gait)!r} is a folder, not a gait file")
     for cand in (GAITS_DIR / f"{gait}.yaml", GAITS_DIR / str(gait)):
         if cand.is_file():
             return cand
@@ -263,17 +265,63 @@ def parse_z(text: str | None, flag: str = "--z") -> np.ndarray | None:
         raise ValueError(f"{flag} must be numbers, got {text!r}") from None
 
 
+def read_gait_file(path: Path) -> dict:
+    """A gait file's YAML mapping; ValueError naming the file for anything else (binary, not
+    YAML, a YAML tag, truncated to nothing useful, or not a mapping)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"gait file {path}: not a text (UTF-8) file") from None
+    except IsADirectoryError:
+        raise ValueError(f"gait file {path} is a folder, not a file") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        where = getattr(e, "problem_mark", None)
+        at = f" at line {where.line + 1}" if where is not None else ""
+        problem = getattr(e, "problem", None) or type(e).__name__
+        raise ValueError(f"gait file {path}: not valid YAML{at} ({problem})") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ValueError(f"gait file {path}: expected a mapping of gait keys, got "
+                         f"{type(data).__name__}")
+    return data
+
+
+def _gait_z(data: dict, key: str, path: Path) -> np.ndarray | None:
+    """``z_star``/``z_published`` of a gait file in SI, or None; clear errors for bad values."""
+    value = data.get(key)
+    if value is None:
+        return None
+    ok = isinstance(value, (list, tuple)) and len(value) == 6
+    if ok:
+        try:
+            z = np.array([float(v) for v in value])
+            ok = bool(np.all(np.isfinite(z))) and not any(isinstance(v, (str, bool))
+                                                          for v in value)
+        except (TypeError, ValueError):
+            ok = False
+    if not ok:
+        raise ValueError(f"gait file {path}: {key} must be 6 finite numbers {Z_NAMES} in the "
+                         f"paper's units {Z_PAPER_UNITS}, got {value!r}")
+    return z_to_si(z)
+
+
 def load_gait(gait: str | Path, overrides: dict | None = None) -> Gait:
     """Read a gait file (path or name), apply ``overrides`` (gait-file keys), validate."""
     path = resolve_gait_path(gait)
-    data = yaml.safe_load(path.read_text()) or {}
+    data = read_gait_file(path)
     pdict = {k: data[k] for k in GAIT_KEYS if k in data}
     if "min_leg_frac" in data:
         pdict["min_leg_frac"] = data["min_leg_frac"]
+    try:
+        Params.from_gait_dict(pdict)  # the file's own values, named with the file
+    except ValueError as e:
+        raise ValueError(f"gait file {path}: {e}") from None
     pdict.update(overrides or {})
     params = Params.from_gait_dict(pdict)
-    zp = z_to_si(data["z_published"]) if data.get("z_published") is not None else None
-    zs = z_to_si(data["z_star"]) if data.get("z_star") is not None else None
+    zp, zs = (_gait_z(data, key, path) for key in ("z_published", "z_star"))
     meta = {k: v for k, v in data.items() if k not in GAIT_KEYS}
     return Gait(params=params, z_published=zp, z_star=zs, meta=meta, path=path)
 

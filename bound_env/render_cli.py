@@ -8,8 +8,10 @@ so the animation shows exactly the passive model; frames are taken from the envi
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
-from .cli_args import add_gait_args, gait_overrides
+from .cli_args import add_gait_args, gait_overrides, number, out_dir, strict_json
 
 
 def register(sub) -> None:
@@ -18,30 +20,32 @@ def register(sub) -> None:
     add_gait_args(p, default="default")
     p.add_argument(
         "--strides",
-        type=float,
+        type=number(float, 0, 1000, lo_open=True),
         default=3.0,
         help="length of the animation in passive strides (default: %(default)s)",
     )
     p.add_argument("--out", default="bound.gif", help="GIF file to write (default: %(default)s)")
     p.add_argument(
         "--fps",
-        type=float,
+        type=number(float, 0, 1000, lo_open=True),
         default=50.0,
         help="frames per second of the GIF (default: %(default)s)",
     )
     p.add_argument(
         "--slowdown",
-        type=float,
+        type=number(float, 0, 1000, lo_open=True),
         default=1.0,
         help="play this many times slower than real time (default: %(default)s)",
     )
-    p.add_argument("--width", type=int, default=640, help="frame width [pixels]")
-    p.add_argument("--height", type=int, default=360, help="frame height [pixels]")
+    p.add_argument("--width", type=number(int, 16, 8192), default=640, help="frame width [pixels]")
+    p.add_argument("--height", type=number(int, 16, 8192), default=360,
+                   help="frame height [pixels]")
     p.add_argument(
         "--frame",
         metavar="PNG",
         help="also save one frame (mid-stance of the first stride) as a PNG",
     )
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_animate)
 
     p = sub.add_parser(
@@ -49,7 +53,9 @@ def register(sub) -> None:
     )
     p.add_argument("--gait", default="default", help="gait file or name (default: %(default)s)")
     p.add_argument("--out", default="out/demo", help="folder for summary.json and bound.gif")
-    p.add_argument("--gif-strides", type=float, default=3.0, help="strides in the animation")
+    p.add_argument("--gif-strides", type=number(float, 0, 1000, lo_open=True), default=3.0,
+                   help="strides in the animation")
+    p.add_argument("--json", action="store_true", help="print the JSON summary")
     p.set_defaults(func=cmd_demo)
 
 
@@ -100,33 +106,43 @@ def cmd_animate(args) -> int:
         raise ValueError("--strides must be positive")
     if not (args.fps > 0 and args.slowdown > 0):
         raise ValueError("--fps and --slowdown must be positive")
+    for flag, target in (("--out", args.out), ("--frame", args.frame)):
+        if target is not None:
+            if Path(target).is_dir():
+                raise ValueError(f"{flag} {target} is a folder; give a file name")
+            out_dir(Path(target).parent, flag)
     overrides = gait_overrides(args)
     frames, period, frame_dt = animation_frames(
         args.gait, overrides, args.strides, args.fps, args.slowdown, args.width, args.height
     )
+    if not frames:
+        raise ValueError(f"gait {args.gait!r} gives no frames to animate")
     path = save_gif(frames, args.out, fps=args.slowdown / frame_dt)
-    print(f"wrote {path}: {len(frames)} frames, {args.strides:g} strides of {period:.4f} s")
+    msg = f"wrote {path}: {len(frames)} frames, {args.strides:g} strides of {period:.4f} s"
+    print(msg, file=sys.stderr if args.json else sys.stdout)
     if args.frame:
         from PIL import Image
 
         # mid-stance of the back leg in the first stride: ~30 % into it
         k = min(len(frames) - 1, round(0.3 * period / frame_dt))
         Image.fromarray(frames[k]).save(args.frame)
-        print(f"wrote {args.frame}")
+        if not args.json:
+            print(f"wrote {args.frame}")
+    if args.json:
+        print(strict_json({"gif": str(path), "frames": len(frames), "strides": args.strides,
+                           "period": period, "frame": args.frame}))
     return 0
 
 
 def cmd_demo(args) -> int:
     """Zero action from z* for a whole episode; print a summary, write JSON and a GIF."""
-    import json
-    from pathlib import Path
-
     import gymnasium as gym
     import numpy as np
 
     from .params import z_to_paper
     from .render import save_gif
 
+    out = out_dir(args.out)
     env = gym.make("PassiveBound-v0", gait=args.gait, reset_noise_scale=0.0)
     _, info = env.reset(seed=0)
     z_ref = env.unwrapped.task.z_ref
@@ -153,15 +169,19 @@ def cmd_demo(args) -> int:
         "truncated": bool(truncated),
         "failure": info.get("failure"),
     }
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out / "summary.json").write_text(strict_json(summary))
     frames, period, frame_dt = animation_frames(args.gait, None, args.gif_strides)
-    gif = save_gif(frames, out / "bound.gif", fps=1.0 / frame_dt)
+    gif = save_gif(frames, out / "bound.gif", fps=1.0 / frame_dt) if frames else None
+    if args.json:
+        print(strict_json({**summary, "summary": str(out / "summary.json"),
+                           "gif": str(gif) if gif else None}))
+        return 0
     print(f"PassiveBound-v0, zero action from z* of gait {args.gait!r}:")
     print(f"  {summary['strides']} strides in {summary['sim_time_s']:.2f} s, "
           f"{summary['distance_m']:.2f} m down the slope, return {ret:.1f}")
-    print(f"  largest apex deviation from z*: {summary['max_apex_error_si']:.2e} (SI)")
+    err = summary["max_apex_error_si"]
+    print(f"  largest apex deviation from z*: {'-' if err is None else f'{err:.2e}'} (SI)")
     print(f"  ended by {'truncation' if truncated else 'termination: ' + str(summary['failure'])}")
-    print(f"wrote {out / 'summary.json'} and {gif} ({len(frames)} frames, period {period:.4f} s)")
+    print(f"wrote {out / 'summary.json'} and {gif} ({len(frames)} frames, period {period:.4f} s)"
+          if gif else f"wrote {out / 'summary.json'} (no frames: the gait fails at once)")
     return 0

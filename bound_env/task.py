@@ -466,12 +466,14 @@ class PassiveBoundTask:
 
     @staticmethod
     def check_apex_state(z) -> np.ndarray:
+        msg = f"apex_state must be 6 real numbers {Z_NAMES} in SI units (shape (6,)), got {z!r}"
+        raw = np.asarray(z)
+        if raw.ndim != 1 or np.iscomplexobj(raw):  # no silent reshape of (2, 3) or (6, 1)
+            raise ValueError(msg)
         try:
-            z = np.array(z, dtype=float).reshape(6)
+            z = np.array(raw, dtype=float).reshape(6)
         except (TypeError, ValueError):
-            raise ValueError(
-                f"apex_state must be 6 numbers {Z_NAMES} in SI units, got {z!r}"
-            ) from None
+            raise ValueError(msg) from None
         if not np.all(np.isfinite(z)):
             raise ValueError(f"apex_state must be finite, got {z}")
         return z

@@ -7,14 +7,13 @@ parameters as gait-file keys (degrees for ``*_deg``).
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from ..cli_args import add_gait_args, gait_from_args
+from ..cli_args import add_gait_args, gait_from_args, number, out_dir, strict_json
 from ..params import (
     GAIT_KEYS,
     Z_NAMES,
@@ -51,8 +50,9 @@ def register(sub) -> None:
         default="fd",
         help="how nabla P is computed for the eigenvalues (default: %(default)s)",
     )
-    p.add_argument("--tol", type=float, default=1e-10, help="Newton tolerance on |P(z) - z|")
-    p.add_argument("--max-iter", type=int, default=50, help="Newton iterations")
+    p.add_argument("--tol", type=number(float, 0, 1, lo_open=True), default=1e-10,
+                   help="Newton tolerance on |P(z) - z|")
+    p.add_argument("--max-iter", type=number(int, 1, 10_000), default=50, help="Newton iterations")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--save", metavar="PATH", help="write a gait file with the fixed point")
     p.set_defaults(func=cmd_fixed_point)
@@ -66,8 +66,9 @@ def register(sub) -> None:
         metavar="NAME",
         help="continuation parameter, usually kc or alpha_deg",
     )
-    p.add_argument("--to", type=float, required=True, help="target value (gait units)")
-    p.add_argument("--step", type=float, help="parameter step (default: 1/10 of the range)")
+    p.add_argument("--to", type=number(float), required=True, help="target value (gait units)")
+    p.add_argument("--step", type=number(float, allow_zero=False),
+                   help="parameter step (default: 1/10 of the range)")
     p.add_argument("--method", choices=("natural", "arclength"), default="natural")
     p.add_argument(
         "--free",
@@ -77,26 +78,29 @@ def register(sub) -> None:
         metavar="NAME",
         help="gait keys solved for along the branch (e.g. alpha_deg, as in Fig. 4)",
     )
-    p.add_argument("--max-points", type=int, default=400)
+    p.add_argument("--max-points", type=number(int, 1, 100_000), default=400)
     p.add_argument(
         "--out",
         required=True,
         metavar="DIR",
         help="output directory: branch.csv, branch.json, branch.png",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
+                   help="no progress lines on stderr (alias: --no-progress)")
     p.set_defaults(func=cmd_continue)
 
     p = sub.add_parser("sweep", help="e_max against alpha_deg or kc, the paper's way "
                        "(Figs. 7-8), and the stability windows")  # fmt: skip
     _gait_args(p, z_and_pins=False)
     p.add_argument("--param", required=True, choices=GAIT_KEYS, metavar="NAME")
-    p.add_argument("--from", dest="lo", type=float, required=True)
-    p.add_argument("--to", dest="hi", type=float, required=True)
-    p.add_argument("--step", type=float, required=True)
-    p.add_argument("--refine", type=int, default=6, help="bisections of each window edge")
+    p.add_argument("--from", dest="lo", type=number(float), required=True)
+    p.add_argument("--to", dest="hi", type=number(float), required=True)
+    p.add_argument("--step", type=number(float, 0, lo_open=True), required=True)
+    p.add_argument("--refine", type=number(int, 0, 60), default=6,
+                   help="bisections of each window edge")
     p.add_argument("--out", required=True, metavar="DIR", help="sweep.csv and sweep.png")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
+                   help="no progress lines on stderr (alias: --no-progress)")
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("reproduce", help="measure every published number again: Figs. 3-8 "
@@ -110,7 +114,8 @@ def register(sub) -> None:
                    help="also write configs/gaits/default.yaml and literal-cycle.yaml")
     p.add_argument("--docs", metavar="DIR",
                    help="copy REPRODUCTION.md and the PNG figures to DIR (e.g. docs)")
-    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
+                   help="no progress lines on stderr (alias: --no-progress)")
     p.set_defaults(func=cmd_reproduce)
 
 
@@ -190,7 +195,7 @@ def cmd_fixed_point(args) -> int:
         else:
             out["saved"] = str(_save(args.save, gait, res, z0))
     if args.json:
-        print(json.dumps(out))
+        print(strict_json(out))
     else:
         _print_fixed_point(out, res)
     return 0 if res.converged else 1
@@ -236,9 +241,9 @@ def _print_fixed_point(out, res):
 def cmd_continue(args) -> int:
     from .continuation import continue_branch, plot_branch
 
+    out = out_dir(args.out)
     gait, z0 = _setup(args)
     pins = _default_pins(args, z0, gait.params)
-    out = Path(args.out)
     branch = continue_branch(
         gait.params, z0, args.param, args.to, step=args.step, method=args.method,
         free=args.free, pin=pins or None, max_points=args.max_points, out_dir=out,
@@ -251,19 +256,24 @@ def cmd_continue(args) -> int:
           + (f" and {out / 'branch.png'}" if branch.points else ""))  # fmt: skip
     for v, n in flags:
         print(f"  {n} between the previous point and {args.param} = {v:.6g}")
-    return 0 if branch.reached else 1
+    # a fold or any other end of the branch is a result (reported above), not an error;
+    # only a branch that could not start is one
+    return 0 if branch.points else 1
 
 
 def cmd_sweep(args) -> int:
     from .sweeps import plot_sweep, sweep, write_sweep_csv
 
+    out = out_dir(args.out)
     gait, z0 = _setup(args)
-    if not args.step > 0:
-        raise ValueError("--step must be positive")
+    if args.hi < args.lo:
+        raise ValueError(f"--to ({args.hi}) must not be below --from ({args.lo})")
+    n_points = math.floor((args.hi - args.lo) / args.step) + 1
+    if n_points > 100_000:
+        raise ValueError(f"--from/--to/--step ask for {n_points} points; at most 100000")
     values = np.round(np.arange(args.lo, args.hi + 0.5 * args.step, args.step), 12)
     res = sweep(gait.params, z0, args.param, values, refine=args.refine,
                 progress=not args.quiet)  # fmt: skip
-    out = Path(args.out)
     write_sweep_csv(res, out / "sweep.csv")
     plot_sweep(res, out / "sweep.png")
     for kind in ("converged", "stable"):

@@ -1,0 +1,93 @@
+"""The CLI grammar: --version, strict JSON, --no-progress/--quiet, --out folders, and no
+tracked file changed by commands run inside a checkout (checked with git status)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bound_env.cli import main
+from bound_env.cli_args import strict_json
+
+ROOT = Path(__file__).resolve().parent.parent
+_SKIP = shutil.ignore_patterns(".git", ".venv", "out", "runs", "build", "dist", "reproduce",
+                               "*.egg-info", ".pytest_cache", ".ruff_cache")
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0
+    assert capsys.readouterr().out.startswith("bound-env ")
+
+
+def test_strict_json_has_no_nan_tokens():
+    text = strict_json({"a": float("nan"), "b": [1.0, float("inf")], "c": {"d": -float("inf")}})
+    data = json.loads(text)  # parses as strict JSON
+    assert "NaN" not in text and "Infinity" not in text
+    assert data["a"] is None and data["b"] == [1.0, None] and data["c"]["d"] is None
+    assert data["nonfinite"] == {"a": "nan", "b[1]": "inf", "c.d": "-inf"}
+
+
+def test_progress_flag_and_alias_on_long_commands():
+    from bound_env.cli import build_parser
+
+    parser = build_parser()
+    for cmd in ("train", "margins", "compare", "continue", "sweep", "reproduce"):
+        sub = parser._subparsers._group_actions[0].choices[cmd]
+        flags = set(sub._option_string_actions)
+        assert {"--no-progress", "--quiet"} <= flags, cmd
+
+
+def test_out_that_is_a_file_is_a_one_line_error(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["rollout", "--policy", "passive", "--strides", "1",
+                 "--out", str(blocker / "sub")]) == 2
+    err = capsys.readouterr().err
+    assert "not a folder" in err and len(err.strip().splitlines()) == 1
+
+
+def test_stride_repeat_times_after_a_warm_up(capsys):
+    assert main(["stride", "--gait", "default", "--repeat", "3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["repeat"] == 3 and out["seconds_first_stride"] > 0
+    assert out["seconds_per_stride"] > 0
+
+
+@pytest.mark.slow
+def test_commands_in_a_checkout_change_no_tracked_file(tmp_path):
+    repo = tmp_path / "repo"
+    shutil.copytree(ROOT, repo, ignore=_SKIP)
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-c", "commit.gpgsign=false"]
+    subprocess.run(["git", "init", "-q"], cwd=repo, check=True)
+    subprocess.run(git + ["add", "-A"], cwd=repo, check=True)
+    subprocess.run(git + ["commit", "-q", "-m", "snapshot"], cwd=repo, check=True)
+    env = {**os.environ, "PYTHONPATH": str(repo)}
+    commands = [
+        ["stride", "--gait", "default", "--json"],
+        ["fixed-point", "--json"],
+        ["demo", "--gif-strides", "1"],
+        ["animate", "--strides", "1", "--out", "out/a.gif"],
+        ["margins", "--policy", "passive", "--budget", "test", "--workers", "1", "--json"],
+        ["rollout", "--policy", "default", "--strides", "2", "--json"],
+        ["compare", "--budget", "test", "--workers", "1", "--no-progress"],
+        ["train", "--name", "t", "--n-timesteps", "256", "--eval-freq", "128", "--save-freq",
+         "128", "--n-eval-episodes", "1", "--vec-env", "dummy", "--no-progress",
+         "--set", "n_envs=1", "--set", "n_steps=128", "--set", "batch_size=64",
+         "--set", "n_epochs=1", "--set", "callback=[]"],
+    ]
+    for cmd in commands:
+        res = subprocess.run([sys.executable, "-m", "bound_env.cli", *cmd], cwd=repo, env=env,
+                             capture_output=True, text=True, timeout=1200)
+        assert res.returncode == 0, (cmd, res.stderr[-2000:])
+        status = subprocess.run(["git", "status", "--porcelain"], cwd=repo, check=True,
+                                capture_output=True, text=True).stdout
+        assert status == "", (cmd, status)
+    assert (repo / "out" / "margins" / "MARGINS.md").is_file()  # compare wrote into --out

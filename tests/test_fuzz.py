@@ -1,0 +1,194 @@
+"""Bad input, every sub-command: a one-line error and a non-zero exit, never a traceback.
+
+The CLI table runs in-process (`bound_env.cli.main`): an exception escaping ``main`` is what
+a user would see as a traceback, and fails the test. The env table does the same for the
+Gymnasium API: a clear ``ValueError``, never another exception or a silent coercion.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bound_env.cli import main
+
+BAD_GAITS = {
+    "list": "- 1\n- 2\n",
+    "truncated": "kc: [1, 2\n",
+    "unparsable": "kc: : :\n  - ]\n",
+    "tag": "kc: !!python/object/apply:os.system ['echo hi']\n",
+    "binary": b"\x89PNG\r\n\x1a\n\x00\x00\xff\xfe",
+    "z_star_short": "kc: 295\nz_star: [0.25, 0.5]\n",
+    "z_star_text": "kc: 295\nz_star: [a, b, c, d, e, f]\n",
+    "bad_value": "kc: stiff\n",
+}
+
+
+@pytest.fixture
+def files(tmp_path):
+    out = {}
+    for name, text in BAD_GAITS.items():
+        p = tmp_path / f"{name}.yaml"
+        if isinstance(text, bytes):
+            p.write_bytes(text)
+        else:
+            p.write_text(text)
+        out[name] = str(p)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    out["file"] = str(blocker)
+    out["dir"] = str(tmp_path)
+    return out
+
+
+def _cases(f):
+    """(argv, a word the error must contain, or None)."""
+    cases = []
+    for name in BAD_GAITS:
+        g = f[name]
+        cases += [
+            (["stride", "--gait", g], "gait file"),
+            (["fixed-point", "--gait", g], "gait file"),
+            (["animate", "--gait", g, "--out", f["dir"] + "/x.gif"], "gait file"),
+            (["sweep", "--gait", g, "--param", "kc", "--from", "290", "--to", "291", "--step",
+              "1", "--out", f["dir"] + "/s"], "gait file"),
+            (["rollout", "--policy", "passive", "--gait", g, "--strides", "1"], "gait file"),
+        ]
+    cases += [
+        (["stride", "--gait", f["dir"]], "folder"),
+        (["stride", "--repeat", "0"], "--repeat"),
+        (["stride", "--repeat", "inf"], "--repeat"),
+        (["stride", "--z", "1,2,3"], "--z"),
+        (["stride", "--set", "kc=abc"], "kc"),
+        (["stride", "--set", "nope=1"], "nope"),
+        (["stride", "--backend", "gpu"], "--backend"),
+        (["fixed-point", "--tol", "-1"], "--tol"),
+        (["fixed-point", "--tol", "nan"], "--tol"),
+        (["fixed-point", "--max-iter", "-1"], "--max-iter"),
+        (["continue", "--param", "kc", "--to", "inf", "--out", f["dir"] + "/c"], "--to"),
+        (["continue", "--param", "kc", "--to", "300", "--step", "0", "--out", f["dir"]], "--step"),
+        (["continue", "--param", "kc", "--to", "300", "--max-points", "0", "--out", f["dir"]],
+         "--max-points"),
+        (["sweep", "--param", "kc", "--from", "290", "--to", "300", "--step", "1e-12", "--out",
+          f["dir"] + "/s"], "points"),
+        (["sweep", "--param", "kc", "--from", "300", "--to", "290", "--step", "1", "--out",
+          f["dir"] + "/s"], "--from"),
+        (["sweep", "--param", "kc", "--from", "290", "--to", "300", "--step", "0", "--out",
+          f["dir"] + "/s"], "--step"),
+        (["sweep", "--param", "kc", "--from", "290", "--to", "291", "--step", "1", "--out",
+          f["file"]], "not a folder"),
+        (["continue", "--param", "kc", "--to", "296", "--out", f["file"]], "not a folder"),
+        (["animate", "--strides", "0"], "--strides"),
+        (["animate", "--strides", "inf"], "--strides"),
+        (["animate", "--fps", "0"], "--fps"),
+        (["animate", "--strides", "1", "--out", f["dir"]], "folder"),
+        (["demo", "--gif-strides", "0"], "--gif-strides"),
+        (["demo", "--out", f["file"]], "not a folder"),
+        (["rollout", "--strides", "inf"], "--strides"),
+        (["rollout", "--strides", "0"], "--strides"),
+        (["rollout", "--noise", "nan"], "--noise"),
+        (["rollout", "--policy", f["dir"] + "/nothing"], "does not exist"),
+        (["rollout", "--policy", "passive", "--strides", "1", "--video", "x.avi"], "--video"),
+        (["margins", "--workers", "0"], "--workers"),
+        (["margins", "--budget", "huge"], "--budget"),
+        (["margins", "--policy", "passive", "--budget", "test", "--out", f["file"]],
+         "not a folder"),
+        (["train", "--n-timesteps", "inf"], "--n-timesteps"),
+        (["train", "--name", "x", "--runs-dir", f["dir"] + "/r", "--n-timesteps", "64",
+          "--set", "not_a_hyperparameter=1"], "not_a_hyperparameter"),
+        (["train", "--name", "nope", "--runs-dir", f["dir"] + "/r", "--resume"], "--resume"),
+        (["compare", "--workers", "0"], "--workers"),
+        (["reproduce"], "--out"),
+        (["nonsense-command"], None),
+    ]
+    return cases
+
+
+@pytest.mark.slow  # ~15 s: train imports torch
+def test_cli_fuzz(files, capsys):
+    failures = []
+    for argv, word in _cases(files):
+        try:
+            code = main(argv)
+        except SystemExit as e:  # argparse: usage error, exit 2
+            code = e.code
+        except Exception as e:  # noqa: BLE001 - what a user would see as a traceback
+            failures.append(f"{argv}: {type(e).__name__}: {e}")
+            continue
+        err = capsys.readouterr().err
+        if not code:
+            failures.append(f"{argv}: exit 0")
+        elif "Traceback" in err:
+            failures.append(f"{argv}: traceback")
+        elif word is not None and word not in err:
+            failures.append(f"{argv}: error does not name {word!r}: {err.strip()[-300:]}")
+    assert not failures, "\n".join(failures)
+
+
+def test_gait_file_errors_name_the_file_and_the_key(files):
+    from bound_env.params import load_gait
+
+    with pytest.raises(ValueError, match="z_star_short.yaml.*z_star must be 6"):
+        load_gait(files["z_star_short"])
+    with pytest.raises(ValueError, match="bad_value.yaml.*kc"):
+        load_gait(files["bad_value"])
+    with pytest.raises(ValueError, match="list.yaml.*mapping"):
+        load_gait(files["list"])
+
+
+def test_fold_is_a_result_exit_0(tmp_path, capsys, monkeypatch):
+    """A branch that ends at a fold (the README's arclength example, near k_c = 303) exits 0
+    and reports it; only a branch that cannot start is an error."""
+    from types import SimpleNamespace
+
+    from bound_env.analysis import continuation
+
+    point = SimpleNamespace(value=303.0, fold=True, pd=False, ns=False)
+    folded = SimpleNamespace(points=[point], reason="fold: a real eigenvalue reached +1",
+                             reached=False)
+    monkeypatch.setattr(continuation, "continue_branch", lambda *a, **k: folded)
+    monkeypatch.setattr(continuation, "plot_branch", lambda *a, **k: None)
+    argv = ["continue", "--param", "kc", "--to", "305", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    assert "fold" in capsys.readouterr().out
+    monkeypatch.setattr(continuation, "continue_branch",
+                        lambda *a, **k: SimpleNamespace(points=[], reason="no fixed point",
+                                                        reached=False))
+    assert main(argv) == 1
+
+
+# -- environment API ---------------------------------------------------------------------
+
+
+@pytest.fixture
+def env():
+    import gymnasium as gym
+
+    import bound_env
+
+    gym.register_envs(bound_env)
+    e = gym.make("PassiveBound-v0")
+    e.reset(seed=0)
+    yield e
+    e.close()
+
+
+@pytest.mark.parametrize("action", [None, np.array([1 + 2j]), 1 + 0j, "0.5", [np.nan],
+                                    np.array([np.inf]), np.zeros(2), [[0.1, 0.2]], object()])
+def test_env_step_rejects_bad_actions(env, action):
+    with pytest.raises(ValueError, match="action"):
+        env.step(action)
+
+
+@pytest.mark.parametrize("z", [np.zeros((2, 3)), np.ones((6, 1)), [1.0] * 5, ["a"] * 6,
+                               [np.nan] * 6, np.ones(6) * (1 + 1j)])
+def test_env_reset_rejects_bad_apex_states(env, z):
+    with pytest.raises(ValueError, match="apex_state"):
+        env.reset(options={"apex_state": z})
+
+
+def test_env_gait_path_that_is_not_a_mapping(files):
+    import gymnasium as gym
+
+    with pytest.raises(ValueError, match="mapping"):
+        gym.make("PassiveBound-v0", gait=files["list"])
