@@ -116,7 +116,10 @@ def _version() -> str:
 
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # usage errors (2), --help and --version (0), as a return code
+        return e.code if isinstance(e.code, int) else 2
     from .parallel import TasksFailed
 
     try:
