@@ -323,13 +323,27 @@ def render_markdown(groups, plots, curves, budget, note: str = "") -> str:
     full = BUDGETS["full"]
     if budget == "full":
         budget_note = "the **full** budget"
+    elif b is None:
+        budget_note = f"the `{budget}` budget"
     else:
-        budget_note = (f"the **{budget}** budget, NOT the full one: "
-                       f"{b.curve_dirs} random directions instead of "
-                       f"{full.curve_dirs}, {b.basin_strides} strides to return instead of "
-                       f"{full.basin_strides}, {b.terrain_runs} rough-terrain runs of "
-                       f"{b.terrain_strides} strides instead of {full.terrain_runs} of "
-                       f"{full.terrain_strides}" if b else f"the `{budget}` budget")
+        diffs = []
+        for field, what in (("curve_dirs", "random directions"),
+                            ("curve_sizes", "curve sizes"),
+                            ("basin_strides", "strides to return"),
+                            ("basin_iters", "basin bisection steps"),
+                            ("push_samples", "push samples per size"),
+                            ("terrain_sigmas", "rough-terrain levels"),
+                            ("terrain_runs", "rough-terrain runs per level"),
+                            ("terrain_strides", "rough-terrain strides"),
+                            ("ceiling_random", "random ceiling profiles"),
+                            ("ceiling_opt", "ceiling optimizer iterations")):
+            mine, theirs = getattr(b, field), getattr(full, field)
+            if mine != theirs:
+                n = len(mine) if isinstance(mine, tuple) else mine
+                m = len(theirs) if isinstance(theirs, tuple) else theirs
+                diffs.append(f"{n} {what} instead of {m}")
+        budget_note = (f"the **{budget}** budget, NOT the full one ("
+                       + "; ".join(diffs) + ")")
     terrain = base["runs"][0].get("terrain", {})
     ceil = settings.get("ceiling", {})
     r0 = base["runs"][0]
