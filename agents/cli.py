@@ -191,7 +191,7 @@ def export_policy(run_dir, dest, source: str = "final") -> Path:
     for name in ("model.zip", "vecnormalize.pkl"):
         if (src / name).is_file():
             shutil.copyfile(src / name, dest / name)
-    for name in POLICY_FILES[2:] + ("basin_validation.csv",):
+    for name in POLICY_FILES[2:] + ("basin_validation.csv", "base.json"):
         if (run_dir / name).is_file():
             shutil.copyfile(run_dir / name, dest / name)
     info = {"exported_from": str(src), "selection": "best validation" if src == best

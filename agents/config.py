@@ -204,6 +204,8 @@ def preprocess(hp: dict) -> TrainSpec:
             algo[key] = linear_schedule(float(value))
         elif v is not None:
             algo[key] = float(v)
+    if isinstance(algo.get("policy"), str) and "." in algo["policy"]:  # a class path
+        algo["policy"] = get_class_by_name(algo["policy"])
     if isinstance(algo.get("policy_kwargs"), str):
         algo["policy_kwargs"] = eval_kwargs_string(algo["policy_kwargs"])
     for key in ("n_steps", "batch_size", "n_epochs"):

@@ -681,6 +681,9 @@ def train(
     set_random_seed(seed)
     venv = make_vec(env_id, spec, spec.n_envs, seed, vec_env, run_dir / "monitor",
                     append=ckpt is not None)
+    from .stride import write_base
+
+    write_base(run_dir, venv)  # a residual stride policy's base controller (agents/stride.py)
     eval_env = make_vec(env_id, spec, 1, seed + 10_000, "dummy")
     callbacks, curriculum_end = [], math.nan
     for cls, kwargs in spec.callbacks:
