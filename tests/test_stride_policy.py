@@ -60,7 +60,7 @@ def test_config_parses_and_wraps_the_stride_env():
     assert [c.__name__ for c, _ in spec.wrappers] == ["DirectionStarts", "StrideControl",
                                                       "YardstickReward"]
     assert [c.__name__ for c, _ in spec.callbacks] == ["ZeroActionNet"]
-    assert spec.env_kwargs["K"] == 4 and spec.env_kwargs["basis"] == "windows"
+    assert spec.env_kwargs["K"] == 8 and spec.env_kwargs["basis"] == "windows"
 
 
 def test_zero_residual_reproduces_the_lqr_exactly(zero_run):
@@ -155,12 +155,12 @@ def test_yardstick_reward_contraction_and_early_falls_cost_more():
     env = YardstickReward(StrideControl(_stride_env(), base=None), ctrl_weight=0.0,
                           fall_penalty=10.0, horizon=10)
     env.reset(options={"apex_state": env.z_ref})  # on the cycle: e at its floor, no contraction
-    _, r, term, _, _ = env.step(np.zeros(4))
+    _, r, term, _, _ = env.step(np.zeros(env.unwrapped.task.K))
     assert not term and r == pytest.approx(1.0)
     z_low = env.z_ref.copy()
     z_low[0] *= 0.5  # hips far below their touchdown height: falls in the first stride
     env.reset(options={"apex_state": z_low})
-    _, r, term, _, info = env.step(np.zeros(4))
+    _, r, term, _, info = env.step(np.zeros(env.unwrapped.task.K))
     assert term and info["failure"] is not None and r == pytest.approx(-10.0)
     with pytest.raises(ValueError, match="residual_scale"):
         StrideControl(_stride_env(), base=None, residual_scale=0.0)
@@ -203,5 +203,5 @@ def test_anchored_policy_keeps_the_cycle_whatever_the_weights(zero_run, tmp_path
         (run / name).write_bytes((zero_run / name).read_bytes())
     ctrl = load_stride_policy(run)
     assert ctrl.anchored
-    np.testing.assert_array_equal(ctrl.stride_action(ctrl.z_ref), np.zeros(4))
+    np.testing.assert_array_equal(ctrl.stride_action(ctrl.z_ref), np.zeros(ctrl.phi.shape[1]))
     assert np.any(ctrl.residual(ctrl.z_ref * 1.05) != 0.0)
