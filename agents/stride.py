@@ -262,13 +262,30 @@ def anchored_policy_class():
         from stable_baselines3.common.policies import ActorCriticPolicy
 
         class AnchoredMlpPolicy(ActorCriticPolicy):
-            """PPO's MLP actor-critic whose action mean is net(obs) - net(0): the residual
-            vanishes at observation 0, the reference apex state z* (the observation of
-            `StrideControl` is (z - z*) / |z*|), whatever the weights. Under a residual on
-            the LQR (u_lqr(z*) = 0) the closed loop then keeps z* as its cycle with zero
-            torque. Needs an unnormalized observation (``norm_obs=False``)."""
+            """PPO's MLP actor-critic whose action mean is g(x) (net(x) - net(0)), with
+            g(x) = |x|^2 / (|x|^2 + gate_scale^2) (g = 1 if gate_scale is 0).
+
+            The residual vanishes at observation 0, the reference apex state z* (the
+            observation of `StrideControl` is x = (z - z*) / |z*|), whatever the weights:
+            under a residual on the LQR (u_lqr(z*) = 0) the closed loop keeps z* as its
+            cycle with zero torque. With the gate, the residual also vanishes to second
+            order, so the closed loop's linearization at z* is the LQR's (same e_max): the
+            residual only acts farther out. Needs an unnormalized observation
+            (``norm_obs=False``)."""
+
+            def __init__(self, *args, gate_scale: float = 0.0, **kwargs):
+                self.gate_scale = float(gate_scale)
+                super().__init__(*args, **kwargs)
+
+            def _get_constructor_parameters(self):
+                data = super()._get_constructor_parameters()
+                data["gate_scale"] = self.gate_scale
+                return data
 
             def _get_action_dist_from_latent(self, latent_pi):
+                raise NotImplementedError("AnchoredMlpPolicy needs the observation")
+
+            def _dist(self, obs, latent_pi):
                 import torch as th
 
                 if not isinstance(self.action_dist, DiagGaussianDistribution):
@@ -276,7 +293,39 @@ def anchored_policy_class():
                 zero = th.zeros((1, *self.observation_space.shape), device=latent_pi.device)
                 latent0 = self.mlp_extractor.forward_actor(self.pi_features_extractor(zero))
                 mean = self.action_net(latent_pi) - self.action_net(latent0)
+                if self.gate_scale > 0:
+                    q = th.sum(th.square(obs.float()), dim=-1, keepdim=True)
+                    mean = mean * (q / (q + self.gate_scale ** 2))
                 return self.action_dist.proba_distribution(mean, self.log_std)
+
+            def forward(self, obs, deterministic: bool = False):
+                features = self.extract_features(obs)
+                if self.share_features_extractor:
+                    latent_pi, latent_vf = self.mlp_extractor(features)
+                else:
+                    latent_pi = self.mlp_extractor.forward_actor(features[0])
+                    latent_vf = self.mlp_extractor.forward_critic(features[1])
+                values = self.value_net(latent_vf)
+                distribution = self._dist(obs, latent_pi)
+                actions = distribution.get_actions(deterministic=deterministic)
+                log_prob = distribution.log_prob(actions)
+                actions = actions.reshape((-1, *self.action_space.shape))
+                return actions, values, log_prob
+
+            def evaluate_actions(self, obs, actions):
+                features = self.extract_features(obs)
+                if self.share_features_extractor:
+                    latent_pi, latent_vf = self.mlp_extractor(features)
+                else:
+                    latent_pi = self.mlp_extractor.forward_actor(features[0])
+                    latent_vf = self.mlp_extractor.forward_critic(features[1])
+                distribution = self._dist(obs, latent_pi)
+                return (self.value_net(latent_vf), distribution.log_prob(actions),
+                        distribution.entropy())
+
+            def get_distribution(self, obs):
+                features = super().extract_features(obs, self.pi_features_extractor)
+                return self._dist(obs, self.mlp_extractor.forward_actor(features))
 
         AnchoredMlpPolicy.__module__ = __name__
         AnchoredMlpPolicy.__qualname__ = "AnchoredMlpPolicy"
@@ -316,7 +365,8 @@ class StridePolicyController:
     max_torque: float
     base: BaseGain | None = None
     residual_scale: float = 1.0
-    anchored: bool = False  # residual = net(x) - net(0) (`AnchoredMlpPolicy`)
+    anchored: bool = False  # residual = g(x) (net(x) - net(0)) (`AnchoredMlpPolicy`)
+    gate_scale: float = 0.0  # g(x) = |x|^2 / (|x|^2 + gate_scale^2), 1 if 0
     obs_mean: np.ndarray | None = None  # VecNormalize statistics of x (None: none)
     obs_var: np.ndarray | None = None
     epsilon: float = 1e-8
@@ -348,13 +398,16 @@ class StridePolicyController:
     def residual(self, z) -> np.ndarray:
         """du = clip(mean action, -1, 1) at apex state z."""
         x = (np.asarray(z, dtype=float) - self.z_ref) / np.abs(self.z_ref)
-        x = np.clip(x, -1e3, 1e3)
+        x = np.clip(x, -1e3, 1e3).astype(np.float32).astype(float)  # the env's observation
         if self.obs_mean is not None:
             x = np.clip((x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
                         -self.clip_obs, self.clip_obs)
         mean = self._net(x)
         if self.anchored:
             mean = mean - self._net(np.zeros_like(x))
+            if self.gate_scale > 0:
+                q = float(np.dot(x, x))
+                mean = mean * (q / (q + self.gate_scale ** 2))
         return np.clip(mean, -1.0, 1.0)
 
     def coefficients(self, z) -> np.ndarray:
@@ -390,7 +443,7 @@ class StridePolicyController:
         for a in arrays:
             h.update(np.ascontiguousarray(a, dtype=float).tobytes())
         h.update(repr((self.max_torque, self.dt, self.gait, self.residual_scale,
-                       self.activation, self.anchored)).encode())
+                       self.activation, self.anchored, self.gate_scale)).encode())
         return h.hexdigest()[:16]
 
     def __getstate__(self):
@@ -469,6 +522,7 @@ def load_stride_policy(path) -> StridePolicyController:
         edges=task.basis.edges.copy(), phi=task.basis.phi.copy(), max_torque=task.max_torque,
         base=base, residual_scale=float(ctl.get("residual_scale", 1.0)), gait=gait, seed=seed,
         anchored=type(model.policy).__name__ == "AnchoredMlpPolicy",
+        gate_scale=float(getattr(model.policy, "gate_scale", 0.0)),
     )  # fmt: skip
     if vecnorm_path is not None:
         with vecnorm_path.open("rb") as f:

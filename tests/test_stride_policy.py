@@ -202,6 +202,11 @@ def test_anchored_policy_keeps_the_cycle_whatever_the_weights(zero_run, tmp_path
     for name in ("config.yaml", BASE_FILE):
         (run / name).write_bytes((zero_run / name).read_bytes())
     ctrl = load_stride_policy(run)
-    assert ctrl.anchored
+    assert ctrl.anchored and ctrl.gate_scale > 0
     np.testing.assert_array_equal(ctrl.stride_action(ctrl.z_ref), np.zeros(ctrl.phi.shape[1]))
     assert np.any(ctrl.residual(ctrl.z_ref * 1.05) != 0.0)
+    # the gate: the residual vanishes faster than linearly, so the closed loop's Jacobian at z*
+    # is the LQR's (a linear residual would shrink 10x for a 10x smaller step, this ~1000x)
+    d = np.abs(ctrl.z_ref) * np.array([1.0, -0.5, 0.3, 0.8, -1.0, 0.2])
+    big, small = (np.max(np.abs(ctrl.residual(ctrl.z_ref + h * d))) for h in (1e-2, 1e-3))
+    assert 0 < small < big / 50
