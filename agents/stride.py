@@ -37,6 +37,7 @@ import hashlib
 import json
 import math
 import pickle
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -462,48 +463,41 @@ def wrapper_kwargs(env_wrappers, name: str) -> dict | None:
     return None
 
 
-def is_stride_policy(path) -> bool:
-    """Whether ``path`` is a policy directory (or model zip) trained on the stride env."""
-    from .policy import resolve_policy_files
-
-    try:
-        _, _, config = resolve_policy_files(path)
-    except FileNotFoundError:
-        return False
-    if config is None:
-        return False
-    import yaml
-
-    data = yaml.safe_load(config.read_text()) or {}
-    return (data.get("run") or {}).get("env_id") == STRIDE_ENV_ID
-
-
-def load_stride_policy(path) -> StridePolicyController:
-    """A trained stride policy directory -> `StridePolicyController` (reads the model once,
-    with torch; the controller itself is NumPy)."""
-    import yaml
+def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyController:
+    """A trained stride policy (folder or model zip) -> `StridePolicyController` (reads the
+    model once, with torch; the controller itself is NumPy). Checks as
+    `agents.policy.load_controller` does: the fingerprint of model and statistics, and the gait
+    (another ``gait`` than the policy's own is refused unless ``force``)."""
     from stable_baselines3 import PPO
 
     from bound_env.stride_task import StrideTask
 
-    from .policy import _extract_actor, resolve_policy_files
+    from .policy import (
+        _extract_actor,
+        check_gait,
+        check_policy_files,
+        find_policy_files,
+        read_policy_section,
+    )
 
-    model_path, vecnorm_path, config_path = resolve_policy_files(path)
-    data = yaml.safe_load(config_path.read_text()) or {}
-    section = data.get(STRIDE_ENV_ID) or {}
-    seed = (data.get("run") or {}).get("seed")
+    files = find_policy_files(path)
+    model_path, vecnorm_path = files.model, files.vecnormalize
+    section, env_id, seed = read_policy_section(files)
+    if env_id != STRIDE_ENV_ID:
+        raise ValueError(f"policy {path} was trained on {env_id}, not {STRIDE_ENV_ID}")
+    for w in check_policy_files(files, section, force):
+        print(f"warning: {w}", file=sys.stderr)
     env_kwargs = dict(section.get("env_kwargs") or {})
-    env_kwargs.pop("max_episode_steps", None)
     wrappers = section.get("env_wrapper") or []
     ctl = wrapper_kwargs(wrappers, "StrideControl")
     if ctl is None:
-        raise ValueError(f"{config_path}: no agents.stride.StrideControl in env_wrapper")
+        raise ValueError(f"{files.config}: no agents.stride.StrideControl in env_wrapper")
     try:
         model = PPO.load(str(model_path), device="cpu")
     except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
         raise ValueError(f"cannot load {model_path} as an SB3 PPO model: {e}") from None
-    gait = str(env_kwargs.get("gait", "default"))
-    task = StrideTask(gait=gait, basis=env_kwargs.get("basis", "windows"),
+    trained_gait = str(env_kwargs.get("gait", "default"))
+    task = StrideTask(gait=trained_gait, basis=env_kwargs.get("basis", "windows"),
                       K=env_kwargs.get("K"), max_torque=env_kwargs.get("max_torque", 80.0),
                       rtol=BASIS_RTOL)
     if tuple(model.observation_space.shape) != (6,) or \
@@ -520,7 +514,8 @@ def load_stride_policy(path) -> StridePolicyController:
     ctrl = StridePolicyController(
         name=str(path), layers=layers, activation=activation, z_ref=task.z_ref.copy(),
         edges=task.basis.edges.copy(), phi=task.basis.phi.copy(), max_torque=task.max_torque,
-        base=base, residual_scale=float(ctl.get("residual_scale", 1.0)), gait=gait, seed=seed,
+        base=base, residual_scale=float(ctl.get("residual_scale", 1.0)), gait=trained_gait,
+        seed=seed,
         anchored=type(model.policy).__name__ == "AnchoredMlpPolicy",
         gate_scale=float(getattr(model.policy, "gate_scale", 0.0)),
     )  # fmt: skip
@@ -534,6 +529,7 @@ def load_stride_policy(path) -> StridePolicyController:
             ctrl.obs_var = np.asarray(vn.obs_rms.var, dtype=np.float64)
             ctrl.epsilon = float(vn.epsilon)
             ctrl.clip_obs = float(vn.clip_obs)
+    check_gait(ctrl, gait, force)
     return ctrl
 
 

@@ -29,6 +29,7 @@ def _zero_residual_policy(tmp_path) -> Path:
     """A fresh residual policy of configs/ppo-stride.yaml with ZeroActionNet applied, saved as a
     run directory (model.zip, config.yaml, base.json), without any training update."""
     from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.stride import write_base
     from agents.train import make_vec, resolve_section, write_config
@@ -43,6 +44,7 @@ def _zero_residual_policy(tmp_path) -> Path:
     run = tmp_path / "run"
     run.mkdir()
     model.save(run / "model.zip")
+    VecNormalize(venv, norm_obs=False, norm_reward=True).save(str(run / "vecnormalize.pkl"))
     write_config(run / "config.yaml", STRIDE_ENV_ID, hp, 0)
     write_base(run, venv)
     venv.close()
@@ -103,7 +105,7 @@ def test_numpy_controller_matches_the_network_and_the_wrapper(zero_run, tmp_path
     run = tmp_path / "run"
     run.mkdir()
     model.save(run / "model.zip")
-    for name in ("config.yaml", BASE_FILE):
+    for name in ("config.yaml", BASE_FILE, "vecnormalize.pkl"):
         (run / name).write_bytes((zero_run / name).read_bytes())
     ctrl = load_stride_policy(run)
     gym.register_envs(bound_env)
@@ -199,7 +201,7 @@ def test_anchored_policy_keeps_the_cycle_whatever_the_weights(zero_run, tmp_path
     run = tmp_path / "run"
     run.mkdir()
     model.save(run / "model.zip")
-    for name in ("config.yaml", BASE_FILE):
+    for name in ("config.yaml", BASE_FILE, "vecnormalize.pkl"):
         (run / name).write_bytes((zero_run / name).read_bytes())
     ctrl = load_stride_policy(run)
     assert ctrl.anchored and ctrl.gate_scale > 0
