@@ -195,6 +195,8 @@ def resolve_policy(spec: str | Path) -> str | Path:
     return p
 
 
+_INFERENCE_ONLY = {"learning_rate": 0.0, "lr_schedule": lambda _: 0.0,
+                   "clip_range": lambda _: 0.0}  # replaces training-only pickled objects
 FINGERPRINT_FILE = "fingerprint.json"  # sha256 of the model and its statistics, as one unit
 
 
@@ -451,7 +453,8 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     from stable_baselines3 import PPO
 
     try:
-        model = PPO.load(str(model_path), device="cpu")
+        # schedules are not needed to act, and rl-zoo3 pickles its own schedule classes
+        model = PPO.load(str(model_path), device="cpu", custom_objects=_INFERENCE_ONLY)
     except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
         raise ValueError(f"cannot load {model_path} as an SB3 PPO model: {e}") from None
     section, env_id, seed = read_policy_section(files)
