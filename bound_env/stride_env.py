@@ -6,6 +6,8 @@ stride under a spine-torque profile with the compiled hybrid simulator.
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces, utils
@@ -163,7 +165,9 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
 
     ## Version History
 
-    * v0: Initial version.
+    * v0: Initial version. `slope_noise_deg` (rough terrain, as in `PassiveBound-v0`: the
+      slope becomes alpha + sigma xi_k at every apex reached) added later with default 0,
+      which leaves every result bit-identical.
     """
 
     metadata = {"render_modes": []}
@@ -181,12 +185,13 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         ctrl_cost_weight: float = DEFAULT_CTRL_COST_WEIGHT,
         apex_scales=None,
         rtol: float = DEFAULT_STRIDE_RTOL,
+        slope_noise_deg: float = 0.0,
     ):
         kwargs = dict(
             gait=gait, gait_overrides=gait_overrides, basis=basis, K=K, max_torque=max_torque,
             reset_noise_scale=reset_noise_scale, alive_reward=alive_reward,
             tracking_cost_weight=tracking_cost_weight, ctrl_cost_weight=ctrl_cost_weight,
-            apex_scales=apex_scales, rtol=rtol,
+            apex_scales=apex_scales, rtol=rtol, slope_noise_deg=slope_noise_deg,
         )  # fmt: skip
         utils.EzPickle.__init__(self, **kwargs)
         self.task = StrideTask(**kwargs)
@@ -195,6 +200,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         self._z = self.task.z_ref.copy()
         self._failure: str | None = None
         self._strides = 0
+        self._alpha = self.task.params.alpha  # slope under the robot [rad] (rough terrain)
 
     @property
     def params(self) -> Params:
@@ -211,6 +217,11 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         return self.task.basis
 
     @property
+    def alpha_deg(self) -> float:
+        """The slope under the robot now [deg] (changes at each apex with ``slope_noise_deg``)."""
+        return math.degrees(self._alpha)
+
+    @property
     def z(self) -> np.ndarray:
         """The current apex state (SI, float64), a copy."""
         return self._z.copy()
@@ -222,6 +233,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         super().reset(seed=seed)
         self._z = self.task.start_state(self.np_random, options)
         self._strides = 0
+        self._alpha = self.task.params.alpha
         probe = self.task.step_task.new_batch(1)  # the step task's start check
         self.task.step_task.reset_robot(probe, 0, self._z)
         self._failure = self.task.step_task.info(probe, 0, reset=True)["failure"]
@@ -230,7 +242,15 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
     def step(self, action):
         u = np.clip(check_coefficients(action, self.task.K), -1.0, 1.0)
         taus = self.task.basis.torques(u, self.task.max_torque)
-        out = self.task.sim.run_torques(self._z, taus)
+        slope = None
+        if self.task.slope_noise_deg > 0.0 and self._strides > 0:
+            # rough terrain, as PassiveBound-v0: the slope changes at every apex reached
+            alpha = self.task.params.alpha + math.radians(
+                self.task.slope_noise_deg) * float(self.np_random.standard_normal())
+            slope = (self._alpha, alpha)
+        out = self.task.sim.run_torques(self._z, taus, slope)
+        if slope is not None and out.z1 is not None:
+            self._alpha = slope[1]
         failed = out.z1 is None
         alive, tracking, ctrl = self.task.rewards(out.z1, u, failed)
         info = {

@@ -60,6 +60,7 @@ from .hybrid import (
 )
 from .params import P_TAU, Gait, load_gait
 from .task import DEFAULT_RESET_NOISE_SCALE, PassiveBoundTask, _number
+from .terrain import change_slope, set_slope
 
 BASES = ("windows", "phases", "hats")
 DEFAULT_BASIS = "windows"
@@ -251,10 +252,18 @@ class StrideSimulator:
         """One stride from apex state z (SI) with coefficients u (clipped to [-1, 1])."""
         return self.run_torques(z, self.basis.torques(u, self.max_torque))
 
-    def run_torques(self, z, taus) -> StrideOutcome:
-        """One stride with the sub-window torques ``taus`` [N m] (any values)."""
+    def run_torques(self, z, taus, slope: tuple | None = None) -> StrideOutcome:
+        """One stride with the sub-window torques ``taus`` [N m] (any values).
+
+        ``slope`` = (alpha_from, alpha_to) [rad], rough terrain: z is an apex state in the
+        frame of a ground at alpha_from, which tilts to alpha_to at that apex
+        (`bound_env.terrain.change_slope`); the stride runs on alpha_to. None: the
+        parameters' slope, unchanged."""
         y = state_from_z(np.asarray(z, dtype=float).reshape(6))
         aux = self._aux0.copy()
+        if slope is not None:
+            set_slope(aux, slope[0])
+            change_slope(y, aux, slope[1] - slope[0])
         flags = np.zeros(N_FLAGS, dtype=np.bool_)
         edges, taus = merge_windows(self.basis.edges, np.asarray(taus, dtype=float))
         status, t, impulse = run_profile(
@@ -292,6 +301,7 @@ class StrideTask:
         ctrl_cost_weight: float = DEFAULT_CTRL_COST_WEIGHT,
         apex_scales=None,
         rtol: float = DEFAULT_STRIDE_RTOL,
+        slope_noise_deg: float = 0.0,
     ):
         self.step_task = PassiveBoundTask(
             gait=gait,
@@ -303,7 +313,9 @@ class StrideTask:
             ctrl_cost_weight=ctrl_cost_weight,
             apex_scales=apex_scales,
             rtol=rtol,
+            slope_noise_deg=slope_noise_deg,
         )  # fmt: skip (validates every number)
+        self.slope_noise_deg = self.step_task.slope_noise_deg
         self.gait = self.step_task.gait
         self.params = self.step_task.params
         self.z_ref = self.step_task.z_ref

@@ -56,3 +56,10 @@ def change_slope(y, aux, d_alpha):
     aux[P_GX] = aux[P_G] * math.sin(alpha)  # eq. (2)
     aux[P_GY] = aux[P_G] * math.cos(alpha)
     return True
+
+
+def set_slope(aux, alpha) -> None:
+    """Put the slope alpha [rad] into a parameter vector (alpha and gravity, eq. 2)."""
+    aux[P_ALPHA] = alpha
+    aux[P_GX] = aux[P_G] * math.sin(alpha)
+    aux[P_GY] = aux[P_G] * math.cos(alpha)
