@@ -328,3 +328,22 @@ def test_failing_task_on_a_dask_worker_does_not_stop_the_run(capsys):
     assert "div-0 (1.0, 0)" in capsys.readouterr().err
     with pytest.raises(TasksFailed, match="1 of 3 tasks failed"):
         raise TasksFailed(failures, 3)
+
+
+@pytest.mark.slow
+def test_sweep_directions_as_two_tasks_give_the_serial_sweep():
+    from bound_env.analysis.sweeps import sweep
+    from bound_env.params import load_gait
+
+    g = load_gait("default")
+    kw = dict(n_strides=30, polish=False)
+    vals = [293.0, 294.0, 296.0, 297.0]
+    serial = sweep(g.params, g.z0, "kc", vals, **kw)
+    with open_pool(None, 2) as pool:
+        par = sweep(g.params, g.z0, "kc", vals, executor=pool.executor, **kw)
+    assert [p.value for p in serial.points] == [p.value for p in par.points]
+    assert len(serial.points) == 5  # the base value too
+    for a, b in zip(serial.points, par.points, strict=True):
+        assert (a.converged, a.error, a.emax, a.failure) == (b.converged, b.error, b.emax,
+                                                               b.failure)
+        assert np.array_equal(a.z, b.z)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cli_args import add_gait_args, gait_from_args, number, out_dir, strict_json
+from ..parallel import add_scheduler_args
 from ..params import (
     GAIT_KEYS,
     Z_NAMES,
@@ -101,6 +102,7 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="sweep.csv and sweep.png")
     p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
                    help="no progress lines on stderr (alias: --no-progress)")
+    add_scheduler_args(p, workers_default=1)  # the two directions as two tasks
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("reproduce", help="measure every published number again: Figs. 3-8 "
@@ -262,6 +264,7 @@ def cmd_continue(args) -> int:
 
 
 def cmd_sweep(args) -> int:
+    from ..parallel import open_pool
     from .sweeps import plot_sweep, sweep, write_sweep_csv
 
     out = out_dir(args.out)
@@ -272,8 +275,10 @@ def cmd_sweep(args) -> int:
     if n_points > 100_000:
         raise ValueError(f"--from/--to/--step ask for {n_points} points; at most 100000")
     values = np.round(np.arange(args.lo, args.hi + 0.5 * args.step, args.step), 12)
-    res = sweep(gait.params, z0, args.param, values, refine=args.refine,
-                progress=not args.quiet)  # fmt: skip
+    with open_pool(args.scheduler, args.workers) as pool:
+        res = sweep(gait.params, z0, args.param, values, refine=args.refine,
+                    progress=not args.quiet,
+                    executor=pool.executor if pool.kind != "serial" else None)  # fmt: skip
     write_sweep_csv(res, out / "sweep.csv")
     plot_sweep(res, out / "sweep.png")
     for kind in ("converged", "stable"):

@@ -130,37 +130,56 @@ def evaluate(params: Params, z_start, n_strides=PAPER_STRIDES, tol=PAPER_CONV_TO
 def sweep(
     params: Params, z_star, param: str, values, n_strides: int = PAPER_STRIDES,
     tol: float = PAPER_CONV_TOL, polish: bool = True, stop_after: int = STOP_AFTER,
-    refine: int = 0, progress: bool = False, sim_kw: dict | None = None,
+    refine: int = 0, progress: bool = False, sim_kw: dict | None = None, executor=None,
 ) -> SweepResult:  # fmt: skip
     """e_max against ``param`` (gait key, gait units) over ``values``, the paper's way.
 
     The base value is the parameter's value in ``params`` (z_star its fixed point, SI).
     Values above it are visited upwards, values below downwards, each starting from the
     previous value's fixed point (or z_100 where Newton did not polish, else the last start).
+    The two directions are independent after the base value: with an ``executor``
+    (`bound_env.parallel`) they run as two tasks, with the same result.
     """
     if param not in GAIT_KEYS:
         raise ValueError(f"cannot sweep {param!r}: not a gait key")
     base = float(params.to_gait_dict()[param])
     vals = np.unique(np.append(np.asarray(values, dtype=float), base))
-    pts: dict[float, SweepPoint] = {}
-    for chain in (vals[vals >= base], vals[vals <= base][::-1]):
-        z, misses = np.asarray(z_star, dtype=float), 0
-        for v in chain:
-            if v in pts:  # the base value, shared by both directions
-                z = pts[v].z if pts[v].z is not None else z
-                continue
-            pt = _evaluate_at(params, param, v, z, n_strides, tol, polish, sim_kw)
-            pts[v] = pt
-            _say(progress, param, pt)
-            if pt.z is not None and (pt.found or pt.converged):
-                z = pt.z  # the next value starts from this fixed point
-            misses = 0 if (pt.converged or pt.stable) else misses + 1
-            if misses >= stop_after:
-                break
+    z0 = np.asarray(z_star, dtype=float)
+    args = (params, param, n_strides, tol, polish, sim_kw, stop_after, progress)
+    (base_pt,) = _chain(*args, [base], z0, 0)
+    ok = base_pt.converged or base_pt.stable
+    z_up = base_pt.z if base_pt.z is not None and (base_pt.found or base_pt.converged) else z0
+    z_down = base_pt.z if base_pt.z is not None else z0
+    chains = [(vals[vals > base], z_up, 0 if ok else 1), (vals[vals < base][::-1], z_down, 0)]
+    if executor is None:
+        ends = [_chain(*args, list(c), z, m) for c, z, m in chains]
+    else:
+        futs = [executor.submit(_chain, *args, list(c), z, m) for c, z, m in chains]
+        ends = [f.result() for f in futs]
+    pts = {p.value: p for p in [base_pt, *ends[0], *ends[1]]}
     res = SweepResult(param, base, [pts[v] for v in sorted(pts)])
     for kind in ("converged", "stable") if refine else ():
         _refine(res, params, param, kind, refine, n_strides, tol, polish, sim_kw, progress)
     return res
+
+
+def _chain(params, param, n_strides, tol, polish, sim_kw, stop_after, progress, chain, z,
+           misses) -> list:  # fmt: skip
+    """Evaluate ``chain`` in order, each value from the previous one's fixed point; stop
+    after ``stop_after`` consecutive values outside both windows (``misses`` so far)."""
+    pts = []
+    if misses >= stop_after:
+        return pts
+    for v in chain:
+        pt = _evaluate_at(params, param, v, z, n_strides, tol, polish, sim_kw)
+        pts.append(pt)
+        _say(progress, param, pt)
+        if pt.z is not None and (pt.found or pt.converged):
+            z = pt.z  # the next value starts from this fixed point
+        misses = 0 if (pt.converged or pt.stable) else misses + 1
+        if misses >= stop_after:
+            break
+    return pts
 
 
 def _evaluate_at(params, param, v, z, n_strides, tol, polish, sim_kw) -> SweepPoint:

@@ -1,0 +1,104 @@
+"""Speed of the basin atlas (`bound_env.analysis.basin`), run by hand:
+
+    python benchmarks/basin_map.py                 # 64x64 passive and shipped policy
+    python benchmarks/basin_map.py --grid 32 --policy-grid 16   # quicker
+
+Prints starts per second and ratios, all timed in this run on this machine:
+
+- passive, one process (in-process executor) vs a local process pool of 2 workers vs a Dask
+  LocalCluster of 2 single-threaded workers (the same chunks);
+- the shipped policy with the process pool of 2 workers.
+
+Each executor is opened and warmed up first (one small chunk per worker, so that every worker
+has loaded the compiled code), then the whole grid is timed without the chunk cache.
+Cluster start-up is timed separately. The machine's load average is printed beside: other
+jobs on the machine slow every row, and the ratios between rows are what to compare.
+Targets (issue 12): 64x64 passive <= 60 s on 2 cores; shipped policy <= 3 min; 2 workers
+>= 1.6x one process; Dask within 10 % of the process pool.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+from bound_env.analysis.basin import (
+    BasinSpec,
+    axis_values,
+    controller_cycle,
+    parse_axes,
+    parse_range,
+    run_chunk,
+    run_grid,
+)
+from bound_env.parallel import open_pool
+from bound_env.params import load_gait
+
+
+def spec_for(grid: int, controller=None, gait: str = "default", chunk: int = 128) -> BasinSpec:
+    z_star = np.asarray(load_gait(gait).z0, dtype=float)
+    ax = parse_axes("xdot_g,y_g")
+    values = axis_values(ax, parse_range(None, ax, z_star), grid)
+    target = z_star if controller is None else controller_cycle(controller, z_star, gait)[0]
+    return BasinSpec(axes=ax, values=values, z_slice=z_star, z_target=target,
+                     controller=controller, gait=gait, chunk=chunk)
+
+
+def timed(spec: BasinSpec, scheduler: str | None, workers: int) -> tuple[float, float]:
+    """(seconds to open and warm up, seconds for the grid)."""
+    t0 = time.perf_counter()
+    with open_pool(scheduler, workers, quiet=True) as pool:
+        warm = BasinSpec(**{**spec.__dict__, "values": (spec.values[0][:2], spec.values[1][:1]),
+                            "chunk": 1})
+        futs = [pool.executor.submit(run_chunk, warm, i % 2) for i in range(2 * workers)]
+        for f in futs:
+            f.result()
+        t1 = time.perf_counter()
+        res = run_grid(spec, pool.executor)
+        t2 = time.perf_counter()
+    assert res["outcome"].size == spec.n_starts
+    return t1 - t0, t2 - t1
+
+
+def row(name: str, n: int, setup: float, seconds: float, base: float | None) -> None:
+    ratio = f"{base / seconds:5.2f}x" if base else "    1x"
+    print(f"| {name:38s} | {n:6d} | {setup:6.1f} | {seconds:7.1f} | {n / seconds:8.1f} | {ratio} |"
+          f" {os.getloadavg()[0]:4.1f} |", flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--grid", type=int, default=64, help="passive grid (default: 64)")
+    ap.add_argument("--policy-grid", type=int, default=64, help="policy grid (0: skip)")
+    ap.add_argument("--policy", default="default", help="shipped policy name or path")
+    ap.add_argument("--no-dask", action="store_true")
+    args = ap.parse_args()
+    print(f"cores: {os.cpu_count()}, load average at start: {os.getloadavg()}")
+    print("| case | starts | open+warm s | grid s | starts/s | vs first row | load |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    spec = spec_for(args.grid)
+    su, serial = timed(spec, None, 1)
+    row(f"passive {args.grid}x{args.grid}, 1 process", spec.n_starts, su, serial, None)
+    su, pool = timed(spec, None, 2)
+    row(f"passive {args.grid}x{args.grid}, process pool 2", spec.n_starts, su, pool, serial)
+    if not args.no_dask:
+        su, dask = timed(spec, "local:2", 2)
+        row(f"passive {args.grid}x{args.grid}, Dask LocalCluster 2", spec.n_starts, su, dask,
+            serial)
+        print(f"Dask vs process pool: {pool / dask:.2f}x the pool's rate")
+    if args.policy_grid:
+        from agents.policy import load_controller
+
+        ctrl = load_controller(args.policy)
+        pspec = spec_for(args.policy_grid, ctrl, ctrl.env_kwargs.get("gait") or "default")
+        su, ptime = timed(pspec, None, 2)
+        row(f"policy {args.policy} {args.policy_grid}x{args.policy_grid}, pool 2",
+            pspec.n_starts, su, ptime, None)
+    print(f"load average at end: {os.getloadavg()}")
+
+
+if __name__ == "__main__":
+    main()
