@@ -48,9 +48,9 @@ def resolve(policy: str, gait: str | None):
     from .policy import load_controller
 
     ctrl = load_controller(policy, gait=gait)
-    if not callable(getattr(ctrl, "batch", None)) or not hasattr(ctrl, "env_kwargs"):
-        raise ValueError(f"--policy {policy}: basin-map needs 'passive' or a controller with "
-                         "batch(observations) (a trained policy)")
+    if not callable(ctrl) or not hasattr(ctrl, "env_kwargs"):
+        raise ValueError(f"--policy {policy}: basin-map needs 'passive' or a controller "
+                         "with env_kwargs and __call__(obs) or batch(obs)")
     return ctrl, _policy_label(policy), gait or ctrl.env_kwargs.get("gait") or "default"
 
 

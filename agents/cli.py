@@ -53,6 +53,16 @@ def register(sub) -> None:
                         "with the best validation score (validation set disjoint from the "
                         "margins' test set: see configs/ppo.yaml)")
     add_progress_args(p)
+    p.add_argument("--seeds", metavar="S,S,...",
+                   help="one training per seed (runs <name>_s<seed>), each a task of the "
+                        "executor below, then compare over them (agents/multiseed.py)")
+    add_scheduler_args(p, workers_default=2)
+    p.add_argument("--runs-transfer", choices=("shared", "bytes"), default="shared",
+                   help="with --seeds: workers write --runs-dir themselves (shared storage), "
+                        "or send each run back as bytes (default: %(default)s)")
+    p.add_argument("--compare-budget", choices=("test", "quick", "full", "none"),
+                   default="quick", help="with --seeds: margins budget of the final compare "
+                   "(default: %(default)s)")
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("margins", help="stability margins of the passive gait or a policy")
@@ -151,6 +161,8 @@ def cmd_train(args) -> int:
 
     t0 = time.perf_counter()
     n = int(args.n_timesteps) if args.n_timesteps is not None else None
+    if args.seeds is not None:
+        return _train_seeds(args, n, t0)
     run = train(
         config=args.config, env_id=args.env_id, name=args.name, seed=args.seed, n_timesteps=n,
         sets=args.set, resume=args.resume, runs_dir=args.runs_dir, vec_env=args.vec_env,
@@ -169,6 +181,32 @@ def cmd_train(args) -> int:
 def _default(value, default, resume: bool):
     """A schedule option: as given; else on --resume the run's own (None), else ``default``."""
     return value if value is not None or resume else default
+
+
+def _train_seeds(args, n, t0) -> int:
+    from .multiseed import parse_seeds, train_seeds
+
+    seeds = parse_seeds(args.seeds)
+    if args.export:
+        raise ValueError("--export takes one run: export one of the seeds' runs afterwards")
+    kwargs = dict(
+        config=args.config, env_id=args.env_id, n_timesteps=n, sets=args.set,
+        resume=args.resume, vec_env="dummy" if args.vec_env == "auto" else args.vec_env,
+        eval_freq=_default(args.eval_freq, 100_000, args.resume),
+        n_eval_episodes=_default(args.n_eval_episodes, 10, args.resume),
+        save_freq=_default(args.save_freq, 200_000, args.resume),
+    )  # fmt: skip
+    budget = None if args.compare_budget == "none" else args.compare_budget
+    r = train_seeds(seeds, args.name or args.env_id, args.runs_dir, kwargs,
+                    scheduler=args.scheduler, workers=args.workers,
+                    transfer=args.runs_transfer, compare_budget=budget,
+                    progress=not args.no_progress)
+    for run in r["runs"]:
+        print(f"run {run}")
+    if r["compare"]:
+        print(f"compare: {r['compare']}")
+    print(f"({time.perf_counter() - t0:.0f} s)")
+    return 0
 
 
 def export_policy(run_dir, dest, source: str = "final") -> Path:

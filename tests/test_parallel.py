@@ -347,3 +347,28 @@ def test_sweep_directions_as_two_tasks_give_the_serial_sweep():
         assert (a.converged, a.error, a.emax, a.failure) == (b.converged, b.error, b.emax,
                                                                b.failure)
         assert np.array_equal(a.z, b.z)
+
+
+@pytest.mark.slow
+def test_multi_seed_training_on_a_local_cluster_ends_with_compare(tmp_path):
+    """``train --seeds 0,1 --scheduler local:2`` with a tiny budget: one run per seed, sent
+    back as bytes, then the compare page over both seeds."""
+    pytest.importorskip("distributed")
+    sets = ["n_envs=2", "n_steps=256", "batch_size=128", "n_epochs=1",
+            "policy_kwargs=dict(net_arch=dict(pi=[16], vf=[16]))", "callback=[]"]
+    argv = [str(BIN / "bound-env"), "train", "--seeds", "0,1", "--scheduler", "local:2",
+            "--name", "tiny", "--n-timesteps", "2048", "--runs-dir", str(tmp_path / "runs"),
+            "--runs-transfer", "bytes", "--compare-budget", "test", "--eval-freq", "1024",
+            "--n-eval-episodes", "1", "--save-freq", "1024", "--no-progress"]
+    for s in sets:
+        argv += ["--set", s]
+    r = subprocess.run(argv, env=ENV, cwd=tmp_path, capture_output=True, text=True,
+                       timeout=2 * TIMEOUT_S)
+    assert r.returncode == 0, r.stderr[-3000:]
+    for seed in (0, 1):
+        run = tmp_path / "runs" / f"tiny_s{seed}"
+        info = json.loads((run / "run.json").read_text())
+        assert info["seed"] == seed and info["timesteps_done"] >= 2048
+        assert (run / "model.zip").is_file()
+    page = tmp_path / "runs" / "tiny_seeds" / "MARGINS.md"
+    assert page.is_file() and "tiny (2 seeds)" in page.read_text()

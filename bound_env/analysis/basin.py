@@ -17,12 +17,14 @@ Two ways to run a batch of starts:
 - **passive**: `passive_batch`, one compiled function that loops over the starts and over
   their strides with the fast back-end's `bound_env.fast.advance` (the same call
   `bound_env.hybrid.simulate_stride` makes);
-- **a controller** with ``batch(obs) -> actions`` and ``env_kwargs`` (e.g. a trained policy,
-  `agents.policy.MLPController`): `controller_batch`, the native vector env's kernel
-  (`bound_env.task.PassiveBoundTask.step`) with one batched controller call per control
-  interval (Python runs once per interval for the whole batch, and once per stride for a
-  robot's restart). Each stride restarts the control intervals at its apex (the robot is reset at
-  the apex it reached), so the closed-loop apex map is the one `agents.margins` measures.
+- **a controller** with ``env_kwargs`` and ``batch(obs) -> actions`` (a trained policy,
+  `agents.policy.MLPController`) or the per-observation protocol of `agents.margins`
+  (``__call__(obs)``, optional ``on_apex``; then one copy per robot): `controller_batch`,
+  the native vector env's kernel (`bound_env.task.PassiveBoundTask.step`) with one
+  controller call per control interval for the whole batch (Python runs once per interval,
+  and once per stride for a robot's restart). Each stride restarts the control intervals at
+  its apex (the robot is reset at the apex it reached), so the closed-loop apex map is the
+  one `agents.margins` measures.
 
 The grid is cut into chunks of ``chunk`` starts (row-major), one task each, through any
 executor (`bound_env.parallel`). A chunk's result depends only on its starts, so the map is
@@ -161,13 +163,14 @@ def controller_batch(controller, Z, z_ref, gait: str = "default", max_strides=DE
         task.reset_robot(b, i, Z[i])
     out = _empty_outputs(n, max_strides)
     out["z_last"][:] = Z
+    act = _actions(controller, Z)
     live = np.ones(n, dtype=np.bool_)
     stride = np.zeros(n, dtype=np.int64)  # strides completed
     steps = np.zeros(n, dtype=np.int64)  # control intervals in the current stride
     max_steps = int(math.ceil(NO_APEX_TIME / task.dt)) + 2
     zi = np.array(_Z_IN_Y)
     while live.any():
-        b.actions[:] = controller.batch(b.obs)
+        b.actions[:] = act(b.obs, live)
         b.active[:] = live
         task.step(b)
         steps[live] += 1
@@ -196,8 +199,37 @@ def controller_batch(controller, Z, z_ref, gait: str = "default", max_strides=DE
                 live[i] = False
             else:
                 task.reset_robot(b, i, z1)
+                act.restart(i, z1)
                 steps[i] = 0
     return out
+
+
+class _actions:
+    """One call per control interval for the whole batch: ``controller.batch(obs)`` if it has
+    one; else one copy of the controller per robot, called row by row, with ``on_apex(z, 0.0)``
+    at each stride's start apex when it has that hook (stride-level controllers)."""
+
+    def __init__(self, controller, Z):
+        self.controller = controller
+        self.batched = callable(getattr(controller, "batch", None))
+        if not self.batched:
+            import copy
+
+            self.copies = [copy.deepcopy(controller) for _ in range(len(Z))]
+            for i, z in enumerate(Z):
+                self.restart(i, z)
+
+    def restart(self, i: int, z) -> None:
+        if not self.batched and hasattr(self.copies[i], "on_apex"):
+            self.copies[i].on_apex(np.asarray(z, dtype=float), 0.0)
+
+    def __call__(self, obs, live) -> np.ndarray:
+        if self.batched:
+            return self.controller.batch(obs)
+        a = np.zeros(len(obs))
+        for i in np.flatnonzero(live):
+            a[i] = self.copies[i](obs[i])
+        return a
 
 
 def _fell(out, i, code, stride, phase):
