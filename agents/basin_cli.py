@@ -36,6 +36,9 @@ def register(sub) -> None:
     add_scheduler_args(p, workers_default=2)
     p.add_argument("--out", required=True, help="directory for basin.npz, basin.png and the "
                    "chunk cache")
+    p.add_argument("--png", metavar="PATH",
+                   help="also write the figure to PATH (e.g. docs/basin_passive_xdot_y.png); "
+                        "nothing outside --out is written without it")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=cmd_basin_map)
 
@@ -62,6 +65,11 @@ def cmd_basin_map(args) -> int:
                   gait=gait, max_strides=args.strides, chunk=args.chunk,
                   scheduler=args.scheduler, workers=args.workers, out=args.out,
                   progress=sys.stderr.isatty(), overlay_passive=not args.no_overlay)
+    if args.png:
+        from bound_env.cache import atomic_write
+
+        atomic_write(args.png, (Path(args.out) / "basin.png").read_bytes())
+        s["png"] = str(args.png)
     if args.json:
         print(json.dumps(s))
     else:
