@@ -33,7 +33,7 @@ from bound_env.parallel import (
 ROOT = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
-TIMEOUT_S = 240  # any single cluster run
+TIMEOUT_S = 600  # any single run (generous: the machine may be loaded by other jobs)
 
 
 # -- the executor module -------------------------------------------------------------------------
@@ -82,6 +82,19 @@ def spawn(args, log: Path) -> subprocess.Popen:
     """A process in its own process group (so that it and its children can be killed)."""
     return subprocess.Popen(args, stdout=log.open("w"), stderr=subprocess.STDOUT, env=ENV,
                             cwd=ROOT, start_new_session=True)
+
+
+def run(argv, timeout=TIMEOUT_S, cwd=ROOT) -> subprocess.CompletedProcess:
+    """Run a command in its own process group; the whole group (pool workers, a
+    LocalCluster's processes) is killed afterwards, also on a timeout."""
+    p = subprocess.Popen([str(a) for a in argv], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=ENV, cwd=cwd,
+                         start_new_session=True)
+    try:
+        out, err = p.communicate(timeout=timeout)
+    finally:
+        kill(p)
+    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 def kill(p: subprocess.Popen, sig=signal.SIGKILL) -> None:
@@ -137,9 +150,8 @@ def assert_same_map(a: Path, b: Path) -> None:
 
 
 def basin_cli(out: Path, *extra) -> subprocess.CompletedProcess:
-    return subprocess.run([str(BIN / "bound-env"), "basin-map", "--grid", "12", "--chunk", "12",
-                           "--out", str(out), "--json", *extra], env=ENV, cwd=ROOT,
-                          capture_output=True, text=True, timeout=TIMEOUT_S)
+    return run([BIN / "bound-env", "basin-map", "--grid", "12", "--chunk", "12", "--out", out,
+                "--json", *extra])
 
 
 # -- the basin atlas -----------------------------------------------------------------------------
@@ -239,9 +251,8 @@ def test_local_cluster_margins_equal_the_serial_run(tmp_path):
     pytest.importorskip("distributed")
     runs = {}
     for name, extra in (("serial", ["--workers", "1"]), ("dask", ["--scheduler", "local:2"])):
-        p = subprocess.run([str(BIN / "bound-env"), "margins", "--policy", "passive", "--budget",
-                            "quick", "--out", str(tmp_path / name), "--json", *extra], env=ENV,
-                           cwd=ROOT, capture_output=True, text=True, timeout=TIMEOUT_S)
+        p = run([BIN / "bound-env", "margins", "--policy", "passive", "--budget", "quick",
+                 "--out", tmp_path / name, "--json", *extra])
         assert p.returncode == 0, p.stderr
         runs[name] = json.loads(p.stdout)
         runs[name].pop("seconds")
@@ -300,15 +311,12 @@ def test_killed_client_resumes_with_the_missing_tasks_only(tmp_path):
         kill(client)
     before = cache.read_text().splitlines()
     keys_before = [json.loads(line)["key"] for line in before if line.strip()]
-    r = subprocess.run(argv + ["--workers", "2"], env=ENV, cwd=ROOT, capture_output=True,
-                       text=True, timeout=TIMEOUT_S)
+    r = run(argv + ["--workers", "2"])
     assert r.returncode == 0, r.stderr
     after = [json.loads(line)["key"] for line in cache.read_text().splitlines() if line.strip()]
     assert after[:len(keys_before)] == keys_before
     assert len(after) == len(set(after)), "a cached task ran again"
-    full = subprocess.run(argv[:-3] + ["--out", str(tmp_path / "full"), "--json",
-                                       "--workers", "2"], env=ENV, cwd=ROOT,
-                          capture_output=True, text=True, timeout=TIMEOUT_S)
+    full = run(argv[:-3] + ["--out", tmp_path / "full", "--json", "--workers", "2"])
     a, b = json.loads(r.stdout), json.loads(full.stdout)
     a.pop("seconds"), b.pop("seconds")
     assert a == b
@@ -362,13 +370,12 @@ def test_multi_seed_training_on_a_local_cluster_ends_with_compare(tmp_path):
             "--n-eval-episodes", "1", "--save-freq", "1024", "--no-progress"]
     for s in sets:
         argv += ["--set", s]
-    r = subprocess.run(argv, env=ENV, cwd=tmp_path, capture_output=True, text=True,
-                       timeout=2 * TIMEOUT_S)
+    r = run(argv, timeout=3 * TIMEOUT_S, cwd=tmp_path)
     assert r.returncode == 0, r.stderr[-3000:]
     for seed in (0, 1):
-        run = tmp_path / "runs" / f"tiny_s{seed}"
-        info = json.loads((run / "run.json").read_text())
+        rdir = tmp_path / "runs" / f"tiny_s{seed}"
+        info = json.loads((rdir / "run.json").read_text())
         assert info["seed"] == seed and info["timesteps_done"] >= 2048
-        assert (run / "model.zip").is_file()
+        assert (rdir / "model.zip").is_file()
     page = tmp_path / "runs" / "tiny_seeds" / "MARGINS.md"
     assert page.is_file() and "tiny (2 seeds)" in page.read_text()
