@@ -61,7 +61,7 @@ RETURNED, FELL, UNDECIDED = 0, 1, 2
 OUTCOMES = ("returned", "fell", "undecided")
 REASONS = ("",) + FAILURES  # reason code 0: none; k >= 1: FAILURES[k - 1]
 # Default half-widths of the slice around the cycle, paper units [m, deg, deg, m/s, deg/s, deg/s]
-DEFAULT_HALF_WIDTH = np.array([0.04, 6.0, 10.0, 0.4, 120.0, 120.0])
+DEFAULT_HALF_WIDTH = np.array([0.05, 10.0, 10.0, 0.6, 200.0, 200.0])
 CYCLE_STRIDES = 400  # iterations to settle a controller's cycle
 CYCLE_TOL = 1e-11  # successive apex states closer than this: settled (SI)
 _Z_IN_Y = (1, 2, 3, 4, 6, 7)  # z = y[_Z_IN_Y] at an apex (eq. 17)
