@@ -75,20 +75,22 @@ def main() -> None:
     ap.add_argument("--policy-grid", type=int, default=64, help="policy grid (0: skip)")
     ap.add_argument("--policy", default="default", help="shipped policy name or path")
     ap.add_argument("--no-dask", action="store_true")
+    ap.add_argument("--repeat", type=int, default=1, help="rounds of the passive cases")
     args = ap.parse_args()
     print(f"cores: {os.cpu_count()}, load average at start: {os.getloadavg()}")
     print("| case | starts | open+warm s | grid s | starts/s | vs first row | load |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
     spec = spec_for(args.grid)
-    su, serial = timed(spec, None, 1)
-    row(f"passive {args.grid}x{args.grid}, 1 process", spec.n_starts, su, serial, None)
-    su, pool = timed(spec, None, 2)
-    row(f"passive {args.grid}x{args.grid}, process pool 2", spec.n_starts, su, pool, serial)
-    if not args.no_dask:
-        su, dask = timed(spec, "local:2", 2)
-        row(f"passive {args.grid}x{args.grid}, Dask LocalCluster 2", spec.n_starts, su, dask,
-            serial)
-        print(f"Dask vs process pool: {pool / dask:.2f}x the pool's rate")
+    g = f"{args.grid}x{args.grid}"
+    for _ in range(args.repeat):  # alternating, so that a change of load hits every case
+        su, serial = timed(spec, None, 1)
+        row(f"passive {g}, 1 process", spec.n_starts, su, serial, None)
+        su, pool = timed(spec, None, 2)
+        row(f"passive {g}, process pool 2", spec.n_starts, su, pool, serial)
+        if not args.no_dask:
+            su, dask = timed(spec, "local:2", 2)
+            row(f"passive {g}, Dask LocalCluster 2", spec.n_starts, su, dask, serial)
+            print(f"Dask vs process pool: {pool / dask:.2f}x the pool's rate")
     if args.policy_grid:
         from agents.policy import load_controller
 
