@@ -13,6 +13,7 @@ torch in the worker processes of `agents.margins`.
 from __future__ import annotations
 
 import hashlib
+import math
 import pickle
 import sys
 from collections.abc import Callable
@@ -91,9 +92,10 @@ class MLPController:
 
     def batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions for a batch of observations (one row each), as ``__call__`` row by row (to
-        rounding). Each row is computed alone, in a fixed order, without BLAS threads: a row's
-        action does not depend on the other rows or on the machine's load."""
-        act = _ACTIVATIONS[self.activation]
+        rounding). Each row is computed alone, in a fixed order, without BLAS threads, and tanh
+        element by element (NumPy's vectorized tanh rounds differently in and after its SIMD
+        blocks): a row's action depends neither on the other rows nor on the machine's load."""
+        act = _tanh_elements if self.activation == "Tanh" else _ACTIVATIONS[self.activation]
         x = np.asarray(obs, dtype=np.float64)
         if self.obs_index is not None:
             x = x[:, self.obs_index]
@@ -119,10 +121,20 @@ class MLPController:
         return h.hexdigest()[:16]
 
 
-@nb.njit(cache=True, fastmath=True)
+@nb.njit(cache=True)
+def _tanh_elements(x):
+    """tanh of each element by the same scalar routine, wherever it sits in the array."""
+    out = np.empty_like(x)
+    flat_in, flat_out = x.ravel(), out.ravel()
+    for i in range(flat_in.size):
+        flat_out[i] = math.tanh(flat_in[i])
+    return out
+
+
+@nb.njit(cache=True)
 def _affine_rows(x, W, b):
-    """x @ W.T + b, one row at a time (row i depends on x[i] only; fixed summation order
-    for a given build, vectorized)."""
+    """x @ W.T + b, one row at a time, each sum in index order (no fast-math: a vectorized
+    sum would depend on the row's alignment in memory), so row i depends on x[i] only."""
     out = np.empty((x.shape[0], W.shape[0]))
     for i in range(x.shape[0]):
         for j in range(W.shape[0]):

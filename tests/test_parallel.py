@@ -380,3 +380,33 @@ def test_multi_seed_training_on_a_local_cluster_ends_with_compare(tmp_path):
         assert (rdir / "model.zip").is_file()
     page = tmp_path / "runs" / "tiny_seeds" / "MARGINS.md"
     assert page.is_file() and "tiny (2 seeds)" in page.read_text()
+
+
+@pytest.mark.slow
+def test_per_observation_controllers_run_one_copy_per_robot():
+    """A controller without batch() (the margins protocol, with on_apex) gives the same map
+    as the same law with batch()."""
+    from agents.policy import load_controller
+    from bound_env.analysis.basin import BasinSpec, run_chunk
+    from bound_env.params import load_gait
+
+    class RowByRow:  # the shipped policy, seen through __call__ only
+        def __init__(self, inner):
+            self.inner, self.env_kwargs, self.starts = inner, inner.env_kwargs, []
+
+        def __call__(self, obs):
+            return self.inner.batch(np.asarray(obs)[None])[0]
+
+        def on_apex(self, z, t):
+            self.starts.append(np.array(z))
+
+        def fingerprint(self):
+            return "row-by-row " + self.inner.fingerprint()
+
+    ctrl = load_controller("ppo-v1")
+    zs = np.asarray(load_gait("default").z0)
+    vals = (zs[3] + np.linspace(-0.2, 0.2, 3), zs[0] + np.linspace(-0.01, 0.01, 2))
+    a = run_chunk(BasinSpec((3, 0), vals, zs, zs, controller=ctrl, max_strides=30), 0)
+    b = run_chunk(BasinSpec((3, 0), vals, zs, zs, controller=RowByRow(ctrl), max_strides=30), 0)
+    for k in ("outcome", "reason", "strides", "phase", "z_last"):
+        assert np.array_equal(a[k], b[k]), k
