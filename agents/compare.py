@@ -136,6 +136,9 @@ MEASURES = [
     ("terrain_sigma50_deg", "rough terrain **σ50** [deg] (survival crosses 1/2)",
      lambda r: r.get("terrain_sigma50_deg"), 3, True),
     ("emax", "**emax** (closed-loop apex map)", lambda r: r["emax"], 4, False),
+    ("fp_residual", "closed-loop fixed point residual max\\|P(z) − z\\| (> 1e-6: no cycle "
+     "found, the other rows measure around a non-periodic start)",
+     lambda r: r["fixed_point_residual"], 2, False),
     ("slope_lo", "slope window α, low edge [deg] (survive 50 strides)",
      lambda r: r["slope_window_deg"][0], 4, False),
     ("slope_hi", "slope window α, high edge [deg]", lambda r: r["slope_window_deg"][1], 4,
@@ -218,9 +221,14 @@ def _provenance(g) -> list[str]:
         p = Path(policy)
         info_path = p / "run.json"
         if not info_path.is_file():
-            runs = g["runs"]
-            desc = next((r.get("description") for r in runs if r.get("source") == policy), None)
-            lines.append(desc or f"controller `{policy}` (see its documentation)")
+            from .policy import CONTROLLERS
+
+            what = CONTROLLERS.get(policy, (None, None))[1]
+            spec = ROOT / "configs" / "controllers" / f"{policy}.yaml"
+            lines.append(
+                f"controller `{policy}`" + (f": {what}" if what else "")
+                + (f"; spec `{_rel(str(spec))}`" if spec.is_file() else "")
+                + "; designed, not trained: no seeds, no selection")
             continue
         info = json.loads(info_path.read_text())
         t = info.get("wall_time_s")
@@ -243,9 +251,12 @@ def render_markdown(groups, plots, curves, budget, note: str = "") -> str:
 
     labels = [g["label"] for g in groups]
     base = groups[0]
+    def trained(g) -> bool:
+        return all((Path(p) / "run.json").is_file() for p in g["policies"])
+
     head = "| measure | " + " | ".join(
         f"{g['label']} ({len(g['runs'])} seed{'s' if len(g['runs']) > 1 else ''})"
-        if g["policies"] != ["passive"] else g["label"] for g in groups) + " |"
+        if trained(g) else g["label"] for g in groups) + " |"
     sep = "| --- |" + " --- |" * len(groups)
     rows = ["| gait | " + " | ".join(f"`{g['gait']}`" for g in groups) + " |"]
     for name, title, fn, digits, ratio in MEASURES:
