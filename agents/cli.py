@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from bound_env.cli_args import out_dir, strict_json
+from bound_env.cli_args import add_json_arg, out_dir, say, strict_json
 
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_HELP = ("'passive', a shipped policy ('default', 'literal-cycle'), another built-in "
@@ -63,6 +63,7 @@ def register(sub) -> None:
     p.add_argument("--compare-budget", choices=("test", "quick", "full", "none"),
                    default="quick", help="with --seeds: margins budget of the final compare "
                    "(default: %(default)s)")
+    add_json_arg(p, "the run summary (run.json)")
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("margins", help="stability margins of the passive gait or a policy")
@@ -114,6 +115,7 @@ def register(sub) -> None:
                    help="where MARGINS.md and its PNGs go (default: the --out folder; give "
                         "--docs docs to update the repository's page)")
     add_progress_args(p)
+    add_json_arg(p)
     p.add_argument("--note", default="", help="a paragraph for the top of the page (e.g. why "
                    "the budget is not the full one)")
     p.set_defaults(func=cmd_compare)
@@ -171,10 +173,14 @@ def cmd_train(args) -> int:
         save_freq=_default(args.save_freq, 200_000, args.resume),
         progress_bar=not args.no_progress,
     )  # fmt: skip
-    print(f"run {run}  ({time.perf_counter() - t0:.0f} s)")
+    say(args, f"run {run}  ({time.perf_counter() - t0:.0f} s)")
+    dest = None
     if args.export:
         dest = export_policy(run, args.export, source=args.export_from)
-        print(f"exported to {dest}")
+        say(args, f"exported to {dest}")
+    if args.json:
+        info = json.loads((Path(run) / "run.json").read_text())
+        print(strict_json({"run": str(run), "export": str(dest) if dest else None, **info}))
     return 0
 
 
@@ -273,5 +279,8 @@ def cmd_compare(args) -> int:
                    docs=out_dir(args.docs or args.out, "--docs"),
                    progress=sys.stderr.isatty() and not args.no_progress, note=args.note,
                    scheduler=args.scheduler)
-    print(f"wrote {path}")
+    say(args, f"wrote {path}")
+    if args.json:
+        print(strict_json({"page": str(path), "out": args.out, "budget": args.budget,
+                           "entries": [e[0] for e in entries]}))
     return 0

@@ -38,6 +38,19 @@ def add_progress_args(parser):
                         help="no progress output (alias: --quiet)")
 
 
+def add_json_arg(parser, what="a JSON summary"):
+    """``--json``: print ``what`` on stdout as strict JSON (`strict_json`); the human-readable
+    lines then go to stderr."""
+    parser.add_argument("--json", action="store_true", help=f"print {what} (strict JSON)")
+
+
+def say(args, *parts) -> None:
+    """A human-readable line: stdout, or stderr under ``--json`` (stdout is then JSON only)."""
+    import sys
+
+    print(*parts, file=sys.stderr if getattr(args, "json", False) else sys.stdout)
+
+
 def strict_json(obj) -> str:
     """JSON text with no NaN/Infinity tokens: a non-finite number becomes null, and its path is
     listed under ``"nonfinite"`` (the reason: "nan", "inf" or "-inf")."""
@@ -60,7 +73,7 @@ def strict_json(obj) -> str:
     out = clean(obj, "")
     if reasons and isinstance(out, dict):
         out["nonfinite"] = {**(out.get("nonfinite") or {}), **reasons}
-    return json.dumps(out, allow_nan=False)
+    return json.dumps(out, allow_nan=False, default=str)  # paths and the like as text
 
 
 def out_dir(path, flag: str = "--out"):

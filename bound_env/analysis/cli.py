@@ -13,7 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli_args import add_gait_args, gait_from_args, number, out_dir, strict_json
+from ..cli_args import (
+    add_gait_args,
+    add_json_arg,
+    gait_from_args,
+    number,
+    out_dir,
+    say,
+    strict_json,
+)
 from ..parallel import add_scheduler_args
 from ..params import (
     GAIT_KEYS,
@@ -88,6 +96,7 @@ def register(sub) -> None:
     )
     p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
                    help="no progress lines on stderr (alias: --no-progress)")
+    add_json_arg(p)
     p.set_defaults(func=cmd_continue)
 
     p = sub.add_parser("sweep", help="e_max against alpha_deg or kc, the paper's way "
@@ -103,6 +112,7 @@ def register(sub) -> None:
     p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
                    help="no progress lines on stderr (alias: --no-progress)")
     add_scheduler_args(p, workers_default=1)  # the two directions as two tasks
+    add_json_arg(p)
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("reproduce", help="measure every published number again: Figs. 3-8 "
@@ -118,6 +128,7 @@ def register(sub) -> None:
                    help="copy REPRODUCTION.md and the PNG figures to DIR (e.g. docs)")
     p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
                    help="no progress lines on stderr (alias: --no-progress)")
+    add_json_arg(p)
     p.set_defaults(func=cmd_reproduce)
 
 
@@ -254,10 +265,15 @@ def cmd_continue(args) -> int:
     if branch.points:
         plot_branch(branch, out / "branch.png")
     flags = [(p.value, n) for p in branch.points for n in ("fold", "pd", "ns") if getattr(p, n)]
-    print(f"{len(branch.points)} points, {branch.reason}; wrote {out / 'branch.csv'}"
-          + (f" and {out / 'branch.png'}" if branch.points else ""))  # fmt: skip
+    say(args, f"{len(branch.points)} points, {branch.reason}; wrote {out / 'branch.csv'}"
+        + (f" and {out / 'branch.png'}" if branch.points else ""))  # fmt: skip
     for v, n in flags:
-        print(f"  {n} between the previous point and {args.param} = {v:.6g}")
+        say(args, f"  {n} between the previous point and {args.param} = {v:.6g}")
+    if args.json:
+        print(strict_json({"param": args.param, "points": len(branch.points),
+                           "reason": branch.reason, "reached": bool(branch.reached),
+                           "flags": [{"kind": n, "value": v} for v, n in flags],
+                           "csv": str(out / "branch.csv")}))
     # a fold or any other end of the branch is a result (reported above), not an error;
     # only a branch that could not start is one
     return 0 if branch.points else 1
@@ -281,12 +297,17 @@ def cmd_sweep(args) -> int:
                     executor=pool.executor if pool.kind != "serial" else None)  # fmt: skip
     write_sweep_csv(res, out / "sweep.csv")
     plot_sweep(res, out / "sweep.png")
+    windows = {}
     for kind in ("converged", "stable"):
         w = res.window(kind)
+        windows[kind] = [float(w[0]), float(w[1])] if w else None
         label = "100-stride convergence" if kind == "converged" else "e_max < 1"
-        print(f"{label} window in {args.param}: " +
-              (f"{w[0]:.6g} .. {w[1]:.6g}" if w else "none"))  # fmt: skip
-    print(f"wrote {out / 'sweep.csv'} and {out / 'sweep.png'}")
+        say(args, f"{label} window in {args.param}: " +
+            (f"{w[0]:.6g} .. {w[1]:.6g}" if w else "none"))  # fmt: skip
+    say(args, f"wrote {out / 'sweep.csv'} and {out / 'sweep.png'}")
+    if args.json:
+        print(strict_json({"param": args.param, "points": len(values), "windows": windows,
+                           "csv": str(out / "sweep.csv"), "png": str(out / "sweep.png")}))
     return 0
 
 
@@ -296,6 +317,8 @@ def cmd_reproduce(args) -> int:
     res = run(args.out, quick=args.quick, force=args.force, progress=not args.quiet,
               write_gaits=args.write_gaits, docs_dir=args.docs)  # fmt: skip
     hits = ", ".join(res["cache"]["hits"]) or "none"
-    print(f"wrote {res['report']} ({len(res['figures'])} figure files) in "
-          f"{res['wall_seconds']:.1f} s; cached stages: {hits}")
+    say(args, f"wrote {res['report']} ({len(res['figures'])} figure files) in "
+        f"{res['wall_seconds']:.1f} s; cached stages: {hits}")
+    if args.json:
+        print(strict_json(res))
     return 0
