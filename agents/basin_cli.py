@@ -3,13 +3,13 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 
 def register(sub) -> None:
     from bound_env.analysis.basin import DEFAULT_CHUNK, DEFAULT_GRID, DEFAULT_STRIDES
+    from bound_env.cli_args import add_progress_args
     from bound_env.parallel import add_scheduler_args
 
     p = sub.add_parser("basin-map", help="2-D basin map (basin.npz, basin.png) of the passive "
@@ -40,6 +40,7 @@ def register(sub) -> None:
                    help="also write the figure to PATH (e.g. docs/basin_passive_xdot_y.png); "
                         "nothing outside --out is written without it")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    add_progress_args(p)
     p.set_defaults(func=cmd_basin_map)
 
 
@@ -59,19 +60,21 @@ def resolve(policy: str, gait: str | None):
 
 def cmd_basin_map(args) -> int:
     from bound_env.analysis.basin import basin_map, summary_text
+    from bound_env.cli_args import strict_json
 
     controller, label, gait = resolve(args.policy, args.gait)
     s = basin_map(controller, label, axes=args.axes, grid=args.grid, ranges=args.ranges,
                   gait=gait, max_strides=args.strides, chunk=args.chunk,
                   scheduler=args.scheduler, workers=args.workers, out=args.out,
-                  progress=sys.stderr.isatty(), overlay_passive=not args.no_overlay)
+                  progress=sys.stderr.isatty() and not args.no_progress,
+                  overlay_passive=not args.no_overlay)
     if args.png:
         from bound_env.cache import atomic_write
 
         atomic_write(args.png, (Path(args.out) / "basin.png").read_bytes())
         s["png"] = str(args.png)
     if args.json:
-        print(json.dumps(s))
+        print(strict_json(s))
     else:
         print(summary_text(s))
         print(f"wrote {Path(args.out) / 'basin.npz'} and {Path(args.out) / 'basin.png'}")
