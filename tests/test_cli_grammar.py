@@ -16,8 +16,14 @@ from bound_env.cli import main
 from bound_env.cli_args import strict_json
 
 ROOT = Path(__file__).resolve().parent.parent
-_SKIP = shutil.ignore_patterns(".git", ".venv", "out", "runs", "build", "dist", "reproduce",
-                               "*.egg-info", ".pytest_cache", ".ruff_cache")
+_ANYWHERE = shutil.ignore_patterns(".git", "*.egg-info", ".pytest_cache", ".ruff_cache")
+_TOP = {".venv", "out", "runs", "build", "dist", "reproduce"}  # outputs at the top level only
+
+
+def _SKIP(folder, names):
+    """copytree's ignore: output folders only at the top of the checkout."""
+    top = {n for n in names if n in _TOP} if Path(folder) == ROOT else set()
+    return set(_ANYWHERE(folder, names)) | top
 
 
 def _no_nan(token):

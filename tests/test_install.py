@@ -22,9 +22,16 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-_SKIP = shutil.ignore_patterns(".git", ".venv", "out", "runs", "build", "dist", "reproduce",
-                               "__pycache__", "*.egg-info", "*.nbi", "*.nbc", "*.pyc",
-                               ".pytest_cache", ".ruff_cache")
+_ANYWHERE = shutil.ignore_patterns(".git", "__pycache__", "*.egg-info", "*.nbi", "*.nbc",
+                                   "*.pyc", ".pytest_cache", ".ruff_cache")
+_TOP = {".venv", "out", "runs", "build", "dist", "reproduce"}  # outputs at the top level only
+
+
+def _SKIP(folder, names):
+    """copytree's ignore: caches anywhere, output folders only at the top of the checkout (a
+    package may be called ``reproduce`` too)."""
+    top = {n for n in names if n in _TOP} if Path(folder) == ROOT else set()
+    return set(_ANYWHERE(folder, names)) | top
 # site-packages entries of this project itself (an editable install), hidden from the fresh venv
 _OWN = ("bound_env", "agents", "__editable__", "_bound_env", "__pycache__")
 
