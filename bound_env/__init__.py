@@ -20,7 +20,7 @@ Importing the package registers these Gymnasium environments:
     env = gym.make("PassiveBound-v0")
 
 Gymnasium itself is imported lazily by those modules; the simulator (`bound_env.params`,
-`bound_env.hybrid`, `bound_env.fast`) never needs it.
+`bound_env.stride`, `bound_env.fast`) never needs it.
 """
 
 from .resources import configure_numba_cache

@@ -19,8 +19,8 @@ PLUGIN_GROUP = "bound_env.commands"  # entry points: name = "module:register"
 
 
 def cmd_stride(args) -> int:
-    from .hybrid import simulate_stride
     from .params import parse_z
+    from .stride import simulate_stride
 
     gait = gait_from_args(args)
     z0 = parse_z(args.z, "--z")

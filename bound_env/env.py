@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces, utils
 
-from .hybrid import FAIL_FIRST
+from .events import FAIL_FIRST
 from .params import P_ALPHA, Params
 from .task import (
     DEFAULT_ALIVE_REWARD,

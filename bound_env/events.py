@@ -146,7 +146,8 @@ def apply_events(y, aux, flags, fired):
     """Resets for the guards that fired at state y; updates aux (contacts, toes) and flags.
 
     Returns CONTINUE, APEX or a failure code. Failures take precedence, then liftoffs, then
-    touchdowns (which place the toe at x_hip + l_bar sin(gamma_td)), then the apex.
+    touchdowns (which place the toe at x_hip + l_bar sin(gamma_td)), then the apex, which
+    ends the stride and starts the next one (the touched-down flags are cleared).
     """
     if fired[G_GROUND_B]:
         return F_GROUND_B
@@ -184,6 +185,9 @@ def apply_events(y, aux, flags, fired):
         aux[A_CF] = 1.0
         flags[FL_TOUCHED_F] = True
     if fired[G_APEX] and apex_armed(aux, flags):
+        # the stride ends here and the next one starts: no leg has touched down in it yet
+        flags[FL_TOUCHED_B] = False
+        flags[FL_TOUCHED_F] = False
         return APEX
     return CONTINUE
 

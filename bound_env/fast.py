@@ -4,11 +4,16 @@ Adaptive DOP853 steps (`bound_env._dop853`), guard sign changes checked after ev
 step, each crossing located as a root of its guard on the step's 7th-order dense output,
 resets applied by the same compiled `bound_env.events.apply_events` the reference back-end
 uses. No Python runs between the start and the end of a stride (or of a control interval).
+
+Like scipy's ``OdeSolver``, `advance` keeps its state in a few named buffers rather than a long
+argument list: the hybrid state (``y``, ``aux``, ``flags``, updated in place), the solver
+`Options`, an `EventLog` (events and apex states passed) and a `Recorder` (sampled states).
 """
 
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 
@@ -25,8 +30,6 @@ from .events import (
     CONTINUE,
     F_INTEGRATION,
     F_NON_FINITE,
-    FL_TOUCHED_B,
-    FL_TOUCHED_F,
     GUARD_DIRECTION,
     GUARD_NAMES,
     N_GUARDS,
@@ -47,6 +50,31 @@ MAX_STEPS = 200_000  # accepted + rejected steps in one call; beyond that: integ
 ROOT_ITERATIONS = 60  # bound on the root finder's iterations per guard
 EVENT_CAPACITY = 256  # events logged per call
 H_MIN = 1e-14  # smallest step [s] before the integration is declared failed
+
+# Solver options: tolerances and whether an apex ends the call (else it starts a new stride).
+Options = namedtuple("Options", ("rtol", "atol", "stop_at_apex"))
+# Events of one call: time [s], guard index, phase index after it; full states of the apexes
+# passed (up to the capacity); ``count`` = [events logged, apexes passed] (int64[2]).
+EventLog = namedtuple("EventLog", ("t", "guard", "phase", "apex_y", "count"))
+# Samples every ``dt`` seconds (``dt`` <= 0: off) and at every event: time, state, phase index,
+# total energy [J]; ``count`` = [samples taken] (int64[1]).
+Recorder = namedtuple("Recorder", ("dt", "t", "y", "phase", "energy", "count"))
+EV_LOGGED, EV_APEXES = 0, 1  # entries of EventLog.count
+
+
+@jit
+def event_log(capacity, apex_y):
+    """An empty `EventLog` for ``capacity`` events, storing apex states into ``apex_y``."""
+    return EventLog(np.empty(capacity), np.empty(capacity, dtype=np.int64),
+                    np.empty(capacity, dtype=np.int64), apex_y, np.zeros(2, dtype=np.int64))
+
+
+@jit
+def recorder(capacity, dt):
+    """An empty `Recorder` for ``capacity`` samples every ``dt`` seconds (``dt`` <= 0: off)."""
+    return Recorder(dt, np.empty(capacity), np.empty((capacity, 8)),
+                    np.empty(capacity, dtype=np.int64), np.empty(capacity),
+                    np.zeros(1, dtype=np.int64))
 
 
 @jit
@@ -84,29 +112,38 @@ def _locate(i, t_a, g_a, t_b, g_b, F, y_old, t_old, h, aux, flags, ybuf, gbuf):
 
 
 @jit
-def _record(t, y, aux, rec_t, rec_y, rec_ph, rec_e, n_rec):
-    if n_rec < rec_t.shape[0]:
-        rec_t[n_rec] = t
-        rec_y[n_rec, :] = y
-        rec_ph[n_rec] = phase_index(aux)
-        rec_e[n_rec] = total_energy(y, aux)
-        return n_rec + 1
-    return n_rec
+def _record(rec, t, y, aux):
+    k = rec.count[0]
+    if k < rec.t.shape[0]:
+        rec.t[k] = t
+        rec.y[k, :] = y
+        rec.phase[k] = phase_index(aux)
+        rec.energy[k] = total_energy(y, aux)
+        rec.count[0] = k + 1
 
 
 @jit
-def advance(
-    y, aux, flags, t, t_end, stop_at_apex, rtol, atol, h,
-    ev_t, ev_g, ev_ph, apex_y, rec_dt, rec_t, rec_y, rec_ph, rec_e,
-):  # fmt: skip
-    """Integrate the hybrid system from (t, y) to the apex (if ``stop_at_apex``) or t_end.
+def _log_events(log, t, fired, ph):
+    for i in range(N_GUARDS):
+        k = log.count[EV_LOGGED]
+        if fired[i] and k < log.t.shape[0]:
+            log.t[k] = t
+            log.guard[k] = i
+            log.phase[k] = ph
+            log.count[EV_LOGGED] = k + 1
 
-    ``y``, ``aux`` (contacts, toes) and ``flags`` are updated in place. Events are logged in
-    ``ev_t, ev_g, ev_ph`` (time, guard, phase after); with ``stop_at_apex`` false every apex
-    is stored in ``apex_y`` and starts a new stride. With ``rec_dt > 0`` the state is
-    sampled every ``rec_dt`` and at every event into the ``rec_*`` buffers.
 
-    Returns (status, t, h_next, n_events, n_apex, n_rec).
+@jit
+def advance(y, aux, flags, t, t_end, h, opts, log, rec):
+    """Integrate the hybrid system from (t, y) to the apex (if ``opts.stop_at_apex``) or t_end.
+
+    ``y``, ``aux`` (contacts, toes) and ``flags`` are updated in place; ``h`` is the first step
+    to try (0: choose one). Events go to the `EventLog` ``log``; with ``stop_at_apex`` false
+    every apex is stored in ``log.apex_y`` and starts a new stride. With ``rec.dt > 0`` the
+    state is sampled every ``rec.dt`` and at every event into the `Recorder` ``rec``. Both
+    counts start from zero.
+
+    Returns (status, t, h_next).
     """
     n = y.shape[0]
     K = np.empty((N_STAGES_EXTENDED, n))
@@ -119,31 +156,31 @@ def advance(
     g_new = np.empty(N_GUARDS)
     gbuf = np.empty(N_GUARDS)
     fired = np.zeros(N_GUARDS, dtype=np.bool_)
-    n_ev = 0
-    n_apex = 0
-    n_rec = 0
-    recording = rec_dt > 0.0
+    log.count[:] = 0
+    rec.count[:] = 0
+    rtol, atol = opts.rtol, opts.atol
+    recording = rec.dt > 0.0
     t_next_rec = t
 
     status = start_status(y, aux)
     if status != CONTINUE:
-        return status, t, h, n_ev, n_apex, n_rec
+        return status, t, h
     rhs(t, y, aux, fy)
     guard_values(y, aux, flags, g_old)
     if recording:
-        n_rec = _record(t, y, aux, rec_t, rec_y, rec_ph, rec_e, n_rec)
-        t_next_rec = t + rec_dt
+        _record(rec, t, y, aux)
+        t_next_rec = t + rec.dt
     if not h > 0.0:
         h = initial_step(t, y, fy, aux, rtol, atol, 1.0, t_end - t, y_new, f_new)
 
     for _ in range(MAX_STEPS):
         if t >= t_end:
-            return TIME_UP, t, h, n_ev, n_apex, n_rec
+            return TIME_UP, t, h
         h_try = min(h, t_end - t)
         if h_try < H_MIN:
             if t_end - t < H_MIN:  # reached t_end up to rounding
-                return TIME_UP, t_end, h, n_ev, n_apex, n_rec
-            return F_INTEGRATION, t, h, n_ev, n_apex, n_rec
+                return TIME_UP, t_end, h
+            return F_INTEGRATION, t, h
         err = rk_step(t, y, fy, h_try, aux, rtol, atol, K, y_new, f_new)
         if not err <= 1.0:  # rejected (or NaN)
             finite = True
@@ -151,7 +188,7 @@ def advance(
                 if not math.isfinite(y_new[i]):
                     finite = False
             if not finite and h_try < 1e-9:
-                return F_NON_FINITE, t, h, n_ev, n_apex, n_rec
+                return F_NON_FINITE, t, h
             h = h_try * step_factor(err)
             continue
         guard_values(y_new, aux, flags, g_new)
@@ -175,8 +212,8 @@ def advance(
                 dense_ready = True
             while t_next_rec < t_star:
                 dense_eval(F, y, t, h_try, t_next_rec, ybuf)
-                n_rec = _record(t_next_rec, ybuf, aux, rec_t, rec_y, rec_ph, rec_e, n_rec)
-                t_next_rec += rec_dt
+                _record(rec, t_next_rec, ybuf, aux)
+                t_next_rec += rec.dt
         if first < 0:
             t += h_try
             y[:] = y_new
@@ -193,46 +230,42 @@ def advance(
         fired[first] = True
         coincident(g_old, gbuf, fired)
         status = apply_events(y, aux, flags, fired)
-        ph = phase_index(aux)
-        for i in range(N_GUARDS):
-            if fired[i] and n_ev < ev_t.shape[0]:
-                ev_t[n_ev] = t
-                ev_g[n_ev] = i
-                ev_ph[n_ev] = ph
-                n_ev += 1
+        _log_events(log, t, fired, phase_index(aux))
         if recording:
-            n_rec = _record(t, y, aux, rec_t, rec_y, rec_ph, rec_e, n_rec)
+            _record(rec, t, y, aux)
         if status == APEX:
-            if stop_at_apex:
-                return APEX, t, h, n_ev, n_apex, n_rec
-            if n_apex < apex_y.shape[0]:
-                apex_y[n_apex, :] = y
-            n_apex += 1
-            flags[FL_TOUCHED_B] = False
-            flags[FL_TOUCHED_F] = False
+            if opts.stop_at_apex:
+                return APEX, t, h
+            k = log.count[EV_APEXES]
+            if k < log.apex_y.shape[0]:
+                log.apex_y[k, :] = y
+            log.count[EV_APEXES] = k + 1
         elif status != CONTINUE:
-            return status, t, h, n_ev, n_apex, n_rec
+            return status, t, h
         rhs(t, y, aux, fy)
         guard_values(y, aux, flags, g_old)
         h = max(h_try * step_factor(err), 1e-6)
-    return F_INTEGRATION, t, h, n_ev, n_apex, n_rec
+    return F_INTEGRATION, t, h
+
+
+@jit
+def _stride(y, aux, flags, t0, t_end, rtol, atol, record_dt, record_capacity):
+    """`advance` to the apex with fresh buffers (allocated here: a call from Python with
+    scalars and arrays dispatches faster than one with named tuples)."""
+    log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
+    rec = recorder(record_capacity, record_dt)
+    status, t, _ = advance(y, aux, flags, t0, t_end, 0.0, Options(rtol, atol, True), log, rec)
+    return status, t, log, rec
 
 
 def simulate_fast(y0, aux, flags, t0=0.0, t_end=2.0, rtol=1e-10, atol=1e-10, record_dt=None):
-    """Python wrapper with the same return as `bound_env.hybrid.simulate_reference`."""
+    """Python wrapper with the same return as `bound_env.reference.simulate_reference`."""
     y = np.array(y0, dtype=float)
-    ev_t = np.empty(EVENT_CAPACITY)
-    ev_g = np.empty(EVENT_CAPACITY, dtype=np.int64)
-    ev_ph = np.empty(EVENT_CAPACITY, dtype=np.int64)
-    apex_y = np.empty((1, 8))
     cap = int((t_end - t0) / record_dt) + 2 * EVENT_CAPACITY if record_dt else 1
-    rec_t, rec_y = np.empty(cap), np.empty((cap, 8))
-    rec_ph, rec_e = np.empty(cap, dtype=np.int64), np.empty(cap)
-    status, t, _, n_ev, _, n_rec = advance(
-        y, aux, flags, float(t0), float(t_end), True, rtol, atol, 0.0, ev_t, ev_g, ev_ph,
-        apex_y, float(record_dt or 0.0), rec_t, rec_y, rec_ph, rec_e,
-    )  # fmt: skip
-    events = [Event(float(ev_t[k]), GUARD_NAMES[ev_g[k]], PHASES[ev_ph[k]]) for k in range(n_ev)]
-    samples = [(float(rec_t[k]), rec_y[k].copy(), PHASES[rec_ph[k]], float(rec_e[k]))
-               for k in range(n_rec)]
+    status, t, log, rec = _stride(y, aux, flags, float(t0), float(t_end), rtol, atol,
+                                  float(record_dt or 0.0), cap)
+    events = [Event(float(log.t[k]), GUARD_NAMES[log.guard[k]], PHASES[log.phase[k]])
+              for k in range(log.count[EV_LOGGED])]
+    samples = [(float(rec.t[k]), rec.y[k].copy(), PHASES[rec.phase[k]], float(rec.energy[k]))
+               for k in range(rec.count[0])]
     return int(status), float(t), y, events, samples

@@ -41,6 +41,7 @@ Z_PAPER_UNITS = ("m", "deg", "deg", "m/s", "deg/s", "deg/s")
 Z_SI_UNITS = ("m", "rad", "rad", "m/s", "rad/s", "rad/s")
 Z_SYMBOLS = ('y_g', 'θ1', 'θ2', 'ẋ_g', 'θ̇1', 'θ̇2')  # plain text
 Z_TEX = ("y_g", r"\theta_1", r"\theta_2", r"\dot x_g", r"\dot\theta_1", r"\dot\theta_2")  # LaTeX
+Z_IN_Y = (1, 2, 3, 4, 6, 7)  # z = y[Z_IN_Y] for the full state y = [q, qdot] at an apex
 
 
 def z_labels(style: str = "text") -> tuple[str, ...]:
@@ -59,6 +60,8 @@ def z_labels(style: str = "text") -> tuple[str, ...]:
     if style == "inline":
         return tuple(f"{s} {u}" for s, u in zip(Z_SYMBOLS, units, strict=True))
     raise ValueError(f"z label style must be text, tex, column or inline, got {style!r}")
+
+
 _Z_ANGULAR = np.array([False, True, True, False, True, True])
 
 

@@ -70,7 +70,7 @@ def animation_frames(
     import numpy as np
 
     from .env import PassiveBoundEnv
-    from .hybrid import simulate_stride
+    from .stride import simulate_stride
 
     env = PassiveBoundEnv(
         gait=gait,

@@ -12,8 +12,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces, utils
 
-from .hybrid import z_from_state
 from .params import Params
+from .stride import z_from_state
 from .stride_task import (
     DEFAULT_BASIS,
     DEFAULT_CTRL_COST_WEIGHT,
@@ -55,7 +55,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
     classical controllers of `bound_env.control` act here.
 
     Zero action is exactly the passive Poincare map: one call of the same compiled
-    integrator as `bound_env.hybrid.simulate_stride` with the same tolerance, so ``apex_z``
+    integrator as `bound_env.stride.simulate_stride` with the same tolerance, so ``apex_z``
     equals its z1 (50 zero-action strides from z* stay within 1e-9 of z*). A non-zero
     profile is applied event-accurately: the integrator stops at each window edge, the
     torque is a parameter of the equations, contacts and the apex are located exactly.

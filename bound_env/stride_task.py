@@ -35,7 +35,7 @@ parameter vector (``aux[P_TAU]``). `run_profile` advances it piecewise: to each 
 with that window's torque, stopping at the apex, so contacts and the apex are located on the
 integrator's dense output and a torque change never falls inside an integrator step.
 Consecutive sub-windows with equal torque are merged first, so zero action is a single call,
-the same one `bound_env.hybrid.simulate_stride` makes: zero action is exactly the passive map.
+the same one `bound_env.stride.simulate_stride` makes: zero action is exactly the passive map.
 """
 
 from __future__ import annotations
@@ -46,19 +46,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dynamics import jit, make_aux
-from .fast import EVENT_CAPACITY, advance
-from .hybrid import (
-    APEX,
-    DEFAULT_T_MAX,
-    F_NO_APEX,
-    N_FLAGS,
-    TIME_UP,
-    failure_name,
-    simulate_stride,
-    state_from_z,
-    z_from_state,
-)
+from .events import APEX, F_NO_APEX, N_FLAGS, TIME_UP, failure_name
+from .fast import EVENT_CAPACITY, Options, advance, event_log, recorder
 from .params import P_TAU, Gait, load_gait
+from .stride import DEFAULT_T_MAX, simulate_stride, state_from_z, z_from_state
 from .task import DEFAULT_RESET_NOISE_SCALE, PassiveBoundTask, _number
 from .terrain import change_slope, set_slope
 
@@ -172,14 +163,8 @@ def run_profile(
     rtol,
     atol,
     t_max,
-    ev_t,
-    ev_g,
-    ev_ph,
-    apex_y,
-    rec_t,
-    rec_y,
-    rec_ph,
-    rec_e,
+    log,
+    rec,
 ):
     """Advance from an apex (t = 0) to the next apex with torque taus[j] on [t_edges[j],
     t_edges[j + 1]) and the last torque held until ``t_max``.
@@ -189,16 +174,14 @@ def run_profile(
     """
     t = 0.0
     h = 0.0
+    opts = Options(rtol, atol, True)
     impulse = 0.0
     status = TIME_UP
     n = taus.shape[0]
     for j in range(n):
         t_end = t_edges[j + 1] if j < n - 1 else t_max
         aux[P_TAU] = taus[j]
-        status, t_new, h, _, _, _ = advance(
-            y, aux, flags, t, t_end, True, rtol, atol, h,
-            ev_t, ev_g, ev_ph, apex_y, 0.0, rec_t, rec_y, rec_ph, rec_e,
-        )  # fmt: skip
+        status, t_new, h = advance(y, aux, flags, t, t_end, h, opts, log, rec)
         impulse += abs(taus[j]) * (t_new - t)
         t = t_new
         if status != TIME_UP:
@@ -242,11 +225,8 @@ class StrideSimulator:
         self.rtol = float(rtol)
         self.t_max = float(t_max)
         self._aux0 = make_aux(params.to_array())
-        self._ev_t = np.empty(EVENT_CAPACITY)
-        self._ev_g = np.empty(EVENT_CAPACITY, dtype=np.int64)
-        self._ev_ph = np.empty(EVENT_CAPACITY, dtype=np.int64)
-        self._apex = np.empty((1, 8))
-        self._rec = (np.empty(0), np.empty((0, 8)), np.empty(0, dtype=np.int64), np.empty(0))
+        self._log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
+        self._rec = recorder(0, 0.0)
 
     def run(self, z, u) -> StrideOutcome:
         """One stride from apex state z (SI) with coefficients u (clipped to [-1, 1])."""
@@ -267,8 +247,7 @@ class StrideSimulator:
         flags = np.zeros(N_FLAGS, dtype=np.bool_)
         edges, taus = merge_windows(self.basis.edges, np.asarray(taus, dtype=float))
         status, t, impulse = run_profile(
-            y, aux, flags, edges, taus, self.rtol, self.rtol, self.t_max,
-            self._ev_t, self._ev_g, self._ev_ph, self._apex, *self._rec,
+            y, aux, flags, edges, taus, self.rtol, self.rtol, self.t_max, self._log, self._rec,
         )  # fmt: skip
         ok = status == APEX
         return StrideOutcome(

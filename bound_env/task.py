@@ -25,11 +25,9 @@ import numba as nb
 import numpy as np
 
 from .dynamics import A_CB, A_CF, jit, leg_back, leg_front, make_aux, total_energy
-from .fast import advance
-from .hybrid import (
+from .events import (
     APEX,
     CONTINUE,
-    DEFAULT_T_MAX,
     F_NO_APEX,
     F_NON_FINITE,
     FAIL_FIRST,
@@ -43,9 +41,10 @@ from .hybrid import (
     failure_name,
     phase_index,
     start_status,
-    state_from_z,
 )
-from .params import P_ALPHA, P_GB, P_GF, P_LB, P_LF, P_TAU, Z_NAMES, Gait, load_gait
+from .fast import EV_APEXES, EV_LOGGED, Options, advance, event_log, recorder
+from .params import P_ALPHA, P_GB, P_GF, P_LB, P_LF, P_TAU, Z_IN_Y, Z_NAMES, Gait, load_gait
+from .stride import DEFAULT_T_MAX, state_from_z
 from .terrain import change_slope
 
 # ---------------------------------------------------------------------------------------------
@@ -97,7 +96,7 @@ S_H = 1  # integrator step to carry into the next interval [s] (0: choose)
 S_T_APEX = 2  # time of the last apex, or 0 [s]
 S_STEPS = 3  # control intervals since reset
 S_STRIDES = 4  # strides completed since reset
-S_STATUS = 5  # CONTINUE or a failure code (bound_env.hybrid)
+S_STATUS = 5  # CONTINUE or a failure code (bound_env.events)
 S_NAPEX = 6  # strides completed in the last interval
 S_TAU = 7  # spine torque of the last interval [N m]
 S_ENERGY = 8  # total energy after the last interval [J]
@@ -123,8 +122,7 @@ C_SLOPE_NOISE = C_OBS_HIGH + N_OBS_FULL  # sigma of the slope at each apex [rad]
 C_ALPHA_NOMINAL = C_SLOPE_NOISE + 1  # the nominal slope alpha [rad]
 N_CFG = C_ALPHA_NOMINAL + 1
 
-_Z_IN_Y = (1, 2, 3, 4, 6, 7)  # z = y[_Z_IN_Y] at an apex (eq. 17)
-_Z_IDX = np.array(_Z_IN_Y)
+_Z_IDX = np.array(Z_IN_Y)  # z = y[_Z_IDX] at an apex (eq. 17)
 _PHASE_OBJECTS = np.array(PHASES, dtype=object)
 # failure reason (None for success) by status code
 FAILURE_NAMES = tuple(failure_name(c) for c in range(FAIL_FIRST + len(FAILURES)))
@@ -189,7 +187,7 @@ def tracking_cost(apex, n_apex, cfg):
     for k in range(n_apex):
         c = 0.0
         for j in range(6):
-            d = (apex[k, _Z_IN_Y[j]] - cfg[C_ZREF + j]) / cfg[C_ZSCALE + j]
+            d = (apex[k, Z_IN_Y[j]] - cfg[C_ZREF + j]) / cfg[C_ZSCALE + j]
             c += d * d
         if math.isfinite(c):
             total += c
@@ -206,23 +204,21 @@ def reward_terms(cfg, tracking, a, failed):
 
 
 @jit
-def advance_rough(y, aux, flags, s, t_end, cfg, ev_t, ev_g, ev_ph, apex, rec_t, rec_y, rec_ph,
-                  rec_e):
+def advance_rough(y, aux, flags, s, t_end, cfg, log, apex):
     """`bound_env.fast.advance` to t_end on rough terrain: at every apex the apex state is
     stored in ``apex`` (as the smooth path stores it), then the slope becomes
     alpha + sigma xi_k (alpha nominal, xi_k = s[S_XI + k] for the k-th apex of the interval):
     the ground tilts by the difference (`bound_env.terrain.change_slope`) and a new stride
-    starts.
+    starts (`bound_env.events.apply_events` has cleared the touched-down flags).
 
     Returns (status, t, h_next, n_apex, t_last_apex or -1).
     """
     t, h = s[S_T], s[S_H]
     n_apex, t_apex = 0, -1.0
+    opts = Options(cfg[C_RTOL], cfg[C_ATOL], True)
+    rec = recorder(0, 0.0)
     for _ in range(apex.shape[0] + 8):
-        status, t, h, _, _, _ = advance(
-            y, aux, flags, t, t_end, True, cfg[C_RTOL], cfg[C_ATOL], h,
-            ev_t, ev_g, ev_ph, apex, 0.0, rec_t, rec_y, rec_ph, rec_e,
-        )  # fmt: skip
+        status, t, h = advance(y, aux, flags, t, t_end, h, opts, log, rec)
         if status != APEX:
             return status, t, h, n_apex, t_apex
         if n_apex < apex.shape[0]:
@@ -231,8 +227,6 @@ def advance_rough(y, aux, flags, s, t_end, cfg, ev_t, ev_g, ev_ph, apex, rec_t, 
         change_slope(y, aux, alpha_k - aux[P_ALPHA])
         n_apex += 1
         t_apex = t
-        flags[FL_TOUCHED_B] = False
-        flags[FL_TOUCHED_F] = False
     return status, t, h, n_apex, t_apex
 
 
@@ -248,33 +242,24 @@ def step_env(y, aux, flags, s, apex, obs, cfg, action):
     tau = cfg[C_MAX_TORQUE] * a
     aux[P_TAU] = tau
     y_start = y.copy()
-    ev_t = np.empty(32)
-    ev_g = np.empty(32, dtype=np.int64)
-    ev_ph = np.empty(32, dtype=np.int64)
-    rec_t = np.empty(0)
-    rec_y = np.empty((0, 8))
-    rec_ph = np.empty(0, dtype=np.int64)
-    rec_e = np.empty(0)
+    log = event_log(32, apex)
     steps = s[S_STEPS] + 1.0
     t_end = steps * cfg[C_DT]  # not accumulated, so no drift over long episodes
     if cfg[C_SLOPE_NOISE] > 0.0:  # rough terrain: stop at each apex and tilt the ground
-        status, t, h, n_apex, t_apex = advance_rough(
-            y, aux, flags, s, t_end, cfg, ev_t, ev_g, ev_ph, apex, rec_t, rec_y, rec_ph, rec_e,
-        )  # fmt: skip
+        status, t, h, n_apex, t_apex = advance_rough(y, aux, flags, s, t_end, cfg, log, apex)
         n_ev = 0
     else:
-        status, t, h, n_ev, n_apex, _ = advance(
-            y, aux, flags, s[S_T], t_end, False, cfg[C_RTOL], cfg[C_ATOL], s[S_H],
-            ev_t, ev_g, ev_ph, apex, 0.0, rec_t, rec_y, rec_ph, rec_e,
-        )  # fmt: skip
+        opts = Options(cfg[C_RTOL], cfg[C_ATOL], False)
+        status, t, h = advance(y, aux, flags, s[S_T], t_end, s[S_H], opts, log, recorder(0, 0.0))
+        n_ev, n_apex = log.count[EV_LOGGED], log.count[EV_APEXES]
         t_apex = t
     if status == TIME_UP:
         status = CONTINUE
     tracking = tracking_cost(apex, min(n_apex, apex.shape[0]), cfg)
     if n_apex > 0:
-        for e in range(min(n_ev, ev_t.shape[0])):
-            if ev_g[e] == G_APEX:
-                t_apex = ev_t[e]
+        for e in range(min(n_ev, log.t.shape[0])):
+            if log.guard[e] == G_APEX:
+                t_apex = log.t[e]
         s[S_T_APEX] = t_apex
     if status < FAIL_FIRST and t - s[S_T_APEX] >= cfg[C_NO_APEX]:
         status = F_NO_APEX

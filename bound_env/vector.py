@@ -23,7 +23,7 @@ from gymnasium.vector.utils import batch_space
 
 from . import MAX_EPISODE_STEPS
 from .env import RENDER_MODES, check_action, make_spaces, render_text
-from .hybrid import FAIL_FIRST
+from .events import FAIL_FIRST
 from .task import S_REWARD, S_STATUS, S_STEPS, PassiveBoundTask
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bound_env.dynamics import back_hip, front_hip, make_aux, total_energy
-from bound_env.hybrid import FAILURES, simulate_stride, state_from_z
+from bound_env.hybrid import FAILURES, GUARD_NAMES, TIME_UP, simulate_stride, state_from_z
 from bound_env.params import Params, load_gait, z_to_si
 
 # Apex states [paper units] and touchdown angles [deg] that end in each failure (found by a
@@ -283,3 +283,36 @@ def test_strict_rule_ends_at_the_first_apex_after_any_stance(gait):
     a = simulate_stride(gait.z0, gait.params, strict=True)
     b = simulate_stride(gait.z0, gait.params)
     assert a.phases == b.phases and np.allclose(a.z1, b.z1, atol=0)
+
+
+def test_both_back_ends_run_through_apexes_alike(default_gait):
+    """Without stopping at the apex, every apex ends a stride and starts the next one (the
+    touched-down flags are cleared by the events layer): both back-ends pass the same apexes,
+    and each apex state is the next stride's start, as `simulate_stride` chains them."""
+    from bound_env.dynamics import make_aux
+    from bound_env.events import N_FLAGS
+    from bound_env.fast import EV_APEXES, EV_LOGGED, Options, advance, event_log, recorder
+    from bound_env.reference import simulate_reference
+
+    g, t_end = default_gait, 1.0  # ~2.6 strides of 0.39 s
+    y0 = state_from_z(g.z0)
+    aux_r, flags_r, apexes = make_aux(g.params.to_array()), np.zeros(N_FLAGS, np.bool_), []
+    status_r, t_r, _, events_r, _ = simulate_reference(
+        y0, aux_r, flags_r, t_end=t_end, stop_at_apex=False, apexes=apexes)
+    y, aux_f, flags_f = y0.copy(), make_aux(g.params.to_array()), np.zeros(N_FLAGS, np.bool_)
+    log = event_log(64, np.empty((8, 8)))
+    status_f, t_f, _ = advance(y, aux_f, flags_f, 0.0, t_end, 0.0,
+                               Options(1e-12, 1e-12, False), log, recorder(0, 0.0))
+    assert status_r == status_f == TIME_UP and t_r == pytest.approx(t_end) and t_f == t_end
+    n_apex = int(log.count[EV_APEXES])
+    assert n_apex == len(apexes) == 2
+    np.testing.assert_allclose(log.apex_y[:n_apex], np.array(apexes), rtol=0, atol=1e-8)
+    names_f = [GUARD_NAMES[i] for i in log.guard[: log.count[EV_LOGGED]]]
+    assert names_f == [e.name for e in events_r]
+    assert names_f.count("apex") == 2
+    apex_t = [e.t for e in events_r if e.name == "apex"]
+    one = simulate_stride(g.z0, g.params)
+    assert apex_t[0] == pytest.approx(one.t_end, abs=1e-8)
+    np.testing.assert_allclose(apexes[0][[1, 2, 3, 4, 6, 7]], one.z1, rtol=0, atol=1e-8)
+    np.testing.assert_array_equal(flags_r, flags_f)
+    np.testing.assert_array_equal(aux_r[-4:-2], aux_f[-4:-2])  # same contacts at t_end

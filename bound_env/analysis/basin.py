@@ -47,10 +47,11 @@ import numpy as np
 
 from ..cache import atomic_write
 from ..dynamics import jit, make_aux
-from ..fast import EVENT_CAPACITY, advance
-from ..hybrid import APEX, DEFAULT_T_MAX, F_NO_APEX, FAIL_FIRST, FAILURES, N_FLAGS, PHASES, TIME_UP
-from ..hybrid import phase_index as _phase_index
-from ..params import Z_NAMES, Z_PAPER_UNITS, load_gait, z_to_paper, z_to_si
+from ..events import APEX, F_NO_APEX, FAIL_FIRST, FAILURES, N_FLAGS, PHASES, TIME_UP
+from ..events import phase_index as _phase_index
+from ..fast import EVENT_CAPACITY, Options, advance, event_log, recorder
+from ..params import Z_IN_Y, Z_NAMES, Z_PAPER_UNITS, load_gait, z_to_paper, z_to_si
+from ..stride import DEFAULT_T_MAX
 
 RETURN_TOL = 1e-4  # "returned": max-abs apex error to the cycle below this (SI), as margins
 EVAL_RTOL = 1e-10  # integrator tolerance, as agents.margins
@@ -64,7 +65,6 @@ REASONS = ("",) + FAILURES  # reason code 0: none; k >= 1: FAILURES[k - 1]
 DEFAULT_HALF_WIDTH = np.array([0.05, 10.0, 10.0, 0.6, 200.0, 200.0])
 CYCLE_STRIDES = 400  # iterations to settle a controller's cycle
 CYCLE_TOL = 1e-11  # successive apex states closer than this: settled (SI)
-_Z_IN_Y = (1, 2, 3, 4, 6, 7)  # z = y[_Z_IN_Y] at an apex (eq. 17)
 
 
 # --------------------------------------------------------------------------------------------
@@ -88,12 +88,9 @@ def passive_batch(Z, aux0, z_ref, max_strides, tol, rtol, t_max, outcome, reason
     aux = np.empty(aux0.shape[0])
     flags = np.zeros(N_FLAGS, dtype=np.bool_)
     z = np.empty(6)
-    ev_t = np.empty(EVENT_CAPACITY)
-    ev_g = np.empty(EVENT_CAPACITY, dtype=np.int64)
-    ev_ph = np.empty(EVENT_CAPACITY, dtype=np.int64)
-    apex_y = np.empty((1, 8))
-    rec_t, rec_y = np.empty(1), np.empty((1, 8))
-    rec_ph, rec_e = np.empty(1, dtype=np.int64), np.empty(1)
+    log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
+    rec = recorder(1, 0.0)
+    opts = Options(rtol, rtol, True)
     for k in range(n):
         z[:] = Z[k]
         z_last[k, :] = z
@@ -102,13 +99,10 @@ def passive_batch(Z, aux0, z_ref, max_strides, tol, rtol, t_max, outcome, reason
         for s in range(1, max_strides + 1):
             y[0], y[5] = 0.0, 0.0
             for j in range(6):
-                y[_Z_IN_Y[j]] = z[j]
+                y[Z_IN_Y[j]] = z[j]
             aux[:] = aux0
             flags[:] = False
-            status, _, _, _, _, _ = advance(
-                y, aux, flags, 0.0, t_max, True, rtol, rtol, 0.0, ev_t, ev_g, ev_ph, apex_y,
-                0.0, rec_t, rec_y, rec_ph, rec_e,
-            )  # fmt: skip
+            status, _, _ = advance(y, aux, flags, 0.0, t_max, 0.0, opts, log, rec)
             if status == TIME_UP:
                 status = F_NO_APEX
             if status != APEX:
@@ -117,7 +111,7 @@ def passive_batch(Z, aux0, z_ref, max_strides, tol, rtol, t_max, outcome, reason
                 break
             err = 0.0
             for j in range(6):
-                z[j] = y[_Z_IN_Y[j]]
+                z[j] = y[Z_IN_Y[j]]
                 err = max(err, abs(z[j] - z_ref[j]))
             error[k] = err
             z_last[k, :] = z
@@ -168,7 +162,7 @@ def controller_batch(controller, Z, z_ref, gait: str = "default", max_strides=DE
     stride = np.zeros(n, dtype=np.int64)  # strides completed
     steps = np.zeros(n, dtype=np.int64)  # control intervals in the current stride
     max_steps = int(math.ceil(NO_APEX_TIME / task.dt)) + 2
-    zi = np.array(_Z_IN_Y)
+    zi = np.array(Z_IN_Y)
     while live.any():
         b.actions[:] = act(b.obs, live)
         b.active[:] = live
