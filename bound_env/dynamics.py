@@ -22,7 +22,12 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .params import (
+from .params import (  # A_* and N_AUX are re-exported from here
+    A_CB,
+    A_CF,
+    A_XB,
+    A_XF,
+    N_AUX,
     N_PARAMS,
     P_ALPHA,
     P_CC,
@@ -42,12 +47,6 @@ from .params import (
     P_M2,
     P_TAU,
 )  # fmt: skip
-
-A_CB = N_PARAMS  # 1.0 while the back leg is in stance
-A_CF = N_PARAMS + 1  # 1.0 while the front leg is in stance
-A_XB = N_PARAMS + 2  # x of the back toe on the ground [m] (x_b^toe, eq. 13)
-A_XF = N_PARAMS + 3  # x of the front toe on the ground [m] (x_f^toe, eq. 13)
-N_AUX = N_PARAMS + 4
 
 jit = nb.njit(cache=True, fastmath={"contract", "arcp", "nsz", "reassoc"}, error_model="numpy")
 

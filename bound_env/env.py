@@ -13,7 +13,6 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces, utils
 
-from .events import FAIL_FIRST
 from .params import P_ALPHA, Params
 from .task import (
     DEFAULT_ALIVE_REWARD,
@@ -25,11 +24,12 @@ from .task import (
     DEFAULT_TRACKING_COST_WEIGHT,
     S_NAPEX,
     S_REWARD,
-    S_STATUS,
     S_STRIDES,
     S_T,
     S_TAU,
+    TASK_SETTINGS,
     PassiveBoundTask,
+    TaskConfig,
 )
 
 RENDER_MODES = ("human", "rgb_array")
@@ -232,6 +232,11 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
     | `render_mode` | **str** | `None` | `"rgb_array"` or `"human"` |
     | `width`, `height` | **int** | `640`, `360` | frame size [pixels] |
     | `slope_noise_deg` | **float** | `0.0` | rough terrain: sigma of the slope change [deg] |
+    | `config` | **TaskConfig** | `None` | all task settings at once (see below) |
+
+    The task settings (every row above but the rendering ones) are one frozen
+    `bound_env.task.TaskConfig`; `config=` passes one whole, and keyword arguments not at
+    their default change it.
 
     `max_torque` is of the order of the spine spring's torque on the passive cycle: k_c
     |theta2| peaks at 295 N m/rad * 0.1448 rad = 42.7 N m (theta2 spans -3.3 to +8.3 deg).
@@ -261,25 +266,17 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
         width: int = 640,
         height: int = 360,
         slope_noise_deg: float = 0.0,
+        config: TaskConfig | None = None,
     ):
-        utils.EzPickle.__init__(
-            self, gait, gait_overrides, dt, max_torque, reset_noise_scale, alive_reward,
-            tracking_cost_weight, ctrl_cost_weight, apex_scales,
-            exclude_current_positions_from_observation, rtol, render_mode, width, height,
-            slope_noise_deg,
-        )  # fmt: skip
+        settings = {k: v for k, v in locals().items() if k in TASK_SETTINGS}
+        utils.EzPickle.__init__(self, **settings, render_mode=render_mode, width=width,
+                                height=height, config=config)  # fmt: skip
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(
                 f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}"
             )
         self.task = PassiveBoundTask(
-            gait=gait, gait_overrides=gait_overrides, dt=dt, max_torque=max_torque,
-            reset_noise_scale=reset_noise_scale, alive_reward=alive_reward,
-            tracking_cost_weight=tracking_cost_weight, ctrl_cost_weight=ctrl_cost_weight,
-            apex_scales=apex_scales,
-            exclude_current_positions_from_observation=exclude_current_positions_from_observation,
-            rtol=rtol, slope_noise_deg=slope_noise_deg,
-        )  # fmt: skip
+            TaskConfig.resolve(config, settings, defaults_keep_config=True))
         self.dt = self.task.dt
         self.metadata = {"render_modes": list(RENDER_MODES), "render_fps": round(1 / self.dt)}
         self.observation_space, self.action_space = make_spaces(self.task)
@@ -343,7 +340,7 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
         s = b.s[0]
         if s[S_NAPEX] > 0.0:
             self.task.draw_slope_noise(b, 0, self.np_random)
-        terminated = s[S_STATUS] >= FAIL_FIRST
+        terminated = self.task.failed(b)[0]
         if self.render_mode == "human":
             self.render()
         return b.obs[0].copy(), float(s[S_REWARD]), bool(terminated), False, self.task.info(b, 0)

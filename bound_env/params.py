@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .layout import Layout
 from .resources import gaits_dir
 
 GAIT_KEYS = (
@@ -27,13 +28,23 @@ GAIT_KEYS = (
 )  # fmt: skip
 GAITS_DIR = gaits_dir()  # the repository's configs/gaits, or the wheel's copy (package data)
 
-# Layout of the flat float64 parameter vector the compiled dynamics read (see `Params.to_array`).
-P_G, P_ALPHA, P_M1, P_M2, P_L1, P_L2, P_I1, P_I2 = range(8)
-P_LB, P_LF, P_KB, P_KF, P_KC, P_CC, P_GB, P_GF = range(8, 16)
-P_TAU = 16  # spine torque tau [N m], a generalized force on theta2
-P_MINLEG = 17  # shortest physical leg length as a fraction of the rest length
-P_GX, P_GY = 18, 19  # gravity along and normal to the slope, g sin(alpha), g cos(alpha) [m/s^2]
-N_PARAMS = 20
+# Layout of the flat float64 parameter vector the compiled dynamics read (`Params.to_array`):
+# P.G == P_G == 0, ..., N_PARAMS entries. SI units, radians; tau: spine torque [N m] (a
+# generalized force on theta2); minleg: shortest physical leg length as a fraction of the rest
+# length; gx, gy: gravity along and normal to the slope, g sin(alpha), g cos(alpha) [m/s^2].
+PARAM_FIELDS = (
+    "g", "alpha", "m1", "m2", "l1", "l2", "I1", "I2", "lb", "lf", "kb", "kf", "kc", "cc",
+    "gb", "gf", "tau", "minleg", "gx", "gy",
+)  # fmt: skip
+PARAM_LAYOUT = Layout("P_", PARAM_FIELDS, "N_PARAMS")
+P = PARAM_LAYOUT.ns
+globals().update(PARAM_LAYOUT.constants())  # P_G, P_ALPHA, ..., P_GY, N_PARAMS
+# The simulator's ``aux`` vector: the parameter vector followed by the contact state.
+# cb, cf: 1.0 while the back / front leg is in stance; xb, xf: x of the back / front toe on
+# the ground [m] (x_b^toe, x_f^toe of eq. 13). A.CB == A_CB == N_PARAMS, ..., N_AUX entries.
+AUX_LAYOUT = Layout("A_", ("cb", "cf", "xb", "xf"), "N_AUX", start=PARAM_LAYOUT.size)
+A = AUX_LAYOUT.ns
+globals().update(AUX_LAYOUT.constants())  # A_CB, A_CF, A_XB, A_XF, N_AUX
 
 # z on S_apex (eq. 17): [y_g, theta1, theta2, xdot_g, theta1dot, theta2dot].
 Z_NAMES = ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
@@ -161,17 +172,17 @@ class Params:
 
     def to_array(self, tau: float = 0.0) -> np.ndarray:
         """Flat float64 vector for the compiled dynamics (layout: the ``P_*`` constants)."""
-        p = np.empty(N_PARAMS)
-        p[[P_G, P_ALPHA, P_M1, P_M2, P_L1, P_L2, P_I1, P_I2]] = (
+        p = np.empty(P.SIZE)
+        p[[P.G, P.ALPHA, P.M1, P.M2, P.L1, P.L2, P.I1, P.I2]] = (
             self.g, self.alpha, self.m1, self.m2, self.l1, self.l2, self.I1, self.I2,
         )  # fmt: skip
-        p[[P_LB, P_LF, P_KB, P_KF, P_KC, P_CC, P_GB, P_GF]] = (
+        p[[P.LB, P.LF, P.KB, P.KF, P.KC, P.CC, P.GB, P.GF]] = (
             self.lb_bar, self.lf_bar, self.kb, self.kf, self.kc, self.c_c,
             self.gamma_b, self.gamma_f,
         )  # fmt: skip
-        p[P_TAU] = tau
-        p[P_MINLEG] = self.min_leg_frac
-        p[P_GX], p[P_GY] = self.g * math.sin(self.alpha), self.g * math.cos(self.alpha)  # eq. (2)
+        p[P.TAU] = tau
+        p[P.MINLEG] = self.min_leg_frac
+        p[P.GX], p[P.GY] = self.g * math.sin(self.alpha), self.g * math.cos(self.alpha)  # eq. (2)
         return p
 
     def to_gait_dict(self) -> dict:

@@ -19,7 +19,8 @@ same code and give bit-identical results. The per-robot state lives in a `Batch`
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
 
 import numba as nb
 import numpy as np
@@ -43,6 +44,7 @@ from .events import (
     start_status,
 )
 from .fast import EV_APEXES, EV_LOGGED, Options, advance, event_log, recorder
+from .layout import Layout
 from .params import P_ALPHA, P_GB, P_GF, P_LB, P_LF, P_TAU, Z_IN_Y, Z_NAMES, Gait, load_gait
 from .stride import DEFAULT_T_MAX, state_from_z
 from .terrain import change_slope
@@ -90,37 +92,44 @@ _RATE_BOUND = 1000.0  # |theta1dot|, |theta2dot| [rad/s]
 # Leg lengths lie in [0, 2 l_bar] (a stance leg lifts off at l_bar), leg angles in [-pi, pi]
 # (atan2), the 0/1 entries in [0, 1], the time since the apex in [0, NO_APEX_TIME + dt].
 
-# Per-robot scalar state, columns of `Batch.s` (float64; counts and codes are exact integers).
-S_T = 0  # simulation time since reset [s]
-S_H = 1  # integrator step to carry into the next interval [s] (0: choose)
-S_T_APEX = 2  # time of the last apex, or 0 [s]
-S_STEPS = 3  # control intervals since reset
-S_STRIDES = 4  # strides completed since reset
-S_STATUS = 5  # CONTINUE or a failure code (bound_env.events)
-S_NAPEX = 6  # strides completed in the last interval
-S_TAU = 7  # spine torque of the last interval [N m]
-S_ENERGY = 8  # total energy after the last interval [J]
-S_REWARD = 9  # reward of the last interval
-S_ALIVE = 10  # its terms: alive bonus, tracking (<= 0), control (<= 0)
-S_TRACKING = 11
-S_CTRL = 12
-S_X = 13  # x_g after the last interval [m] (a copy, for the info)
-S_PHASE = 14  # stance condition index after the last interval (PHASES)
-S_XI = 15  # N_XI entries: standard normal draws for the slope changes at the next apexes
-N_XI = 4  # (rough terrain only; refilled by `PassiveBoundTask.draw_slope_noise`)
-N_S = S_XI + N_XI
+# Per-robot scalar state, columns of `Batch.s` (float64; counts and codes are exact integers):
+# S.T == S_T == 0, ..., N_S columns.
+N_XI = 4  # slope draws kept per robot (rough terrain; refilled by `draw_slope_noise`)
+STATE_LAYOUT = Layout("S_", (
+    "t",  # simulation time since reset [s]
+    "h",  # integrator step to carry into the next interval [s] (0: choose)
+    "t_apex",  # time of the last apex, or 0 [s]
+    "steps",  # control intervals since reset
+    "strides",  # strides completed since reset
+    "status",  # CONTINUE or a failure code (bound_env.events)
+    "napex",  # strides completed in the last interval
+    "tau",  # spine torque of the last interval [N m]
+    "energy",  # total energy after the last interval [J]
+    "reward",  # reward of the last interval
+    "alive",  # its terms: alive bonus, tracking (<= 0), control (<= 0)
+    "tracking",
+    "ctrl",
+    "x",  # x_g after the last interval [m] (a copy, for the info)
+    "phase",  # stance condition index after the last interval (PHASES)
+    ("xi", N_XI),  # standard normal draws for the slope changes at the next apexes
+), "N_S")  # fmt: skip
+S = STATE_LAYOUT.ns
+globals().update(STATE_LAYOUT.constants())  # S_T, ..., S_XI, N_S (imported by env, vector)
 
-# Task constants, entries of the float64 vector `PassiveBoundTask.cfg` the kernel reads.
-C_DT, C_MAX_TORQUE, C_RTOL, C_ATOL, C_NO_APEX = 0, 1, 2, 3, 4
-C_ALIVE, C_TRACKING, C_CTRL, C_INCLUDE_X = 5, 6, 7, 8
-C_ZREF = 9  # 6 entries: the reference apex state z* (SI)
-C_ZSCALE = 15  # 6 entries: APEX_SCALES
+# Task constants, entries of the float64 vector `PassiveBoundTask.cfg` the kernel reads:
+# C.DT == C_DT == 0, ..., N_CFG entries.
 N_OBS_FULL = len(OBS_NAMES)
-C_OBS_LOW = 21  # N_OBS_FULL entries: lower bounds of the full observation (float32 values)
-C_OBS_HIGH = C_OBS_LOW + N_OBS_FULL  # N_OBS_FULL entries: upper bounds
-C_SLOPE_NOISE = C_OBS_HIGH + N_OBS_FULL  # sigma of the slope at each apex [rad]
-C_ALPHA_NOMINAL = C_SLOPE_NOISE + 1  # the nominal slope alpha [rad]
-N_CFG = C_ALPHA_NOMINAL + 1
+CONFIG_LAYOUT = Layout("C_", (
+    "dt", "max_torque", "rtol", "atol", "no_apex", "alive", "tracking", "ctrl", "include_x",
+    ("zref", 6),  # the reference apex state z* (SI)
+    ("zscale", 6),  # APEX_SCALES
+    ("obs_low", N_OBS_FULL),  # lower bounds of the full observation (float32 values)
+    ("obs_high", N_OBS_FULL),  # upper bounds
+    "slope_noise",  # sigma of the slope at each apex [rad]
+    "alpha_nominal",  # the nominal slope alpha [rad]
+), "N_CFG")  # fmt: skip
+C = CONFIG_LAYOUT.ns
+globals().update(CONFIG_LAYOUT.constants())  # C_DT, ..., N_CFG
 
 _Z_IDX = np.array(Z_IN_Y)  # z = y[_Z_IDX] at an apex (eq. 17)
 _PHASE_OBJECTS = np.array(PHASES, dtype=object)
@@ -167,9 +176,9 @@ def observe(y, aux, flags, time_since_apex, cfg, out):
     v[14] = 1.0 if flags[FL_TOUCHED_B] else 0.0
     v[15] = 1.0 if flags[FL_TOUCHED_F] else 0.0
     v[16] = time_since_apex
-    k0 = 0 if cfg[C_INCLUDE_X] > 0.5 else 1
+    k0 = 0 if cfg[C.INCLUDE_X] > 0.5 else 1
     for j in range(k0, N_OBS_FULL):
-        lo, hi = cfg[C_OBS_LOW + j], cfg[C_OBS_HIGH + j]
+        lo, hi = cfg[C.OBS_LOW + j], cfg[C.OBS_HIGH + j]
         x = v[j]
         out[j - k0] = lo if not x >= lo else (hi if x > hi else x)  # NaN -> lo
 
@@ -187,7 +196,7 @@ def tracking_cost(apex, n_apex, cfg):
     for k in range(n_apex):
         c = 0.0
         for j in range(6):
-            d = (apex[k, Z_IN_Y[j]] - cfg[C_ZREF + j]) / cfg[C_ZSCALE + j]
+            d = (apex[k, Z_IN_Y[j]] - cfg[C.ZREF + j]) / cfg[C.ZSCALE + j]
             c += d * d
         if math.isfinite(c):
             total += c
@@ -197,9 +206,9 @@ def tracking_cost(apex, n_apex, cfg):
 @strict_jit
 def reward_terms(cfg, tracking, a, failed):
     """(alive, tracking, ctrl, reward): the reward terms of one interval and their sum."""
-    alive = 0.0 if failed else cfg[C_ALIVE]
-    r_tracking = -(cfg[C_TRACKING] * tracking) if tracking != 0.0 else 0.0  # (never -0.0)
-    r_ctrl = -(cfg[C_CTRL] * (a * a)) if a != 0.0 else 0.0
+    alive = 0.0 if failed else cfg[C.ALIVE]
+    r_tracking = -(cfg[C.TRACKING] * tracking) if tracking != 0.0 else 0.0  # (never -0.0)
+    r_ctrl = -(cfg[C.CTRL] * (a * a)) if a != 0.0 else 0.0
     return alive, r_tracking, r_ctrl, (alive + r_tracking) + r_ctrl
 
 
@@ -207,15 +216,15 @@ def reward_terms(cfg, tracking, a, failed):
 def advance_rough(y, aux, flags, s, t_end, cfg, log, apex):
     """`bound_env.fast.advance` to t_end on rough terrain: at every apex the apex state is
     stored in ``apex`` (as the smooth path stores it), then the slope becomes
-    alpha + sigma xi_k (alpha nominal, xi_k = s[S_XI + k] for the k-th apex of the interval):
+    alpha + sigma xi_k (alpha nominal, xi_k = s[S.XI + k] for the k-th apex of the interval):
     the ground tilts by the difference (`bound_env.terrain.change_slope`) and a new stride
     starts (`bound_env.events.apply_events` has cleared the touched-down flags).
 
     Returns (status, t, h_next, n_apex, t_last_apex or -1).
     """
-    t, h = s[S_T], s[S_H]
+    t, h = s[S.T], s[S.H]
     n_apex, t_apex = 0, -1.0
-    opts = Options(cfg[C_RTOL], cfg[C_ATOL], True)
+    opts = Options(cfg[C.RTOL], cfg[C.ATOL], True)
     rec = recorder(0, 0.0)
     for _ in range(apex.shape[0] + 8):
         status, t, h = advance(y, aux, flags, t, t_end, h, opts, log, rec)
@@ -223,7 +232,7 @@ def advance_rough(y, aux, flags, s, t_end, cfg, log, apex):
             return status, t, h, n_apex, t_apex
         if n_apex < apex.shape[0]:
             apex[n_apex, :] = y
-        alpha_k = cfg[C_ALPHA_NOMINAL] + cfg[C_SLOPE_NOISE] * s[S_XI + min(n_apex, N_XI - 1)]
+        alpha_k = cfg[C.ALPHA_NOMINAL] + cfg[C.SLOPE_NOISE] * s[S.XI + min(n_apex, N_XI - 1)]
         change_slope(y, aux, alpha_k - aux[P_ALPHA])
         n_apex += 1
         t_apex = t
@@ -239,18 +248,18 @@ def step_env(y, aux, flags, s, apex, obs, cfg, action):
     the tracking term. Results go to ``s`` (columns ``S_*``) and ``obs``.
     """
     a = min(max(action, -1.0), 1.0)
-    tau = cfg[C_MAX_TORQUE] * a
+    tau = cfg[C.MAX_TORQUE] * a
     aux[P_TAU] = tau
     y_start = y.copy()
     log = event_log(32, apex)
-    steps = s[S_STEPS] + 1.0
-    t_end = steps * cfg[C_DT]  # not accumulated, so no drift over long episodes
-    if cfg[C_SLOPE_NOISE] > 0.0:  # rough terrain: stop at each apex and tilt the ground
+    steps = s[S.STEPS] + 1.0
+    t_end = steps * cfg[C.DT]  # not accumulated, so no drift over long episodes
+    if cfg[C.SLOPE_NOISE] > 0.0:  # rough terrain: stop at each apex and tilt the ground
         status, t, h, n_apex, t_apex = advance_rough(y, aux, flags, s, t_end, cfg, log, apex)
         n_ev = 0
     else:
-        opts = Options(cfg[C_RTOL], cfg[C_ATOL], False)
-        status, t, h = advance(y, aux, flags, s[S_T], t_end, s[S_H], opts, log, recorder(0, 0.0))
+        opts = Options(cfg[C.RTOL], cfg[C.ATOL], False)
+        status, t, h = advance(y, aux, flags, s[S.T], t_end, s[S.H], opts, log, recorder(0, 0.0))
         n_ev, n_apex = log.count[EV_LOGGED], log.count[EV_APEXES]
         t_apex = t
     if status == TIME_UP:
@@ -260,8 +269,8 @@ def step_env(y, aux, flags, s, apex, obs, cfg, action):
         for e in range(min(n_ev, log.t.shape[0])):
             if log.guard[e] == G_APEX:
                 t_apex = log.t[e]
-        s[S_T_APEX] = t_apex
-    if status < FAIL_FIRST and t - s[S_T_APEX] >= cfg[C_NO_APEX]:
+        s[S.T_APEX] = t_apex
+    if status < FAIL_FIRST and t - s[S.T_APEX] >= cfg[C.NO_APEX]:
         status = F_NO_APEX
     finite = True
     for j in range(8):
@@ -272,21 +281,21 @@ def step_env(y, aux, flags, s, apex, obs, cfg, action):
         if status < FAIL_FIRST:
             status = F_NON_FINITE
     alive, r_tracking, r_ctrl, reward = reward_terms(cfg, tracking, a, status >= FAIL_FIRST)
-    s[S_T] = t
-    s[S_H] = h
-    s[S_STEPS] = steps
-    s[S_STRIDES] += n_apex
-    s[S_NAPEX] = n_apex
-    s[S_STATUS] = status
-    s[S_TAU] = tau
-    s[S_ENERGY] = total_energy(y, aux)
-    s[S_X] = y[0]
-    s[S_PHASE] = phase_index(aux)
-    s[S_ALIVE] = alive
-    s[S_TRACKING] = r_tracking
-    s[S_CTRL] = r_ctrl
-    s[S_REWARD] = reward
-    observe(y, aux, flags, t - s[S_T_APEX], cfg, obs)
+    s[S.T] = t
+    s[S.H] = h
+    s[S.STEPS] = steps
+    s[S.STRIDES] += n_apex
+    s[S.NAPEX] = n_apex
+    s[S.STATUS] = status
+    s[S.TAU] = tau
+    s[S.ENERGY] = total_energy(y, aux)
+    s[S.X] = y[0]
+    s[S.PHASE] = phase_index(aux)
+    s[S.ALIVE] = alive
+    s[S.TRACKING] = r_tracking
+    s[S.CTRL] = r_ctrl
+    s[S.REWARD] = reward
+    observe(y, aux, flags, t - s[S.T_APEX], cfg, obs)
 
 
 @jit
@@ -323,6 +332,76 @@ def _number(name, value, minimum, strict=False) -> float:
     return v
 
 
+@dataclass(frozen=True)
+class TaskConfig:
+    """The task's settings: one field per keyword argument of PassiveBound-v0 (the table in
+    `bound_env.env.PassiveBoundEnv`'s docstring has their meaning and units). Checked when
+    built: a bad value is a ValueError naming the setting. Both environments build one from
+    their keyword arguments; `PassiveBoundTask` takes it."""
+
+    gait: str | Path = "default"
+    gait_overrides: dict | None = None
+    dt: float = DEFAULT_DT
+    max_torque: float = DEFAULT_MAX_TORQUE
+    reset_noise_scale: float = DEFAULT_RESET_NOISE_SCALE
+    alive_reward: float = DEFAULT_ALIVE_REWARD
+    tracking_cost_weight: float = DEFAULT_TRACKING_COST_WEIGHT
+    ctrl_cost_weight: float = DEFAULT_CTRL_COST_WEIGHT
+    apex_scales: tuple | None = None  # None: APEX_SCALES
+    exclude_current_positions_from_observation: bool = True
+    rtol: float = DEFAULT_RTOL
+    slope_noise_deg: float = 0.0
+
+    def __post_init__(self):
+        put = object.__setattr__  # normalize the values of a frozen instance
+        for name in ("dt", "max_torque", "rtol"):
+            put(self, name, _number(name, getattr(self, name), 0.0, strict=True))
+        for name in ("slope_noise_deg", "reset_noise_scale", "alive_reward",
+                     "tracking_cost_weight", "ctrl_cost_weight"):  # fmt: skip
+            put(self, name, _number(name, getattr(self, name), 0.0))
+        if self.apex_scales is not None:
+            scales = np.asarray(self.apex_scales, dtype=float)
+            if scales.shape != (6,) or not np.all(np.isfinite(scales)) or np.any(scales <= 0):
+                raise ValueError(f"apex_scales must be 6 positive numbers, got "
+                                 f"{self.apex_scales!r}")  # fmt: skip
+            put(self, "apex_scales", tuple(float(v) for v in scales))
+        if self.gait_overrides is not None:
+            put(self, "gait_overrides", dict(self.gait_overrides))
+
+    @classmethod
+    def resolve(cls, config: TaskConfig | None = None, settings: dict | None = None,
+                defaults_keep_config: bool = False) -> TaskConfig:
+        """``config`` with ``settings`` (keyword arguments) changed, or a new config from the
+        settings alone when ``config`` is None. With ``defaults_keep_config`` (a signature
+        that lists every setting with its default) a setting at its default value leaves the
+        config's value. Unknown names are a ValueError."""
+        settings = dict(settings or {})
+        unknown = sorted(set(settings) - set(TASK_SETTINGS))
+        if unknown:
+            raise ValueError(f"unknown task setting(s) {unknown}; known: {TASK_SETTINGS}")
+        if config is None:
+            return cls(**settings)
+        if not isinstance(config, TaskConfig):
+            raise ValueError(f"config must be a TaskConfig, got {type(config).__name__}")
+        if defaults_keep_config:
+            settings = {k: v for k, v in settings.items() if not _is_default(k, v)}
+        return replace(config, **settings) if settings else config
+
+
+def _is_default(name: str, value) -> bool:
+    """Is ``value`` the default of the setting ``name`` (None, or an equal number/string)?"""
+    default = TaskConfig.__dataclass_fields__[name].default
+    if value is None or default is None:
+        return value is default
+    try:
+        return bool(value == default)
+    except (TypeError, ValueError):  # e.g. an array compared with a number
+        return False
+
+
+TASK_SETTINGS = tuple(f.name for f in fields(TaskConfig))  # names of the task's settings
+
+
 @dataclass
 class Batch:
     """State of ``n`` robots (row i is robot i); the kernels update it in place."""
@@ -330,7 +409,7 @@ class Batch:
     y: np.ndarray  # (n, 8) float64: [x_g, y_g, th1, th2, xdot_g, ydot_g, th1dot, th2dot]
     aux: np.ndarray  # (n, N_AUX) float64: parameters, tau, contacts, toes
     flags: np.ndarray  # (n, N_FLAGS) bool: legs touched down since the last apex
-    s: np.ndarray  # (n, N_S) float64: the `S_*` columns
+    s: np.ndarray  # (n, S.SIZE) float64: the `S_*` columns
     apex: np.ndarray  # (n, cap, 8) float64: apex states passed in the last interval
     obs: np.ndarray  # (n, obs_dim) float32
     actions: np.ndarray  # (n,) float64: normalized torques of the next interval
@@ -344,58 +423,39 @@ class Batch:
 class PassiveBoundTask:
     """Spine control around the passive bounding gait: configuration and task logic.
 
-    Arguments are those of `bound_env.env.PassiveBoundEnv` (see its docstring); the reference
-    apex state ``z_ref`` is the gait's z* (its ``z_star``, else ``z_published``) and is not
-    changed by ``gait_overrides``.
+    Takes a `TaskConfig`, or its fields as keyword arguments (those of
+    `bound_env.env.PassiveBoundEnv`, see its docstring), or both (the keywords change the
+    config). The reference apex state ``z_ref`` is the gait's z* (its ``z_star``, else
+    ``z_published``) and is not changed by ``gait_overrides``.
     """
 
-    def __init__(
-        self,
-        gait: str = "default",
-        gait_overrides: dict | None = None,
-        dt: float = DEFAULT_DT,
-        max_torque: float = DEFAULT_MAX_TORQUE,
-        reset_noise_scale: float = DEFAULT_RESET_NOISE_SCALE,
-        alive_reward: float = DEFAULT_ALIVE_REWARD,
-        tracking_cost_weight: float = DEFAULT_TRACKING_COST_WEIGHT,
-        ctrl_cost_weight: float = DEFAULT_CTRL_COST_WEIGHT,
-        apex_scales=None,
-        exclude_current_positions_from_observation: bool = True,
-        rtol: float = DEFAULT_RTOL,
-        slope_noise_deg: float = 0.0,
-    ):
-        dt, max_torque, rtol = (_number(n, v, 0.0, strict=True) for n, v in (
-            ("dt", dt), ("max_torque", max_torque), ("rtol", rtol)))  # fmt: skip
-        self.slope_noise_deg = _number("slope_noise_deg", slope_noise_deg, 0.0)
-        reset_noise_scale, alive_reward, tracking_cost_weight, ctrl_cost_weight = (
-            _number(n, v, 0.0) for n, v in (
-                ("reset_noise_scale", reset_noise_scale), ("alive_reward", alive_reward),
-                ("tracking_cost_weight", tracking_cost_weight),
-                ("ctrl_cost_weight", ctrl_cost_weight),
-            )
-        )  # fmt: skip
-        scales = APEX_SCALES if apex_scales is None else np.asarray(apex_scales, dtype=float)
-        if scales.shape != (6,) or not np.all(np.isfinite(scales)) or np.any(scales <= 0):
-            raise ValueError(f"apex_scales must be 6 positive numbers, got {apex_scales!r}")
-        self.gait: Gait = load_gait(gait, gait_overrides)
+    def __init__(self, config: TaskConfig | None = None, **settings):
+        config = TaskConfig.resolve(config, settings)
+        self.config = config
+        self.slope_noise_deg = config.slope_noise_deg
+        self.gait: Gait = load_gait(config.gait, config.gait_overrides)
         self.params = self.gait.params
         self.z_ref = self.gait.z0  # SI
-        self.dt = float(dt)
-        self.max_torque = float(max_torque)
-        self.reset_noise_scale = float(reset_noise_scale)
-        self.apex_scales = scales.copy()
-        self.include_x = not exclude_current_positions_from_observation
+        self.dt = config.dt
+        self.max_torque = config.max_torque
+        self.reset_noise_scale = config.reset_noise_scale
+        scales = APEX_SCALES if config.apex_scales is None else config.apex_scales
+        self.apex_scales = np.array(scales, dtype=float)
+        self.include_x = not config.exclude_current_positions_from_observation
+        rtol = config.rtol
+        alive_reward, tracking_cost_weight, ctrl_cost_weight = (
+            config.alive_reward, config.tracking_cost_weight, config.ctrl_cost_weight)
         self.obs_names = OBS_NAMES if self.include_x else OBS_NAMES[1:]
         self.obs_units = OBS_UNITS if self.include_x else OBS_UNITS[1:]
         self.apex_capacity = 4 + int(self.dt / 0.05)  # strides last ~0.4 s
-        cfg = np.zeros(N_CFG)
-        cfg[[C_DT, C_MAX_TORQUE, C_RTOL, C_ATOL, C_NO_APEX]] = (
+        cfg = np.zeros(C.SIZE)
+        cfg[[C.DT, C.MAX_TORQUE, C.RTOL, C.ATOL, C.NO_APEX]] = (
             self.dt, self.max_torque, rtol, rtol, NO_APEX_TIME,
         )  # fmt: skip
-        cfg[[C_ALIVE, C_TRACKING, C_CTRL]] = alive_reward, tracking_cost_weight, ctrl_cost_weight
-        cfg[C_INCLUDE_X] = float(self.include_x)
-        cfg[C_ZREF : C_ZREF + 6] = self.z_ref
-        cfg[C_ZSCALE : C_ZSCALE + 6] = self.apex_scales
+        cfg[[C.ALIVE, C.TRACKING, C.CTRL]] = alive_reward, tracking_cost_weight, ctrl_cost_weight
+        cfg[C.INCLUDE_X] = float(self.include_x)
+        cfg[C.ZREF : C.ZREF + 6] = self.z_ref
+        cfg[C.ZSCALE : C.ZSCALE + 6] = self.apex_scales
         p = self.params
         leg, pi = 2.0 * max(p.lb_bar, p.lf_bar), math.pi
         a, w, v = _ANGLE_BOUND, _RATE_BOUND, _SPEED_BOUND
@@ -407,10 +467,10 @@ class PassiveBoundTask:
         ]  # fmt: skip
         self._obs_low = np.array([b[0] for b in bounds], dtype=np.float32)
         self._obs_high = np.array([b[1] for b in bounds], dtype=np.float32)
-        cfg[C_OBS_LOW : C_OBS_LOW + N_OBS_FULL] = self._obs_low
-        cfg[C_OBS_HIGH : C_OBS_HIGH + N_OBS_FULL] = self._obs_high
-        cfg[C_SLOPE_NOISE] = math.radians(self.slope_noise_deg)
-        cfg[C_ALPHA_NOMINAL] = self.params.alpha
+        cfg[C.OBS_LOW : C.OBS_LOW + N_OBS_FULL] = self._obs_low
+        cfg[C.OBS_HIGH : C.OBS_HIGH + N_OBS_FULL] = self._obs_high
+        cfg[C.SLOPE_NOISE] = math.radians(self.slope_noise_deg)
+        cfg[C.ALPHA_NOMINAL] = self.params.alpha
         self.cfg = cfg
         self._aux0 = make_aux(self.params.to_array())
 
@@ -431,7 +491,7 @@ class PassiveBoundTask:
             y=np.zeros((n, 8)),
             aux=np.tile(self._aux0, (n, 1)),
             flags=np.zeros((n, N_FLAGS), dtype=np.bool_),
-            s=np.zeros((n, N_S)),
+            s=np.zeros((n, S.SIZE)),
             apex=np.zeros((n, self.apex_capacity, 8)),
             obs=np.zeros((n, self.obs_dim), dtype=np.float32),
             actions=np.zeros(n),
@@ -471,10 +531,10 @@ class PassiveBoundTask:
         b.flags[i] = False
         s = b.s[i]
         s[:] = 0.0
-        s[S_STATUS] = start_status(y, b.aux[i])  # an impossible start fails at the first step
-        s[S_ENERGY] = total_energy(y, b.aux[i])
-        s[S_X] = y[0]
-        s[S_PHASE] = 0  # df
+        s[S.STATUS] = start_status(y, b.aux[i])  # an impossible start fails at the first step
+        s[S.ENERGY] = total_energy(y, b.aux[i])
+        s[S.X] = y[0]
+        s[S.PHASE] = 0  # df
         observe(y, b.aux[i], b.flags[i], 0.0, self.cfg, b.obs[i])
 
     def draw_slope_noise(self, b: Batch, i: int, rng: np.random.Generator) -> None:
@@ -482,7 +542,12 @@ class PassiveBoundTask:
         the slope changes at robot i's next apexes (call after `reset_robot` and after every
         interval in which a stride completed). Without slope noise no number is drawn."""
         if self.slope_noise_deg > 0.0:
-            b.s[i, S_XI : S_XI + N_XI] = rng.standard_normal(N_XI)
+            b.s[i, S.XI : S.XI + N_XI] = rng.standard_normal(N_XI)
+
+    @staticmethod
+    def failed(b: Batch) -> np.ndarray:
+        """Per robot: did its last interval (or its start state) fail? (terminates it)"""
+        return b.s[:, S.STATUS] >= FAIL_FIRST
 
     def step(self, b: Batch, parallel: bool = False) -> None:
         """One control interval for the robots with ``b.active`` (torques in ``b.actions``)."""
@@ -493,23 +558,23 @@ class PassiveBoundTask:
     def info(self, b: Batch, i: int, reset: bool = False) -> dict:
         """The info dictionary of robot i after a step (or, with ``reset``, after a reset)."""
         s = b.s[i].tolist()  # Python floats in one call (this runs at every step)
-        status = int(s[S_STATUS])
+        status = int(s[S.STATUS])
         info = {
-            "x_position": s[S_X],
-            "phase": PHASES[int(s[S_PHASE])],
-            "stride": int(s[S_STRIDES]),
-            "time": s[S_T],
-            "tau": s[S_TAU],
-            "energy": s[S_ENERGY],
-            "reward_alive": s[S_ALIVE],
-            "reward_tracking": s[S_TRACKING],
-            "reward_ctrl": s[S_CTRL],
+            "x_position": s[S.X],
+            "phase": PHASES[int(s[S.PHASE])],
+            "stride": int(s[S.STRIDES]),
+            "time": s[S.T],
+            "tau": s[S.TAU],
+            "energy": s[S.ENERGY],
+            "reward_alive": s[S.ALIVE],
+            "reward_tracking": s[S.TRACKING],
+            "reward_ctrl": s[S.CTRL],
             "failure": FAILURE_NAMES[status],
         }
         if reset:
             info["start_z"] = b.y[i][_Z_IDX]
-        elif s[S_NAPEX] > 0.0:
-            n = int(s[S_NAPEX])
+        elif s[S.NAPEX] > 0.0:
+            n = int(s[S.NAPEX])
             info["apex_z"] = b.apex[i, min(n, b.apex.shape[1]) - 1][_Z_IDX]
             info["apex_count"] = n
         return info
@@ -531,29 +596,29 @@ class PassiveBoundTask:
                 values = values.astype(values.dtype, copy=False)
             info[key], info["_" + key] = values, mask.copy()
 
-        put("x_position", s[S_X].copy())
-        phase = _PHASE_OBJECTS[s[S_PHASE].astype(np.int64)]
+        put("x_position", s[S.X].copy())
+        phase = _PHASE_OBJECTS[s[S.PHASE].astype(np.int64)]
         if not full:
             phase[~rows] = None
         put("phase", phase, full=True)
-        put("stride", s[S_STRIDES].astype(np.int64))
-        put("time", s[S_T].copy())
-        put("tau", s[S_TAU].copy())
-        put("energy", s[S_ENERGY].copy())
-        put("reward_alive", s[S_ALIVE].copy())
-        put("reward_tracking", s[S_TRACKING].copy())
-        put("reward_ctrl", s[S_CTRL].copy())
+        put("stride", s[S.STRIDES].astype(np.int64))
+        put("time", s[S.T].copy())
+        put("tau", s[S.TAU].copy())
+        put("energy", s[S.ENERGY].copy())
+        put("reward_alive", s[S.ALIVE].copy())
+        put("reward_tracking", s[S.TRACKING].copy())
+        put("reward_ctrl", s[S.CTRL].copy())
         failure = np.full(b.n, None, dtype=object)
-        if s[S_STATUS].max() >= FAIL_FIRST:
-            for i in np.flatnonzero(rows & (s[S_STATUS] >= FAIL_FIRST)):
-                failure[i] = FAILURE_NAMES[int(s[S_STATUS, i])]
+        if s[S.STATUS].max() >= FAIL_FIRST:
+            for i in np.flatnonzero(rows & (s[S.STATUS] >= FAIL_FIRST)):
+                failure[i] = FAILURE_NAMES[int(s[S.STATUS, i])]
         put("failure", failure, full=True)
-        if s[S_NAPEX].max() > 0:
-            apex_rows = rows & (s[S_NAPEX] > 0)
+        if s[S.NAPEX].max() > 0:
+            apex_rows = rows & (s[S.NAPEX] > 0)
             if reset_rows is not None:
                 apex_rows &= ~reset_rows
             if apex_rows.any():
-                napex = s[S_NAPEX].astype(np.int64)
+                napex = s[S.NAPEX].astype(np.int64)
                 last = np.clip(napex, 1, b.apex.shape[1]) - 1
                 z = b.apex[np.arange(b.n), last][:, _Z_IDX]
                 put("apex_z", z, apex_rows, full=False)

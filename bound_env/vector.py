@@ -23,8 +23,7 @@ from gymnasium.vector.utils import batch_space
 
 from . import MAX_EPISODE_STEPS
 from .env import RENDER_MODES, check_action, make_spaces, render_text
-from .events import FAIL_FIRST
-from .task import S_REWARD, S_STATUS, S_STEPS, PassiveBoundTask
+from .task import S_REWARD, S_STEPS, PassiveBoundTask, TaskConfig
 
 
 class PassiveBoundVectorEnv(VectorEnv):
@@ -38,6 +37,7 @@ class PassiveBoundVectorEnv(VectorEnv):
     | `max_episode_steps` | **int** | `3000` | truncation after this many steps (None: never) |
     | `autoreset_mode` | **AutoresetMode** | `NEXT_STEP` | Gymnasium's autoreset mode (or value) |
     | `parallel` | **bool** | `False` | step the robots on Numba's threads (see below) |
+    | `config` | **TaskConfig** | `None` | the task settings at once; keyword arguments change it |
 
     ``reset(options={"apex_state": z})`` starts every robot at z (6 numbers) or robot i at
     ``z[i]`` (shape (num_envs, 6)); ``options={"reset_mask": mask}`` resets only some robots.
@@ -57,6 +57,7 @@ class PassiveBoundVectorEnv(VectorEnv):
         render_mode: str | None = None,
         width: int = 640,
         height: int = 360,
+        config: TaskConfig | None = None,
         **task_kwargs,
     ):
         if int(num_envs) < 1:
@@ -65,10 +66,11 @@ class PassiveBoundVectorEnv(VectorEnv):
             raise ValueError(
                 f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}"
             )
-        if float(task_kwargs.get("slope_noise_deg") or 0.0) != 0.0:
+        config = TaskConfig.resolve(config, task_kwargs)
+        if config.slope_noise_deg != 0.0:
             raise ValueError("slope_noise_deg (rough terrain) is supported by the single env "
                              "PassiveBound-v0 only, not by the native vector env")
-        self.task = PassiveBoundTask(**task_kwargs)
+        self.task = PassiveBoundTask(config)
         self.num_envs = int(num_envs)
         self.max_episode_steps = (
             int(max_episode_steps) if max_episode_steps and max_episode_steps > 0 else None
@@ -159,7 +161,7 @@ class PassiveBoundVectorEnv(VectorEnv):
             for i in np.flatnonzero(reset_rows):
                 self._reset_robot(int(i))
         s = b.s.T
-        terminated = s[S_STATUS] >= FAIL_FIRST
+        terminated = self.task.failed(b)
         truncated = (
             s[S_STEPS] >= self.max_episode_steps
             if self.max_episode_steps is not None

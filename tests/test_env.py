@@ -452,3 +452,70 @@ def test_kick_changes_only_the_velocities_and_rejects_nan():
     assert after[4] == pytest.approx(before[4] + 0.1) and after[6] == pytest.approx(before[6] - 0.5)
     with pytest.raises(ValueError, match="finite"):
         env.kick([np.nan, 0, 0, 0])
+
+
+# -- one config for both environments ----------------------------------------------------------
+
+
+def test_task_config_is_what_both_envs_take(make_env):
+    import pickle
+
+    from bound_env.task import TASK_SETTINGS, TaskConfig
+    from bound_env.vector import PassiveBoundVectorEnv
+
+    cfg = TaskConfig(max_torque=20.0, reset_noise_scale=0.3, apex_scales=[0.03] * 6)
+    assert cfg.apex_scales == (0.03,) * 6 and isinstance(cfg.max_torque, float)
+    with pytest.raises(Exception, match="cannot assign"):
+        cfg.dt = 0.02  # frozen
+    # the settings are exactly the env's keyword arguments, minus the rendering ones
+    import inspect
+
+    from bound_env.env import PassiveBoundEnv
+
+    env_kwargs = set(inspect.signature(PassiveBoundEnv).parameters)
+    assert set(TASK_SETTINGS) == env_kwargs - {"render_mode", "width", "height", "config"}
+    by_kwargs = make_env(max_torque=20.0, reset_noise_scale=0.3, apex_scales=[0.03] * 6)
+    by_config = make_env(config=cfg)
+    assert by_config.unwrapped.task.config == cfg == by_kwargs.unwrapped.task.config
+    rng = np.random.default_rng(5)
+    a = by_kwargs.reset(seed=11)[0], by_config.reset(seed=11)[0]
+    np.testing.assert_array_equal(*a)
+    for _ in range(60):
+        act = rng.uniform(-1, 1, 1).astype(np.float32)
+        o1, r1, *_ = by_kwargs.step(act)
+        o2, r2, *_ = by_config.step(act)
+        np.testing.assert_array_equal(o1, o2)
+        assert r1 == r2
+    # keywords not at their default change the config; the env pickles with its config
+    changed = make_env(config=cfg, dt=0.02).unwrapped
+    assert changed.task.config.dt == 0.02 and changed.task.config.max_torque == 20.0
+    clone = pickle.loads(pickle.dumps(changed))
+    assert clone.task.config == changed.task.config
+    venv = PassiveBoundVectorEnv(num_envs=2, config=cfg, dt=0.02)
+    assert venv.task.config == replace_dt(cfg, 0.02)
+    venv.close()
+    with pytest.raises(ValueError, match="unknown task setting"):
+        PassiveBoundVectorEnv(num_envs=2, spring=1.0)
+    with pytest.raises(ValueError, match="rtol"):
+        TaskConfig(rtol=0.0)
+    with pytest.raises(ValueError, match="ctrl_cost_weight"):
+        TaskConfig(ctrl_cost_weight=-1.0)
+
+
+def replace_dt(cfg, dt):
+    from dataclasses import replace
+
+    return replace(cfg, dt=dt)
+
+
+def test_termination_is_decoded_by_the_task(make_env):
+    """The task says which robots failed; the env reports it as terminated."""
+    env = make_env(gait_overrides={"g": 0.01}, reset_noise_scale=0.0)
+    env.reset(seed=0)
+    task, b = env.unwrapped.task, env.unwrapped._b
+    for _ in range(400):
+        _, _, terminated, _, info = env.step(ZERO)
+        assert terminated == bool(task.failed(b)[0]) == (info["failure"] is not None)
+        if terminated:
+            break
+    assert terminated

@@ -127,3 +127,28 @@ def test_simulator_layers_point_down(low, high):
                 seen.add(n)
                 todo.append(n)
     assert high not in seen
+
+
+def test_flat_array_layouts_are_contiguous_and_exported():
+    """Each family of offsets comes from one declaration: consecutive, non-overlapping fields,
+    and the flat module constants equal the namespace's offsets."""
+    import bound_env.dynamics as dynamics
+    import bound_env.params as params
+    import bound_env.task as task
+    from bound_env.layout import Layout
+
+    for module, layout in ((params, params.PARAM_LAYOUT), (params, params.AUX_LAYOUT),
+                           (task, task.STATE_LAYOUT), (task, task.CONFIG_LAYOUT)):
+        ns = layout.ns
+        offsets = [getattr(ns, n) for n in layout.names]
+        assert offsets[0] == layout.start and offsets == sorted(set(offsets))
+        assert ns.SIZE == layout.size > offsets[-1]
+        for name, value in layout.constants().items():
+            assert getattr(module, name) == value
+    assert params.AUX_LAYOUT.start == params.N_PARAMS
+    assert dynamics.A_CB == params.A_CB and dynamics.N_AUX == params.N_AUX
+    wide = Layout("X_", ("a", ("b", 3), "c"), "N_X", start=2)
+    assert wide.constants() == {"X_A": 2, "X_B": 3, "X_C": 6, "N_X": 7}
+    with pytest.raises(ValueError, match="unique"):
+        Layout("X_", ("a", "A"), "N_X")
+

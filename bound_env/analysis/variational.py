@@ -40,10 +40,10 @@ from scipy.integrate import solve_ivp
 
 from ..dynamics import A_CB, A_XB, A_XF, body_points, jit, make_aux, rhs, trig
 from ..hybrid import simulate_stride, state_from_z
-from ..params import P_GB, P_GF, P_LB, P_LF, Params
+from ..params import P_GB, P_GF, P_LB, P_LF, Z_IN_Y, Params
 
 N_W = 10  # augmented state: y (8) + two toe positions
-Z_ROWS = np.array([1, 2, 3, 4, 6, 7])  # z = w[Z_ROWS] (eq. 17)
+Z_ROWS = np.array(Z_IN_Y)  # z = w[Z_ROWS] (eq. 17)
 H_CS = 1e-30  # complex-step size
 EVENT_TIME_TOL = 1e-6  # re-located events must agree with the reference stride [s]
 _LEG = {"back": 0, "front": 1}
