@@ -114,6 +114,13 @@ def test_no_import_cycle_inside_bound_env():
         ("bound_env.params", "bound_env.dynamics"),
         ("bound_env.dynamics", "bound_env.events"),
         ("bound_env.events", "bound_env.fast"),
+        ("bound_env.events", "bound_env.reference"),
+        ("bound_env.fast", "bound_env.stride"),
+        ("bound_env.reference", "bound_env.stride"),
+        ("bound_env.reference", "bound_env.fast"),
+        ("bound_env.stride", "bound_env.hybrid"),
+        ("bound_env.stride", "bound_env.task"),
+        ("bound_env.task", "bound_env.env"),
     ],
 )
 def test_simulator_layers_point_down(low, high):
