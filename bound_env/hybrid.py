@@ -55,7 +55,12 @@ from .events import (
     start_status,
 )
 from .fast import simulate_fast
-from .reference import simulate_reference
+from .reference import (
+    REFERENCE_H_MIN,
+    REFERENCE_MAX_STEPS,
+    REFERENCE_WALL_S,
+    simulate_reference,
+)
 from .stride import (
     DEFAULT_T_MAX,
     StrideResult,
@@ -74,6 +79,7 @@ __all__ = [
     "G_SHORT_F", "G_TD_B", "G_TD_F", "GUARD_DIRECTION", "GUARD_NAMES", "N_FLAGS", "N_GUARDS",
     "PHASES", "TIME_UP", "Event", "apex_armed", "apply_events", "coincident", "failure_name",
     "guard_values", "phase_index", "start_status", "simulate_fast", "simulate_reference",
+    "REFERENCE_H_MIN", "REFERENCE_MAX_STEPS", "REFERENCE_WALL_S",
     "DEFAULT_T_MAX", "StrideResult", "Trajectory", "phases_from_events", "simulate_stride",
     "state_from_z", "z_from_state",
 ]

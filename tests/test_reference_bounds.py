@@ -8,6 +8,7 @@ import time
 import pytest
 
 import bound_env.hybrid as hybrid
+import bound_env.reference as reference
 from bound_env.params import load_gait
 
 
@@ -17,13 +18,13 @@ def stiff():
 
 
 def test_step_budget_gives_integration_failed(stiff, monkeypatch):
-    monkeypatch.setattr(hybrid, "REFERENCE_MAX_STEPS", 300)
+    monkeypatch.setattr(reference, "REFERENCE_MAX_STEPS", 300)
     res = hybrid.simulate_stride(stiff.z0, stiff.params, backend="reference")
     assert res.failure == "integration_failed" and res.z1 is None
 
 
 def test_wall_clock_guard_gives_integration_failed(stiff, monkeypatch):
-    monkeypatch.setattr(hybrid, "REFERENCE_WALL_S", 0.3)
+    monkeypatch.setattr(reference, "REFERENCE_WALL_S", 0.3)
     t0 = time.perf_counter()
     res = hybrid.simulate_stride(stiff.z0, stiff.params, backend="reference")
     assert res.failure == "integration_failed"
