@@ -459,8 +459,9 @@ def save_checkpoint(model, folder: Path, n: int) -> Path:
         tmp = folder / f".rl_model_vecnormalize_{n}_steps.pkl.tmp"
         vn.save(str(tmp))
         os.replace(tmp, pkl_path)
-        entry.update(vecnormalize=pkl_path.name, vecnormalize_sha256=file_sha256(pkl_path),
-                     obs_count=float(vn.obs_rms.count))
+        entry.update(vecnormalize=pkl_path.name, vecnormalize_sha256=file_sha256(pkl_path))
+        if vn.norm_obs:  # norm_obs=False (e.g. configs/ppo-stride.yaml) keeps no obs_rms
+            entry["obs_count"] = float(vn.obs_rms.count)
     _atomic_write_text(manifest, json.dumps(entry, indent=2) + "\n")
     return zip_path
 

@@ -212,3 +212,14 @@ def test_anchored_policy_keeps_the_cycle_whatever_the_weights(zero_run, tmp_path
     d = np.abs(ctrl.z_ref) * np.array([1.0, -0.5, 0.3, 0.8, -1.0, 0.2])
     big, small = (np.max(np.abs(ctrl.residual(ctrl.z_ref + h * d))) for h in (1e-2, 1e-3))
     assert 0 < small < big / 50
+
+
+@pytest.mark.slow
+def test_checkpoint_without_observation_normalization(tmp_path):
+    """norm_obs=False (the stride configs): a checkpoint is written and the run resumes."""
+    from agents.train import last_checkpoint, train
+
+    run = train(config=CONFIG, env_id=STRIDE_ENV_ID, seed=0, n_timesteps=256, sets=TINY,
+                runs_dir=tmp_path, vec_env="dummy", eval_freq=10_000, save_freq=128,
+                progress_bar=False)
+    assert last_checkpoint(run) is not None
