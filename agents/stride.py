@@ -535,10 +535,11 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
 
 def write_base(run_dir: Path, venv) -> None:
     """Write the base controller of a residual run's envs to ``run_dir/base.json``."""
-    try:
-        bases = venv.get_attr("base")
-    except AttributeError:
+    # has_attr, not get_attr + AttributeError: in a SubprocVecEnv the failing getattr would kill
+    # the worker process (the parent then sees EOFError).
+    if not venv.has_attr("base"):
         return
+    bases = venv.get_attr("base")
     if bases and bases[0] is not None:
         tmp = Path(run_dir) / (BASE_FILE + ".tmp")
         tmp.write_text(json.dumps(bases[0].to_json(), indent=2) + "\n")

@@ -753,11 +753,8 @@ def train(
 
 
 def _has_attr(venv, attr: str) -> bool:
-    try:
-        venv.get_attr(attr)
-        return True
-    except AttributeError:
-        return False
+    # VecEnv.has_attr: a getattr that raises inside a SubprocVecEnv worker would kill it.
+    return bool(venv.has_attr(attr))
 
 
 def _ncpu() -> int:
