@@ -12,33 +12,57 @@ def register(sub) -> None:
     from bound_env.cli_args import add_progress_args
     from bound_env.parallel import add_scheduler_args
 
-    p = sub.add_parser("basin-map", help="2-D basin map (basin.npz, basin.png) of the passive "
-                       "gait or a policy")
-    p.add_argument("--policy", default="passive",
-                   help="'passive', a shipped policy's name or a policy: run/policy directory "
-                        "or model .zip")
-    p.add_argument("--axes", default="xdot_g,y_g",
-                   help="two apex components: y_g, theta1, theta2, xdot_g, theta1dot, "
-                        "theta2dot (default: %(default)s)")
-    p.add_argument("--grid", type=int, default=DEFAULT_GRID, help="points per axis "
-                   "(default: %(default)s)")
-    p.add_argument("--range", dest="ranges", metavar="LO,HI,LO,HI",
-                   help="ranges of the two axes in the paper's units [m, deg, deg, m/s, deg/s, "
-                        "deg/s] (default: z* plus or minus a fixed half-width per component)")
-    p.add_argument("--gait", default=None,
-                   help="gait name or path (default: the policy's own, else 'default')")
-    p.add_argument("--strides", type=int, default=DEFAULT_STRIDES,
-                   help="strides allowed to return (default: %(default)s)")
-    p.add_argument("--chunk", type=int, default=DEFAULT_CHUNK,
-                   help="starts per task (default: %(default)s)")
-    p.add_argument("--no-overlay", action="store_true",
-                   help="do not compute the passive map to overlay its boundary")
+    p = sub.add_parser(
+        "basin-map", help="2-D basin map (basin.npz, basin.png) of the passive gait or a policy"
+    )
+    p.add_argument(
+        "--policy",
+        default="passive",
+        help="'passive', a shipped policy's name or a policy: run/policy directory or model .zip",
+    )
+    p.add_argument(
+        "--axes",
+        default="xdot_g,y_g",
+        help="two apex components: y_g, theta1, theta2, xdot_g, theta1dot, "
+        "theta2dot (default: %(default)s)",
+    )
+    p.add_argument(
+        "--grid", type=int, default=DEFAULT_GRID, help="points per axis (default: %(default)s)"
+    )
+    p.add_argument(
+        "--range",
+        dest="ranges",
+        metavar="LO,HI,LO,HI",
+        help="ranges of the two axes in the paper's units [m, deg, deg, m/s, deg/s, "
+        "deg/s] (default: z* plus or minus a fixed half-width per component)",
+    )
+    p.add_argument(
+        "--gait", default=None, help="gait name or path (default: the policy's own, else 'default')"
+    )
+    p.add_argument(
+        "--strides",
+        type=int,
+        default=DEFAULT_STRIDES,
+        help="strides allowed to return (default: %(default)s)",
+    )
+    p.add_argument(
+        "--chunk", type=int, default=DEFAULT_CHUNK, help="starts per task (default: %(default)s)"
+    )
+    p.add_argument(
+        "--no-overlay",
+        action="store_true",
+        help="do not compute the passive map to overlay its boundary",
+    )
     add_scheduler_args(p, workers_default=2)
-    p.add_argument("--out", required=True, help="directory for basin.npz, basin.png and the "
-                   "chunk cache")
-    p.add_argument("--png", metavar="PATH",
-                   help="also write the figure to PATH (e.g. docs/basin_passive_xdot_y.png); "
-                        "nothing outside --out is written without it")
+    p.add_argument(
+        "--out", required=True, help="directory for basin.npz, basin.png and the chunk cache"
+    )
+    p.add_argument(
+        "--png",
+        metavar="PATH",
+        help="also write the figure to PATH (e.g. docs/basin_passive_xdot_y.png); "
+        "nothing outside --out is written without it",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     add_progress_args(p)
     p.set_defaults(func=cmd_basin_map)
@@ -53,8 +77,10 @@ def resolve(policy: str, gait: str | None):
 
     ctrl = load_controller(policy, gait=gait)
     if not callable(ctrl) or not hasattr(ctrl, "env_kwargs"):
-        raise ValueError(f"--policy {policy}: basin-map needs 'passive' or a controller "
-                         "with env_kwargs and __call__(obs) or batch(obs)")
+        raise ValueError(
+            f"--policy {policy}: basin-map needs 'passive' or a controller "
+            "with env_kwargs and __call__(obs) or batch(obs)"
+        )
     return ctrl, _policy_label(policy), gait or ctrl.env_kwargs.get("gait") or "default"
 
 
@@ -63,11 +89,21 @@ def cmd_basin_map(args) -> int:
     from bound_env.cli_args import strict_json
 
     controller, label, gait = resolve(args.policy, args.gait)
-    s = basin_map(controller, label, axes=args.axes, grid=args.grid, ranges=args.ranges,
-                  gait=gait, max_strides=args.strides, chunk=args.chunk,
-                  scheduler=args.scheduler, workers=args.workers, out=args.out,
-                  progress=sys.stderr.isatty() and not args.no_progress,
-                  overlay_passive=not args.no_overlay)
+    s = basin_map(
+        controller,
+        label,
+        axes=args.axes,
+        grid=args.grid,
+        ranges=args.ranges,
+        gait=gait,
+        max_strides=args.strides,
+        chunk=args.chunk,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        out=args.out,
+        progress=sys.stderr.isatty() and not args.no_progress,
+        overlay_passive=not args.no_overlay,
+    )
     if args.png:
         from bound_env.cache import atomic_write
 

@@ -11,11 +11,12 @@ from pathlib import Path
 from bound_env.cli_args import add_json_arg, out_dir, say, strict_json
 
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
-POLICY_HELP = ("'passive', a shipped policy ('default', 'literal-cycle'), another built-in "
-               "controller ('lqr', 'deadbeat', 'damping': bound_env.control, or a controller "
-               "spec .yaml), or a path: a run/policy folder, a model .zip, an rl-zoo3 run folder")
-POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv",
-                "eval.png")
+POLICY_HELP = (
+    "'passive', a shipped policy ('default', 'literal-cycle'), another built-in "
+    "controller ('lqr', 'deadbeat', 'damping': bound_env.control, or a controller "
+    "spec .yaml), or a path: a run/policy folder, a model .zip, an rl-zoo3 run folder"
+)
+POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv", "eval.png")
 
 
 def register(sub) -> None:
@@ -25,59 +26,111 @@ def register(sub) -> None:
     from .config import DEFAULT_CONFIG, DEFAULT_ENV_ID
 
     p = sub.add_parser("train", help="train a PPO spine controller (runs/<name>/)")
-    p.add_argument("--config", default=str(DEFAULT_CONFIG),
-                   help="rl-zoo3-style hyperparameter file (default: %(default)s)")
-    p.add_argument("--env-id", default=DEFAULT_ENV_ID,
-                   help="section of the config and Gymnasium id (default: %(default)s)")
+    p.add_argument(
+        "--config",
+        default=str(DEFAULT_CONFIG),
+        help="rl-zoo3-style hyperparameter file (default: %(default)s)",
+    )
+    p.add_argument(
+        "--env-id",
+        default=DEFAULT_ENV_ID,
+        help="section of the config and Gymnasium id (default: %(default)s)",
+    )
     p.add_argument("--name", help="run name: runs/<name>/ (default: <env-id>_s<seed>)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--n-timesteps", type=number(float, 1, 1e10), help="override n_timesteps")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a hyperparameter (YAML value; dotted keys descend, e.g. "
-                        "env_kwargs.max_torque=20)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue runs/<name>/ from its last checkpoint")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a hyperparameter (YAML value; dotted keys descend, e.g. "
+        "env_kwargs.max_torque=20)",
+    )
+    p.add_argument(
+        "--resume", action="store_true", help="continue runs/<name>/ from its last checkpoint"
+    )
     p.add_argument("--runs-dir", default="runs")
-    p.add_argument("--vec-env", choices=("auto", "dummy", "subproc"), default="auto",
-                   help="auto: SubprocVecEnv when n_envs > 1 (default: %(default)s)")
-    p.add_argument("--eval-freq", type=int, default=None,
-                   help="timesteps between evaluations (default: 100000; on --resume the run's)")
-    p.add_argument("--n-eval-episodes", type=int, default=None,
-                   help="episodes per evaluation (default: 10; on --resume the run's)")
-    p.add_argument("--save-freq", type=int, default=None,
-                   help="timesteps between checkpoints (default: 200000; on --resume the run's)")
-    p.add_argument("--export", metavar="DIR",
-                   help="afterwards copy the policy files to DIR (e.g. agents/policies/default)")
-    p.add_argument("--export-from", choices=("final", "best"), default="final",
-                   help="export the final model (default: no selection), or the checkpoint "
-                        "with the best validation score (validation set disjoint from the "
-                        "margins' test set: see configs/ppo.yaml)")
+    p.add_argument(
+        "--vec-env",
+        choices=("auto", "dummy", "subproc"),
+        default="auto",
+        help="auto: SubprocVecEnv when n_envs > 1 (default: %(default)s)",
+    )
+    p.add_argument(
+        "--eval-freq",
+        type=int,
+        default=None,
+        help="timesteps between evaluations (default: 100000; on --resume the run's)",
+    )
+    p.add_argument(
+        "--n-eval-episodes",
+        type=int,
+        default=None,
+        help="episodes per evaluation (default: 10; on --resume the run's)",
+    )
+    p.add_argument(
+        "--save-freq",
+        type=int,
+        default=None,
+        help="timesteps between checkpoints (default: 200000; on --resume the run's)",
+    )
+    p.add_argument(
+        "--export",
+        metavar="DIR",
+        help="afterwards copy the policy files to DIR (e.g. agents/policies/default)",
+    )
+    p.add_argument(
+        "--export-from",
+        choices=("final", "best"),
+        default="final",
+        help="export the final model (default: no selection), or the checkpoint "
+        "with the best validation score (validation set disjoint from the "
+        "margins' test set: see configs/ppo.yaml)",
+    )
     add_progress_args(p)
-    p.add_argument("--seeds", metavar="S,S,...",
-                   help="one training per seed (runs <name>_s<seed>), each a task of the "
-                        "executor below, then compare over them (agents/multiseed.py)")
+    p.add_argument(
+        "--seeds",
+        metavar="S,S,...",
+        help="one training per seed (runs <name>_s<seed>), each a task of the "
+        "executor below, then compare over them (agents/multiseed.py)",
+    )
     add_scheduler_args(p, workers_default=2)
-    p.add_argument("--runs-transfer", choices=("shared", "bytes"), default="shared",
-                   help="with --seeds: workers write --runs-dir themselves (shared storage), "
-                        "or send each run back as bytes (default: %(default)s)")
-    p.add_argument("--compare-budget", choices=("test", "quick", "full", "none"),
-                   default="quick", help="with --seeds: margins budget of the final compare "
-                   "(default: %(default)s)")
+    p.add_argument(
+        "--runs-transfer",
+        choices=("shared", "bytes"),
+        default="shared",
+        help="with --seeds: workers write --runs-dir themselves (shared storage), "
+        "or send each run back as bytes (default: %(default)s)",
+    )
+    p.add_argument(
+        "--compare-budget",
+        choices=("test", "quick", "full", "none"),
+        default="quick",
+        help="with --seeds: margins budget of the final compare (default: %(default)s)",
+    )
     add_json_arg(p, "the run summary (run.json)")
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("margins", help="stability margins of the passive gait or a policy")
     p.add_argument("--policy", default="passive", help=POLICY_HELP)
     p.add_argument("--budget", choices=("test", "quick", "standard", "full"), default="quick")
-    p.add_argument("--gait", default=None,
-                   help="gait name or path (default: the policy's own, else 'default')")
-    p.add_argument("--force", action="store_true",
-                   help="evaluate a policy on a gait or without files it was not trained for")
-    p.add_argument("--workers", type=number(int, 1, 256), default=2,
-                   help="worker processes (default: 2)")
+    p.add_argument(
+        "--gait", default=None, help="gait name or path (default: the policy's own, else 'default')"
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="evaluate a policy on a gait or without files it was not trained for",
+    )
+    p.add_argument(
+        "--workers", type=number(int, 1, 256), default=2, help="worker processes (default: 2)"
+    )
     add_scheduler_args(p, workers_default=None)
-    p.add_argument("--out", help="directory for margins.json, CSVs, PNGs and the task cache "
-                   "(default: out/margins/<policy name>)")
+    p.add_argument(
+        "--out",
+        help="directory for margins.json, CSVs, PNGs and the task cache "
+        "(default: out/margins/<policy name>)",
+    )
     p.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     p.add_argument("--json", action="store_true", help="print the JSON result")
     add_progress_args(p)
@@ -85,39 +138,60 @@ def register(sub) -> None:
 
     p = sub.add_parser("rollout", help="run a policy for N strides in its own environment")
     p.add_argument("--policy", default="default", help=POLICY_HELP + " (default: %(default)s)")
-    p.add_argument("--gait", default=None,
-                   help="gait name or path (default: the policy's own, else 'default')")
-    p.add_argument("--strides", type=number(int, 1, 100_000), default=50,
-                   help="strides to run (default: 50)")
+    p.add_argument(
+        "--gait", default=None, help="gait name or path (default: the policy's own, else 'default')"
+    )
+    p.add_argument(
+        "--strides", type=number(int, 1, 100_000), default=50, help="strides to run (default: 50)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the start noise (default: 0)")
-    p.add_argument("--noise", type=number(float, 0, 10), default=0.0,
-                   help="start noise, the env's reset_noise_scale (default: 0, on the cycle)")
+    p.add_argument(
+        "--noise",
+        type=number(float, 0, 10),
+        default=0.0,
+        help="start noise, the env's reset_noise_scale (default: 0, on the cycle)",
+    )
     p.add_argument("--video", metavar="F.gif|F.mp4", help="record the run")
     p.add_argument("--out", help="where summary.json goes (default: out/rollout/<policy>)")
-    p.add_argument("--force", action="store_true",
-                   help="run a policy on a gait or without files it was not trained for")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="run a policy on a gait or without files it was not trained for",
+    )
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     p.set_defaults(func=cmd_rollout)
 
     p = sub.add_parser("compare", help="passive vs learned margins -> docs/MARGINS.md")
-    p.add_argument("--entry", "--policy", action="append", dest="entry",
-                   metavar="LABEL=PATH[,PATH...][@GAIT]",
-                   help="a column besides passive: one controller, or several made the same "
-                        "way (seeds), e.g. learned=runs/s0,runs/s1,runs/s2 (mean and 95%% "
-                        "t interval over them), or a classical controller: lqr, deadbeat, "
-                        "damping or a spec .yaml (a bare name is its own label); repeatable "
-                        "(default: the shipped policies and lqr, deadbeat, damping)")
+    p.add_argument(
+        "--entry",
+        "--policy",
+        action="append",
+        dest="entry",
+        metavar="LABEL=PATH[,PATH...][@GAIT]",
+        help="a column besides passive: one controller, or several made the same "
+        "way (seeds), e.g. learned=runs/s0,runs/s1,runs/s2 (mean and 95%% "
+        "t interval over them), or a classical controller: lqr, deadbeat, "
+        "damping or a spec .yaml (a bare name is its own label); repeatable "
+        "(default: the shipped policies and lqr, deadbeat, damping)",
+    )
     p.add_argument("--budget", choices=("test", "quick", "standard", "full"), default="full")
     p.add_argument("--workers", type=number(int, 1, 256), default=2)
     add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", default="out/margins", help="per-entry results and caches")
-    p.add_argument("--docs", default=None, metavar="DIR",
-                   help="where MARGINS.md and its PNGs go (default: the --out folder; give "
-                        "--docs docs to update the repository's page)")
+    p.add_argument(
+        "--docs",
+        default=None,
+        metavar="DIR",
+        help="where MARGINS.md and its PNGs go (default: the --out folder; give "
+        "--docs docs to update the repository's page)",
+    )
     add_progress_args(p)
     add_json_arg(p)
-    p.add_argument("--note", default="", help="a paragraph for the top of the page (e.g. why "
-                   "the budget is not the full one)")
+    p.add_argument(
+        "--note",
+        default="",
+        help="a paragraph for the top of the page (e.g. why the budget is not the full one)",
+    )
     p.set_defaults(func=cmd_compare)
 
     from .basin_cli import register as register_basin_map
@@ -128,8 +202,15 @@ def register(sub) -> None:
 def cmd_rollout(args) -> int:
     from .rollout import rollout, summary_text
 
-    r = rollout(args.policy, gait=args.gait, strides=args.strides, seed=args.seed,
-                noise=args.noise, video=args.video, force=args.force)
+    r = rollout(
+        args.policy,
+        gait=args.gait,
+        strides=args.strides,
+        seed=args.seed,
+        noise=args.noise,
+        video=args.video,
+        force=args.force,
+    )
     out = Path(args.out) if args.out else Path("out") / "rollout" / _policy_label(args.policy)
     path = _write_json(out / "summary.json", r)
     if args.json:
@@ -166,13 +247,20 @@ def cmd_train(args) -> int:
     if args.seeds is not None:
         return _train_seeds(args, n, t0)
     run = train(
-        config=args.config, env_id=args.env_id, name=args.name, seed=args.seed, n_timesteps=n,
-        sets=args.set, resume=args.resume, runs_dir=args.runs_dir, vec_env=args.vec_env,
+        config=args.config,
+        env_id=args.env_id,
+        name=args.name,
+        seed=args.seed,
+        n_timesteps=n,
+        sets=args.set,
+        resume=args.resume,
+        runs_dir=args.runs_dir,
+        vec_env=args.vec_env,
         eval_freq=_default(args.eval_freq, 100_000, args.resume),
         n_eval_episodes=_default(args.n_eval_episodes, 10, args.resume),
         save_freq=_default(args.save_freq, 200_000, args.resume),
         progress_bar=not args.no_progress,
-    )  # fmt: skip
+    )
     say(args, f"run {run}  ({time.perf_counter() - t0:.0f} s)")
     dest = None
     if args.export:
@@ -196,17 +284,28 @@ def _train_seeds(args, n, t0) -> int:
     if args.export:
         raise ValueError("--export takes one run: export one of the seeds' runs afterwards")
     kwargs = dict(
-        config=args.config, env_id=args.env_id, n_timesteps=n, sets=args.set,
-        resume=args.resume, vec_env="dummy" if args.vec_env == "auto" else args.vec_env,
+        config=args.config,
+        env_id=args.env_id,
+        n_timesteps=n,
+        sets=args.set,
+        resume=args.resume,
+        vec_env="dummy" if args.vec_env == "auto" else args.vec_env,
         eval_freq=_default(args.eval_freq, 100_000, args.resume),
         n_eval_episodes=_default(args.n_eval_episodes, 10, args.resume),
         save_freq=_default(args.save_freq, 200_000, args.resume),
-    )  # fmt: skip
+    )
     budget = None if args.compare_budget == "none" else args.compare_budget
-    r = train_seeds(seeds, args.name or args.env_id, args.runs_dir, kwargs,
-                    scheduler=args.scheduler, workers=args.workers,
-                    transfer=args.runs_transfer, compare_budget=budget,
-                    progress=not args.no_progress)
+    r = train_seeds(
+        seeds,
+        args.name or args.env_id,
+        args.runs_dir,
+        kwargs,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        transfer=args.runs_transfer,
+        compare_budget=budget,
+        progress=not args.no_progress,
+    )
     for run in r["runs"]:
         print(f"run {run}")
     if r["compare"]:
@@ -238,8 +337,10 @@ def export_policy(run_dir, dest, source: str = "final") -> Path:
     for name in POLICY_FILES[2:] + ("basin_validation.csv", "base.json"):
         if (run_dir / name).is_file():
             shutil.copyfile(run_dir / name, dest / name)
-    info = {"exported_from": str(src), "selection": "best validation" if src == best
-            else "none (final model)"}
+    info = {
+        "exported_from": str(src),
+        "selection": "best validation" if src == best else "none (final model)",
+    }
     if (src / "best.json").is_file():
         info.update(json.loads((src / "best.json").read_text()))
     (dest / "exported.json").write_text(json.dumps(info, indent=2) + "\n")
@@ -256,9 +357,16 @@ def cmd_margins(args) -> int:
     progress = (args.budget == "full" or sys.stderr.isatty()) and not args.no_progress
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
     gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"
-    r = compute_margins(ctrl, budget=args.budget, gait=gait, workers=args.workers,
-                        out=out, progress=progress, use_cache=not args.no_cache,
-                        scheduler=args.scheduler)
+    r = compute_margins(
+        ctrl,
+        budget=args.budget,
+        gait=gait,
+        workers=args.workers,
+        out=out,
+        progress=progress,
+        use_cache=not args.no_cache,
+        scheduler=args.scheduler,
+    )
     if args.json:
         print(strict_json(r))
     else:
@@ -273,14 +381,29 @@ def cmd_compare(args) -> int:
     entries = default_entries()
     if args.entry:
         parsed = [parse_entry(t) for t in args.entry]
-        entries = ([] if any(e[1] == ["passive"] and e[2] == "default" for e in parsed)
-                   else [entries[0]]) + parsed
-    path = compare(entries, budget=args.budget, workers=args.workers, out=args.out,
-                   docs=out_dir(args.docs or args.out, "--docs"),
-                   progress=sys.stderr.isatty() and not args.no_progress, note=args.note,
-                   scheduler=args.scheduler)
+        entries = (
+            [] if any(e[1] == ["passive"] and e[2] == "default" for e in parsed) else [entries[0]]
+        ) + parsed
+    path = compare(
+        entries,
+        budget=args.budget,
+        workers=args.workers,
+        out=args.out,
+        docs=out_dir(args.docs or args.out, "--docs"),
+        progress=sys.stderr.isatty() and not args.no_progress,
+        note=args.note,
+        scheduler=args.scheduler,
+    )
     say(args, f"wrote {path}")
     if args.json:
-        print(strict_json({"page": str(path), "out": args.out, "budget": args.budget,
-                           "entries": [e[0] for e in entries]}))
+        print(
+            strict_json(
+                {
+                    "page": str(path),
+                    "out": args.out,
+                    "budget": args.budget,
+                    "entries": [e[0] for e in entries],
+                }
+            )
+        )
     return 0

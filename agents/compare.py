@@ -37,8 +37,7 @@ def default_entries() -> list[tuple[str, list[str], str]]:
     entries += [(name, [name], "default") for name in CLASSICAL]
     if (POLICIES_DIR / "literal-cycle" / "model.zip").is_file():
         entries.append(("passive literal", ["passive"], "literal-cycle"))
-        entries.append(("learned literal", [str(POLICIES_DIR / "literal-cycle")],
-                        "literal-cycle"))
+        entries.append(("learned literal", [str(POLICIES_DIR / "literal-cycle")], "literal-cycle"))
     return entries
 
 
@@ -66,9 +65,17 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
 
 
-def compare(entries=None, budget: str = "full", workers: int = 2, out: str | Path = DEFAULT_OUT,
-            docs: str | Path = DEFAULT_DOCS, progress: bool = True, executor=None,
-            note: str = "", scheduler: str | None = None) -> Path:
+def compare(
+    entries=None,
+    budget: str = "full",
+    workers: int = 2,
+    out: str | Path = DEFAULT_OUT,
+    docs: str | Path = DEFAULT_DOCS,
+    progress: bool = True,
+    executor=None,
+    note: str = "",
+    scheduler: str | None = None,
+) -> Path:
     """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path.
 
     An entry is (label, policies, gait); an old-style (label, policy, gait) is accepted. Each
@@ -77,8 +84,10 @@ def compare(entries=None, budget: str = "full", workers: int = 2, out: str | Pat
     One executor (``executor``, else `bound_env.parallel.open_pool` of ``scheduler`` and
     ``workers``) serves every entry.
     """
-    entries = [(lab, [pol] if isinstance(pol, str) else list(pol), gait)
-               for lab, pol, gait in (entries or default_entries())]
+    entries = [
+        (lab, [pol] if isinstance(pol, str) else list(pol), gait)
+        for lab, pol, gait in (entries or default_entries())
+    ]
     out, docs = Path(out), Path(docs)
     docs.mkdir(parents=True, exist_ok=True)
     groups = []
@@ -88,10 +97,20 @@ def compare(entries=None, budget: str = "full", workers: int = 2, out: str | Pat
         for label, policies, gait in entries:
             runs = []
             for policy in policies:
-                sub = out / _slug(label) if len(policies) == 1 else \
-                    out / _slug(label) / _slug(Path(policy).name)
-                r = compute_margins(policy, budget=budget, gait=gait, workers=workers,
-                                    executor=executor, out=sub, progress=progress)
+                sub = (
+                    out / _slug(label)
+                    if len(policies) == 1
+                    else out / _slug(label) / _slug(Path(policy).name)
+                )
+                r = compute_margins(
+                    policy,
+                    budget=budget,
+                    gait=gait,
+                    workers=workers,
+                    executor=executor,
+                    out=sub,
+                    progress=progress,
+                )
                 r["label"] = label
                 r["source"] = policy
                 runs.append(r)
@@ -125,24 +144,58 @@ def _dir_label(r, key) -> str:
 
 # (name, value of one result, digits, ratio against passive?)
 MEASURES = [
-    ("basin_min", "**basin_min** (zstar scale: units of \\|z*_i\\|, worst of 12 directions)",
-     lambda r: r["basin_min"], 3, True),
-    ("basin_min_cycle", "basin_min_cycle (units of the passive peak-to-peak range)",
-     lambda r: r.get("basin_min_cycle"), 3, True),
-    ("basin_share_min", "basin_share_min (basin / ceiling, worst direction)",
-     lambda r: r.get("basin_share_min"), 3, False),
-    ("r50", "random-direction **r50** (P(return) crosses 0.5; zstar scale)",
-     lambda r: r["basin_curve"]["r50"], 3, True),
-    ("terrain_sigma50_deg", "rough terrain **σ50** [deg] (survival crosses 1/2)",
-     lambda r: r.get("terrain_sigma50_deg"), 3, True),
+    (
+        "basin_min",
+        "**basin_min** (zstar scale: units of \\|z*_i\\|, worst of 12 directions)",
+        lambda r: r["basin_min"],
+        3,
+        True,
+    ),
+    (
+        "basin_min_cycle",
+        "basin_min_cycle (units of the passive peak-to-peak range)",
+        lambda r: r.get("basin_min_cycle"),
+        3,
+        True,
+    ),
+    (
+        "basin_share_min",
+        "basin_share_min (basin / ceiling, worst direction)",
+        lambda r: r.get("basin_share_min"),
+        3,
+        False,
+    ),
+    (
+        "r50",
+        "random-direction **r50** (P(return) crosses 0.5; zstar scale)",
+        lambda r: r["basin_curve"]["r50"],
+        3,
+        True,
+    ),
+    (
+        "terrain_sigma50_deg",
+        "rough terrain **σ50** [deg] (survival crosses 1/2)",
+        lambda r: r.get("terrain_sigma50_deg"),
+        3,
+        True,
+    ),
     ("emax", "**emax** (closed-loop apex map)", lambda r: r["emax"], 4, False),
-    ("fp_residual", "closed-loop fixed point residual max\\|P(z) − z\\| (> 1e-6: no cycle "
-     "found, the other rows measure around a non-periodic start)",
-     lambda r: r["fixed_point_residual"], 2, False),
-    ("slope_lo", "slope window α, low edge [deg] (survive 50 strides)",
-     lambda r: r["slope_window_deg"][0], 4, False),
-    ("slope_hi", "slope window α, high edge [deg]", lambda r: r["slope_window_deg"][1], 4,
-     False),
+    (
+        "fp_residual",
+        "closed-loop fixed point residual max\\|P(z) − z\\| (> 1e-6: no cycle "
+        "found, the other rows measure around a non-periodic start)",
+        lambda r: r["fixed_point_residual"],
+        2,
+        False,
+    ),
+    (
+        "slope_lo",
+        "slope window α, low edge [deg] (survive 50 strides)",
+        lambda r: r["slope_window_deg"][0],
+        4,
+        False,
+    ),
+    ("slope_hi", "slope window α, high edge [deg]", lambda r: r["slope_window_deg"][1], 4, False),
     ("kc_lo", "k_c window, low edge [N m/rad]", lambda r: r["kc_window"][0], 4, False),
     ("kc_hi", "k_c window, high edge [N m/rad]", lambda r: r["kc_window"][1], 4, False),
     ("push_xdot", "push p50, Δẋ [m/s]", lambda r: r["push"]["xdot"]["p50"], 3, False),
@@ -200,12 +253,12 @@ def _cell(g, base, name, fn, digits, ratio) -> str:
 
 
 def _basin_cell(runs, label, sym, key, field="rel", digits=3) -> str:
-    vals = [r[key][label][sym][field] if r[key].get(label, {}).get(sym) else math.nan
-            for r in runs]
+    vals = [r[key][label][sym][field] if r[key].get(label, {}).get(sym) else math.nan for r in runs]
     vals = [math.nan if v is None else float(v) for v in vals]
     text = _agg(vals, digits)
-    capped = sum(bool(r[key][label][sym].get("capped")) for r in runs
-                 if r[key].get(label, {}).get(sym))
+    capped = sum(
+        bool(r[key][label][sym].get("capped")) for r in runs if r[key].get(label, {}).get(sym)
+    )
     if capped:
         text = ("≥" if capped == len(runs) else f"({capped}/{len(runs)} capped) ") + text
     return text
@@ -226,23 +279,28 @@ def _provenance(g) -> list[str]:
             what = CONTROLLERS.get(policy, (None, None))[1]
             spec = ROOT / "configs" / "controllers" / f"{policy}.yaml"
             lines.append(
-                f"controller `{policy}`" + (f": {what}" if what else "")
+                f"controller `{policy}`"
+                + (f": {what}" if what else "")
                 + (f"; spec `{_rel(str(spec))}`" if spec.is_file() else "")
-                + "; designed, not trained: no seeds, no selection")
+                + "; designed, not trained: no seeds, no selection"
+            )
             continue
         info = json.loads(info_path.read_text())
         t = info.get("wall_time_s")
         exp_path = p / "exported.json"
         exp = json.loads(exp_path.read_text()) if exp_path.is_file() else {}
         if "timesteps" in exp:
-            sel = (f"**selected**: the checkpoint with the best basin validation at "
-                   f"{exp['timesteps']} timesteps")
+            sel = (
+                f"**selected**: the checkpoint with the best basin validation at "
+                f"{exp['timesteps']} timesteps"
+            )
         else:
             sel = "final model, **no selection**"
         lines.append(
             f"`{_rel(policy)}`: seed {info.get('seed', '?')}, {info.get('timesteps_done', '?')} "
             f"timesteps, {'%.1f min' % (t / 60) if t else '?'} of training on "
-            f"{info.get('machine', '?')}; {sel}; command `{_command(info.get('command', '?'))}`")
+            f"{info.get('machine', '?')}; {sel}; command `{_command(info.get('command', '?'))}`"
+        )
     return lines
 
 
@@ -251,17 +309,28 @@ def render_markdown(groups, plots, curves, budget, note: str = "") -> str:
 
     labels = [g["label"] for g in groups]
     base = groups[0]
+
     def trained(g) -> bool:
         return all((Path(p) / "run.json").is_file() for p in g["policies"])
 
-    head = "| measure | " + " | ".join(
-        f"{g['label']} ({len(g['runs'])} seed{'s' if len(g['runs']) > 1 else ''})"
-        if trained(g) else g["label"] for g in groups) + " |"
+    head = (
+        "| measure | "
+        + " | ".join(
+            f"{g['label']} ({len(g['runs'])} seed{'s' if len(g['runs']) > 1 else ''})"
+            if trained(g)
+            else g["label"]
+            for g in groups
+        )
+        + " |"
+    )
     sep = "| --- |" + " --- |" * len(groups)
     rows = ["| gait | " + " | ".join(f"`{g['gait']}`" for g in groups) + " |"]
     for name, title, fn, digits, ratio in MEASURES:
-        rows.append(f"| {title} | " + " | ".join(
-            _cell(g, base, name, fn, digits, ratio) for g in groups) + " |")
+        rows.append(
+            f"| {title} | "
+            + " | ".join(_cell(g, base, name, fn, digits, ratio) for g in groups)
+            + " |"
+        )
     main = "\n".join([head, sep, *rows])
 
     def direction_table(key, field="rel", digits=3, unit=True):
@@ -285,10 +354,16 @@ def render_markdown(groups, plots, curves, budget, note: str = "") -> str:
                 mech_rows.append(
                     f"| {g['label']} | {c}{sym} | {_fmt(e['rel'], 3)} | "
                     f"{'yes' if e.get('geometric') else 'no'} | {e.get('mechanism') or '—'} | "
-                    f"{_fmt(bey.get('rel'), 3)} |")
-    mech = "\n".join(["| column (first seed) | direction | ceiling (zstar) | geometric | "
-                      "what stops it | first failing size |",
-                      "| --- | --- | --- | --- | --- | --- |", *mech_rows])
+                    f"{_fmt(bey.get('rel'), 3)} |"
+                )
+    mech = "\n".join(
+        [
+            "| column (first seed) | direction | ceiling (zstar) | geometric | "
+            "what stops it | first failing size |",
+            "| --- | --- | --- | --- | --- | --- |",
+            *mech_rows,
+        ]
+    )
 
     fail_rows = []
     for g in groups:
@@ -301,10 +376,16 @@ def render_markdown(groups, plots, curves, budget, note: str = "") -> str:
                 fail_rows.append(
                     f"| {g['label']} | {c}{sym} | {_fmt(bey.get('rel'), 3)} | "
                     f"{bey.get('reason')} | {bey.get('stride')} | {bey.get('phase') or '—'} | "
-                    f"{'; '.join(bey.get('mechanisms') or []) or '—'} |")
-    fails = "\n".join(["| column (first seed) | direction | size | failure | stride | phase | "
-                       "start geometry |", "| --- | --- | --- | --- | --- | --- | --- |",
-                       *fail_rows])
+                    f"{'; '.join(bey.get('mechanisms') or []) or '—'} |"
+                )
+    fails = "\n".join(
+        [
+            "| column (first seed) | direction | size | failure | stride | phase | "
+            "start geometry |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+            *fail_rows,
+        ]
+    )
 
     details = []
     for g in groups:
@@ -315,20 +396,29 @@ def render_markdown(groups, plots, curves, budget, note: str = "") -> str:
         ds = "| --- |" + " --- |" * len(names)
         drows = []
         for name, _title, fn, digits, _ in MEASURES:
-            drows.append(f"| {name} | " + " | ".join(
-                _fmt(_value(fn, r), digits) for r in g["runs"]) + " |")
-        drows.append("| basin_min direction | " + " | ".join(
-            _dir_label(r, "basin_min_direction") for r in g["runs"]) + " |")
-        details.append(f"<details><summary>per-seed values: {g['label']}</summary>\n\n"
-                       + "\n".join([dh, ds, *drows]) + "\n\n</details>")
+            drows.append(
+                f"| {name} | " + " | ".join(_fmt(_value(fn, r), digits) for r in g["runs"]) + " |"
+            )
+        drows.append(
+            "| basin_min direction | "
+            + " | ".join(_dir_label(r, "basin_min_direction") for r in g["runs"])
+            + " |"
+        )
+        details.append(
+            f"<details><summary>per-seed values: {g['label']}</summary>\n\n"
+            + "\n".join([dh, ds, *drows])
+            + "\n\n</details>"
+        )
 
     prov = []
     for g in groups:
         prov.append(f"- **{g['label']}** (gait `{g['gait']}`):")
         prov += [f"  - {line}" for line in _provenance(g)]
 
-    train_lines = [f"- **{label}** (`{_rel(policy)}`)\n\n  ![training curve {label}]({png.name})"
-                   for label, policy, png in curves]
+    train_lines = [
+        f"- **{label}** (`{_rel(policy)}`)\n\n  ![training curve {label}]({png.name})"
+        for label, policy, png in curves
+    ]
     settings = base["runs"][0]["settings"]
     b = BUDGETS.get(budget)
     full = BUDGETS["full"]
@@ -338,23 +428,24 @@ def render_markdown(groups, plots, curves, budget, note: str = "") -> str:
         budget_note = f"the `{budget}` budget"
     else:
         diffs = []
-        for field, what in (("curve_dirs", "random directions"),
-                            ("curve_sizes", "curve sizes"),
-                            ("basin_strides", "strides to return"),
-                            ("basin_iters", "basin bisection steps"),
-                            ("push_samples", "push samples per size"),
-                            ("terrain_sigmas", "rough-terrain levels"),
-                            ("terrain_runs", "rough-terrain runs per level"),
-                            ("terrain_strides", "rough-terrain strides"),
-                            ("ceiling_random", "random ceiling profiles"),
-                            ("ceiling_opt", "ceiling optimizer iterations")):
+        for field, what in (
+            ("curve_dirs", "random directions"),
+            ("curve_sizes", "curve sizes"),
+            ("basin_strides", "strides to return"),
+            ("basin_iters", "basin bisection steps"),
+            ("push_samples", "push samples per size"),
+            ("terrain_sigmas", "rough-terrain levels"),
+            ("terrain_runs", "rough-terrain runs per level"),
+            ("terrain_strides", "rough-terrain strides"),
+            ("ceiling_random", "random ceiling profiles"),
+            ("ceiling_opt", "ceiling optimizer iterations"),
+        ):
             mine, theirs = getattr(b, field), getattr(full, field)
             if mine != theirs:
                 n = len(mine) if isinstance(mine, tuple) else mine
                 m = len(theirs) if isinstance(theirs, tuple) else theirs
                 diffs.append(f"{n} {what} instead of {m}")
-        budget_note = (f"the **{budget}** budget, NOT the full one ("
-                       + "; ".join(diffs) + ")")
+        budget_note = f"the **{budget}** budget, NOT the full one (" + "; ".join(diffs) + ")"
     terrain = base["runs"][0].get("terrain", {})
     ceil = settings.get("ceiling", {})
     r0 = base["runs"][0]
@@ -366,8 +457,8 @@ do not edit by hand.{para_note}
 Every column is measured on the same yardsticks by `bound-env margins` (agents/margins.py):
 the closed-loop apex-to-apex map, each stride an episode started at an apex with
 `reset(options={{"apex_state": z}})` so the control intervals restart at the apex,
-integrator tolerance {settings['rtol']:g}, "returned" = max-abs apex error below
-{settings['return_tol']:g} (SI) within {settings['basin_strides']} strides.
+integrator tolerance {settings["rtol"]:g}, "returned" = max-abs apex error below
+{settings["return_tol"]:g} (SI) within {settings["basin_strides"]} strides.
 
 **Statistics.** A column with several seeds shows the **mean [95 % Student-t interval] over
 its seeds** (t with n − 1 degrees of freedom; with 3 seeds the interval is wide, and it is
@@ -393,7 +484,7 @@ says so.
   for every column). s = 1e-3 and 1 are tried first; while the loop returns, the bracket
   doubles from the last success up to the direction's physical cap (the size at which the
   start state itself is invalid: a hip or the spine joint in the ground, or ẋ ≤ 0; else
-  {settings.get('basin_cap', 64):g} |z*_i|), then bisection on log s ({settings['basin_iters']}
+  {settings.get("basin_cap", 64):g} |z*_i|), then bisection on log s ({settings["basin_iters"]}
   steps). ≥ marks an edge at the cap.
 - **Two scales.** `zstar`: units of |z*_i| (the paper-style scale; basin_min keeps this
   meaning, now uncapped). `cycle`: units of the component's peak-to-peak range over one
@@ -401,35 +492,35 @@ says so.
   6.4 rad/s on the default gait), so that a step in θ1 means as much as a step in ẋ_g.
 - **Ceiling.** For each direction, the largest perturbation from which *some* admissible
   open-loop torque profile (|τ| ≤ the column's max_torque, piecewise constant over
-  {ceil.get('piece_intervals', '?')} control intervals) completes the first
-  {ceil.get('strides', '?')} strides without a fall. At each tested size the search tries
-  the zero profile, ±max, bang-bang profiles with one switch, {ceil.get('random_profiles', '?')}
-  random piecewise-constant profiles and {ceil.get('optimizer_iters', '?')} iterations of a
+  {ceil.get("piece_intervals", "?")} control intervals) completes the first
+  {ceil.get("strides", "?")} strides without a fall. At each tested size the search tries
+  the zero profile, ±max, bang-bang profiles with one switch, {ceil.get("random_profiles", "?")}
+  random piecewise-constant profiles and {ceil.get("optimizer_iters", "?")} iterations of a
   (1+1) evolution-strategy shooting optimizer from the best; sizes are grown and bisected
-  like the basin ({ceil.get('iters', '?')} steps). A search finds profiles, it cannot prove
+  like the basin ({ceil.get("iters", "?")} steps). A search finds profiles, it cannot prove
   there is none: the ceiling is a lower bound, and a share slightly above 1 means the
   controller's edge lies within the bisection's resolution of it. basin_share = basin /
   ceiling.
-- **Random directions.** {base['runs'][0]['basin_curve']['directions']} directions (seed
-  {base['runs'][0]['basin_curve'].get('direction_seed', '?')}) uniform on the sphere, scaled to max
+- **Random directions.** {base["runs"][0]["basin_curve"]["directions"]} directions (seed
+  {base["runs"][0]["basin_curve"].get("direction_seed", "?")}) uniform on the sphere, scaled to max
   |u_i| = 1, sizes in the zstar scale; 95 % Wilson intervals per point. r50 is where P(return)
   first falls below 0.5, interpolated linearly in log r between the two sizes around the
   crossing (the JSON keeps the grid value as `r50_grid`).
 - **Rough terrain.** The slope becomes α_k = α + σ ξ_k at every apex (ξ_k standard normal
   from the env's RNG; `slope_noise_deg`), the ground tilting under the robot in flight about
   the point below its centre of mass (`bound_env/terrain.py`). σ50 = the σ at which the
-  fraction of {terrain.get('runs', '?')} runs (env seeds {terrain.get('seeds', ['?'])[0]}…) that
-  survive {terrain.get('strides', '?')} strides first falls below one half (log-interpolated
+  fraction of {terrain.get("runs", "?")} runs (env seeds {terrain.get("seeds", ["?"])[0]}…) that
+  survive {terrain.get("strides", "?")} strides first falls below one half (log-interpolated
   like r50; the JSON keeps the largest grid σ with survival ≥ 1/2 as
   `terrain_sigma50_grid_deg`).
 
-Windows: the connected range around the nominal value (α = {r0['slope_nominal_deg']:.4f}°,
-k_c = {r0['kc_nominal']:g} N m/rad) in which the loop started at z_cl survives 50
+Windows: the connected range around the nominal value (α = {r0["slope_nominal_deg"]:.4f}°,
+k_c = {r0["kc_nominal"]:g} N m/rad) in which the loop started at z_cl survives 50
 strides. The paper's passive windows (1.92–2.05°, 294–308 N m/rad) come from its own
 criterion (a stable fixed point that the gait converges to); survival for 50 strides is a
 looser test. Push: a kick of the given size, random sign, at a random control instant of a
 cycle stride; p50 = the largest size up to which at least half of the
-{settings['push_samples']} trials return.
+{settings["push_samples"]} trials return.
 
 ## Basin along each apex component (zstar scale)
 

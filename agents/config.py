@@ -120,7 +120,7 @@ def _entries(value) -> list[tuple[str, dict]]:
         if isinstance(item, str):
             out.append((item, {}))
         elif isinstance(item, dict) and len(item) == 1:
-            (name, kwargs), = item.items()
+            ((name, kwargs),) = item.items()
             out.append((name, dict(kwargs or {})))
         else:
             raise ValueError(f"expected a class path or {{path: kwargs}}, got {item!r}")
@@ -211,6 +211,12 @@ def preprocess(hp: dict) -> TrainSpec:
     for key in ("n_steps", "batch_size", "n_epochs"):
         if key in algo:
             algo[key] = int(algo[key])
-    return TrainSpec(n_envs=n_envs, n_timesteps=n_timesteps, env_kwargs=env_kwargs,
-                     normalize_kwargs=normalize_kwargs, wrappers=wrappers, callbacks=callbacks,
-                     algo_kwargs=algo)
+    return TrainSpec(
+        n_envs=n_envs,
+        n_timesteps=n_timesteps,
+        env_kwargs=env_kwargs,
+        normalize_kwargs=normalize_kwargs,
+        wrappers=wrappers,
+        callbacks=callbacks,
+        algo_kwargs=algo,
+    )

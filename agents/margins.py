@@ -169,28 +169,80 @@ class Budget:
 _CURVE_FULL = tuple(float(x) for x in np.round(np.geomspace(0.005, 0.5, 16), 5)) + (0.7, 1.0)
 _TERRAIN_FULL = (0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
 BUDGETS = {
-    "test": Budget("test", 3, 40, (0.01, 0.1), 2, 2, 10, (0.1, 0.4), (0.5, 2.0), 2,
-                   newton_iters=3, settle_strides=10, ceiling_strides=1, ceiling_iters=2,
-                   ceiling_random=2, ceiling_opt=2, terrain_sigmas=(0.05, 0.5), terrain_runs=2,
-                   terrain_strides=5),
-    "quick": Budget("quick", 7, 100, (0.01, 0.02, 0.04, 0.06, 0.1, 0.15, 0.25, 0.4, 0.7), 32,
-                    5, 50, (0.05, 0.1, 0.2, 0.3, 0.4, 0.6, 0.8), (0.25, 0.5, 1.0, 2.0, 3.0, 4.0,
-                                                                 6.0), 8),
-    "full": Budget("full", 14, 300, _CURVE_FULL, 256, 10, 50,
-                   (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.6, 0.8, 1.0),
-                   (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0), 64,
-                   ceiling_strides=2, ceiling_iters=8, ceiling_random=48, ceiling_opt=48,
-                   terrain_sigmas=_TERRAIN_FULL, terrain_runs=64, terrain_strides=100),
+    "test": Budget(
+        "test",
+        3,
+        40,
+        (0.01, 0.1),
+        2,
+        2,
+        10,
+        (0.1, 0.4),
+        (0.5, 2.0),
+        2,
+        newton_iters=3,
+        settle_strides=10,
+        ceiling_strides=1,
+        ceiling_iters=2,
+        ceiling_random=2,
+        ceiling_opt=2,
+        terrain_sigmas=(0.05, 0.5),
+        terrain_runs=2,
+        terrain_strides=5,
+    ),
+    "quick": Budget(
+        "quick",
+        7,
+        100,
+        (0.01, 0.02, 0.04, 0.06, 0.1, 0.15, 0.25, 0.4, 0.7),
+        32,
+        5,
+        50,
+        (0.05, 0.1, 0.2, 0.3, 0.4, 0.6, 0.8),
+        (0.25, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0),
+        8,
+    ),
+    "full": Budget(
+        "full",
+        14,
+        300,
+        _CURVE_FULL,
+        256,
+        10,
+        50,
+        (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.6, 0.8, 1.0),
+        (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0),
+        64,
+        ceiling_strides=2,
+        ceiling_iters=8,
+        ceiling_random=48,
+        ceiling_opt=48,
+        terrain_sigmas=_TERRAIN_FULL,
+        terrain_runs=64,
+        terrain_strides=100,
+    ),
     # ~1/3 of the full budget's cost where it matters (fewer curve sizes and push samples,
     # fewer terrain levels), the same definitions otherwise: 256 random directions, 300
     # strides to return, 64 rough-terrain runs of 100 strides
-    "standard": Budget("standard", 10, 300,
-                       (0.01, 0.02, 0.03, 0.05, 0.08, 0.12, 0.2, 0.35, 0.6), 256, 10, 50,
-                       (0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.6, 0.8),
-                       (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0), 32,
-                       ceiling_strides=2, ceiling_iters=8, ceiling_random=48, ceiling_opt=48,
-                       terrain_sigmas=(0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0),
-                       terrain_runs=64, terrain_strides=100),
+    "standard": Budget(
+        "standard",
+        10,
+        300,
+        (0.01, 0.02, 0.03, 0.05, 0.08, 0.12, 0.2, 0.35, 0.6),
+        256,
+        10,
+        50,
+        (0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.6, 0.8),
+        (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0),
+        32,
+        ceiling_strides=2,
+        ceiling_iters=8,
+        ceiling_random=48,
+        ceiling_opt=48,
+        terrain_sigmas=(0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0),
+        terrain_runs=64,
+        terrain_strides=100,
+    ),
 }
 # Window scans: first offset from nominal, doubling up to the limit.
 WINDOW_SCAN = {"alpha_deg": (0.005, 4.0), "kc": (0.5, 256.0)}
@@ -243,8 +295,13 @@ class ClosedLoop:
     ``delta`` to one entry of the simulator state just before control interval ``step``.
     """
 
-    def __init__(self, controller, gait: str = "default", gait_overrides: dict | None = None,
-                 env_extra: dict | None = None):
+    def __init__(
+        self,
+        controller,
+        gait: str = "default",
+        gait_overrides: dict | None = None,
+        env_extra: dict | None = None,
+    ):
         import gymnasium as gym
 
         import bound_env
@@ -285,8 +342,9 @@ class ClosedLoop:
             if "apex_z" in info:
                 t_apex = info["time"] - float(obs[self.i_since_apex])
                 impulse += tau * max(0.0, t_apex - t_prev)
-                return StrideOut(np.array(info["apex_z"], dtype=float), None,
-                                 impulse / t_apex, t_apex, k + 1)
+                return StrideOut(
+                    np.array(info["apex_z"], dtype=float), None, impulse / t_apex, t_apex, k + 1
+                )
             impulse += tau * (info["time"] - t_prev)
             t_prev = info["time"]
             if terminated:
@@ -296,8 +354,9 @@ class ClosedLoop:
     def map(self, z) -> np.ndarray | None:
         return self.stride(z).z1
 
-    def run(self, z0, z_target, max_strides: int, kick: tuple | None = None,
-            survive_only: bool = False) -> tuple[bool, int, str | None]:
+    def run(
+        self, z0, z_target, max_strides: int, kick: tuple | None = None, survive_only: bool = False
+    ) -> tuple[bool, int, str | None]:
         """Iterate the map from z0 (the first stride kicked if ``kick``). Returns (success,
         strides, failure): success = returned within RETURN_TOL of ``z_target`` within
         ``max_strides`` (or, with ``survive_only``, did not fall in ``max_strides``)."""
@@ -357,8 +416,13 @@ class ClosedLoop:
                     return True, float(info["stride"]), None, None, info["stride"]
             if terminated:
                 frac = min(0.99, (info["time"] - t_apex) / max(self.period_hint, 1e-3))
-                return (False, info["stride"] + frac, info["failure"], info["phase"],
-                        info["stride"])
+                return (
+                    False,
+                    info["stride"] + frac,
+                    info["failure"],
+                    info["phase"],
+                    info["stride"],
+                )
         return False, float(info["stride"]), "no_apex", info["phase"], info["stride"]
 
     period_hint = 0.39  # s, nominal stride duration for the profile score (set by the tasks)
@@ -397,10 +461,12 @@ class Setup:
 _LOOPS: dict = {}
 
 
-def _loop(setup: Setup, overrides: dict | None = None, env_extra: dict | None = None
-          ) -> ClosedLoop:
-    k = (setup.key, tuple(sorted((overrides or {}).items())),
-         tuple(sorted((env_extra or {}).items())))
+def _loop(setup: Setup, overrides: dict | None = None, env_extra: dict | None = None) -> ClosedLoop:
+    k = (
+        setup.key,
+        tuple(sorted((overrides or {}).items())),
+        tuple(sorted((env_extra or {}).items())),
+    )
     if k not in _LOOPS:
         if len(_LOOPS) > 64:
             _LOOPS.clear()
@@ -418,15 +484,25 @@ def task_cycle(setup: Setup) -> dict:
     """Closed-loop fixed point, multipliers, effort on the cycle."""
     loop = _loop(setup)
     b = setup.budget
-    z_cl, res, jac = map_fixed_point(loop.map, setup.z_star, fd_steps(setup.z_star),
-                                     settle=b.settle_strides, newton_iters=b.newton_iters)
+    z_cl, res, jac = map_fixed_point(
+        loop.map,
+        setup.z_star,
+        fd_steps(setup.z_star),
+        settle=b.settle_strides,
+        newton_iters=b.newton_iters,
+    )
     lam = sorted_eigenvalues(jac)
     out = loop.stride(z_cl)
     return {
-        "z_cl": z_cl.tolist(), "residual": res, "jacobian": jac.tolist(),
+        "z_cl": z_cl.tolist(),
+        "residual": res,
+        "jacobian": jac.tolist(),
         "eigenvalues": [[float(v.real), float(v.imag)] for v in lam],
-        "emax": float(np.abs(lam[0])), "effort": out.effort, "period": out.period,
-        "cycle_steps": out.steps, "max_torque": loop.max_torque,
+        "emax": float(np.abs(lam[0])),
+        "effort": out.effort,
+        "period": out.period,
+        "cycle_steps": out.steps,
+        "max_torque": loop.max_torque,
     }
 
 
@@ -455,6 +531,7 @@ def physical_cap(loop: ClosedLoop, zc, zs, i: int, sign: int) -> tuple[float, st
     """(cap, reason): the smallest relative size s (units of |z*_i|) at which the start state
     z_cl + sign s z*_i e_i is invalid (doubling scan, then 40 bisection steps), or
     (BASIN_CAP, "numeric cap") if it stays valid up to BASIN_CAP."""
+
     def invalid(s):
         z = zc.copy()
         z[i] += sign * s * zs[i]
@@ -514,8 +591,9 @@ def _grown_search(ok, cap: float, iters: int) -> tuple[float, bool, float | None
             fails.append(s)
         return good
 
-    s, capped = bisect_threshold(test, min(BASIN_LO, cap / 2), min(BASIN_HI, cap), iters,
-                                 grow=True, cap=cap)
+    s, capped = bisect_threshold(
+        test, min(BASIN_LO, cap / 2), min(BASIN_HI, cap), iters, grow=True, cap=cap
+    )
     first_fail = min(fails) if fails else None
     if not capped and first_fail is not None and first_fail >= cap:
         capped = True  # every size below the (invalid-start) cap returned
@@ -533,21 +611,33 @@ def task_basin(setup: Setup, i: int, sign: int) -> dict:
         return z
 
     cap, cap_reason = physical_cap(loop, zc, zs, i, sign)
-    s, capped, fail = _grown_search(lambda s: loop.run(start(s), zc, n)[0], cap,
-                                    setup.budget.basin_iters)
+    s, capped, fail = _grown_search(
+        lambda s: loop.run(start(s), zc, n)[0], cap, setup.budget.basin_iters
+    )
     beyond = None
     if fail is not None:
         ok, strides, failure = loop.run(start(fail), zc, n)
         geo = start_geometry(start(fail), loop)
-        beyond = {"rel": fail, "reason": failure or "no_return", "stride": strides,
-                  "phase": loop.last_phase if failure else None,
-                  "mechanisms": geo["mechanisms"]}
-    return {"rel": s, "abs": abs(s * zs[i]), "capped": capped, "cap": cap,
-            "cap_reason": cap_reason, "beyond": beyond}
+        beyond = {
+            "rel": fail,
+            "reason": failure or "no_return",
+            "stride": strides,
+            "phase": loop.last_phase if failure else None,
+            "mechanisms": geo["mechanisms"],
+        }
+    return {
+        "rel": s,
+        "abs": abs(s * zs[i]),
+        "capped": capped,
+        "cap": cap,
+        "cap_reason": cap_reason,
+        "beyond": beyond,
+    }
 
 
-def _profile_search(loop: ClosedLoop, z, n_strides: int, n_pieces: int, b: Budget,
-                    rng: np.random.Generator) -> tuple[bool, dict]:
+def _profile_search(
+    loop: ClosedLoop, z, n_strides: int, n_pieces: int, b: Budget, rng: np.random.Generator
+) -> tuple[bool, dict]:
     """Is there an admissible torque profile that completes ``n_strides`` strides from z?
     Candidates in order: zero, +-max, bang-bang with one switch, random piecewise-constant
     (half bang-bang valued, half uniform), then a (1+1)-ES shooting optimizer from the best.
@@ -618,13 +708,21 @@ def task_ceiling(setup: Setup, i: int, sign: int) -> dict:
     elif fail is not None:
         geo = start_geometry(start(fail), loop)
         best = found_at.get(fail, {})
-        beyond = {"rel": fail, "reason": best.get("failure"), "stride": best.get("stride"),
-                  "phase": best.get("phase"), "mechanisms": geo["mechanisms"]}
+        beyond = {
+            "rel": fail,
+            "reason": best.get("failure"),
+            "stride": best.get("stride"),
+            "phase": best.get("phase"),
+            "mechanisms": geo["mechanisms"],
+        }
         # geometric: the edge sits at the size where a hip starts below its touchdown height
         # (within the bisection's resolution) and the best profile fails by that hip
         for end, at in hips.items():
-            if at is not None and s <= at <= fail * 1.001 and \
-                    f"ground_contact_{end}_hip" == best.get("failure"):
+            if (
+                at is not None
+                and s <= at <= fail * 1.001
+                and f"ground_contact_{end}_hip" == best.get("failure")
+            ):
                 mechanism = f"{end} hip below touchdown height at the apex (from s = {at:.4g})"
                 geometric = True
                 # the geometric edge is known to ~1e-12: the ceiling is just below it if a
@@ -632,12 +730,23 @@ def task_ceiling(setup: Setup, i: int, sign: int) -> dict:
                 if at * (1 - 1e-6) > s and ok(at * (1 - 1e-6)):
                     s = at * (1 - 1e-6)
         if mechanism is None:
-            mechanism = (f"no admissible profile found within the search budget (best: "
-                         f"{best.get('failure')} in stride {(best.get('stride') or 0) + 1}, "
-                         f"phase {best.get('phase')})")
-    return {"rel": s, "abs": abs(s * zs[i]), "capped": capped, "cap": cap,
-            "cap_reason": cap_reason, "mechanism": mechanism, "geometric": geometric,
-            "hip_below_touchdown_from": hips, "beyond": beyond, "profile_pieces": n_pieces}
+            mechanism = (
+                f"no admissible profile found within the search budget (best: "
+                f"{best.get('failure')} in stride {(best.get('stride') or 0) + 1}, "
+                f"phase {best.get('phase')})"
+            )
+    return {
+        "rel": s,
+        "abs": abs(s * zs[i]),
+        "capped": capped,
+        "cap": cap,
+        "cap_reason": cap_reason,
+        "mechanism": mechanism,
+        "geometric": geometric,
+        "hip_below_touchdown_from": hips,
+        "beyond": beyond,
+        "profile_pieces": n_pieces,
+    }
 
 
 def task_curve(setup: Setup, size: float) -> dict:
@@ -662,9 +771,14 @@ def task_terrain(setup: Setup, sigma: float) -> dict:
         strides.append(n)
         if failure:
             reasons[failure] = reasons.get(failure, 0) + 1
-    return {"sigma_deg": sigma, "k": int(k), "n": b.terrain_runs,
-            "success": k / b.terrain_runs, "mean_strides": float(np.mean(strides)),
-            "failures": reasons}
+    return {
+        "sigma_deg": sigma,
+        "k": int(k),
+        "n": b.terrain_runs,
+        "success": k / b.terrain_runs,
+        "mean_strides": float(np.mean(strides)),
+        "failures": reasons,
+    }
 
 
 def task_window(setup: Setup, key: str, side: int) -> dict:
@@ -717,13 +831,21 @@ def task_push(setup: Setup, kind: str, size: float, index: int) -> dict:
     for _ in range(n):
         k = int(rng.integers(0, steps))
         sign = 1.0 if rng.random() < 0.5 else -1.0
-        wins += loop.run(setup.z_cl, setup.z_cl, setup.budget.basin_strides,
-                         kick=(k, y_index, sign * size))[0]
+        wins += loop.run(
+            setup.z_cl, setup.z_cl, setup.budget.basin_strides, kick=(k, y_index, sign * size)
+        )[0]
     return {"kind": kind, "size": size, "success": wins / n, "n": n}
 
 
-TASKS = {"cycle": task_cycle, "basin": task_basin, "curve": task_curve, "window": task_window,
-         "push": task_push, "ceiling": task_ceiling, "terrain": task_terrain}
+TASKS = {
+    "cycle": task_cycle,
+    "basin": task_basin,
+    "curve": task_curve,
+    "window": task_window,
+    "push": task_push,
+    "ceiling": task_ceiling,
+    "terrain": task_terrain,
+}
 
 
 def run_task(setup: Setup, name: str, args: tuple) -> dict:
@@ -747,8 +869,9 @@ def task_key(setup_key: str, name: str, args: tuple) -> str:
     return f"{setup_key}/{name}/{json.dumps(list(args))}"
 
 
-def _run_all(executor, setup: Setup, jobs: list, cache: TaskCache, progress: bool,
-             desc: str) -> dict:
+def _run_all(
+    executor, setup: Setup, jobs: list, cache: TaskCache, progress: bool, desc: str
+) -> dict:
     """Run (name, args) jobs through the executor, using and filling the cache. A task that
     raises is reported (key and arguments) without stopping the others; then `TasksFailed`."""
     results, tasks = {}, {}
@@ -764,31 +887,50 @@ def _run_all(executor, setup: Setup, jobs: list, cache: TaskCache, progress: boo
         if "error" not in res:
             cache.put(key, res)
 
-    done, failures = run_tasks(executor, tasks, progress and bool(tasks), desc, keep,
-                               done_before=len(results))
+    done, failures = run_tasks(
+        executor, tasks, progress and bool(tasks), desc, keep, done_before=len(results)
+    )
     for key, res in done.items():
         results[tasks[key][2]] = res
     if failures:
-        raise TasksFailed(failures, len(jobs), "; the others are cached: rerun to retry"
-                          if cache.path is not None else "")
+        raise TasksFailed(
+            failures,
+            len(jobs),
+            "; the others are cached: rerun to retry" if cache.path is not None else "",
+        )
     return results
 
 
 # Every module setting that changes a result: part of each cache key (with the budget).
 SETTINGS = {
-    "version": 3, "rtol": EVAL_RTOL, "return_tol": RETURN_TOL, "basin_lo": BASIN_LO,
-    "basin_hi": BASIN_HI, "basin_cap": BASIN_CAP, "fd_rel": FD_REL,
-    "fd_floor": FD_FLOOR.tolist(), "curve_seed": CURVE_SEED, "terrain_seed": TERRAIN_SEED,
-    "profile_seg": PROFILE_SEG, "window_scan": WINDOW_SCAN, "env_id": ENV_ID,
+    "version": 3,
+    "rtol": EVAL_RTOL,
+    "return_tol": RETURN_TOL,
+    "basin_lo": BASIN_LO,
+    "basin_hi": BASIN_HI,
+    "basin_cap": BASIN_CAP,
+    "fd_rel": FD_REL,
+    "fd_floor": FD_FLOOR.tolist(),
+    "curve_seed": CURVE_SEED,
+    "terrain_seed": TERRAIN_SEED,
+    "profile_seg": PROFILE_SEG,
+    "window_scan": WINDOW_SCAN,
+    "env_id": ENV_ID,
     "cycle_record_dt": CYCLE_RECORD_DT,
 }
 
 
 def setup_key(controller, gait: str, budget: Budget) -> str:
     env_kwargs = getattr(controller, "env_kwargs", None) or {}
-    return settings_hash({"controller": controller.fingerprint(), "gait": str(gait),
-                          "budget": asdict(budget), "settings": SETTINGS,
-                          "env_kwargs": sorted((str(k), repr(v)) for k, v in env_kwargs.items())})
+    return settings_hash(
+        {
+            "controller": controller.fingerprint(),
+            "gait": str(gait),
+            "budget": asdict(budget),
+            "settings": SETTINGS,
+            "env_kwargs": sorted((str(k), repr(v)) for k, v in env_kwargs.items()),
+        }
+    )
 
 
 def as_controller(policy, gait=None):
@@ -799,8 +941,10 @@ def as_controller(policy, gait=None):
         return load_controller(policy, gait=gait)
     if callable(policy) and callable(getattr(policy, "fingerprint", None)):
         return policy
-    raise ValueError(f"policy must be 'passive', a policy path or a controller with __call__ "
-                     f"and fingerprint(), got {type(policy).__name__}")
+    raise ValueError(
+        f"policy must be 'passive', a policy path or a controller with __call__ "
+        f"and fingerprint(), got {type(policy).__name__}"
+    )
 
 
 def controller_name(controller) -> str:
@@ -814,17 +958,25 @@ def cycle_scale(gait: str) -> np.ndarray:
     from bound_env.params import load_gait
 
     g = load_gait(gait)
-    res = simulate_stride(g.z0, g.params, backend="fast", rtol=EVAL_RTOL, atol=EVAL_RTOL,
-                          record_dt=CYCLE_RECORD_DT)
+    res = simulate_stride(
+        g.z0, g.params, backend="fast", rtol=EVAL_RTOL, atol=EVAL_RTOL, record_dt=CYCLE_RECORD_DT
+    )
     tr = res.trajectory
     full = np.hstack([tr.q, tr.qd])[:, [1, 2, 3, 4, 6, 7]]
     return full.max(axis=0) - full.min(axis=0)
 
 
-def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str = "default",
-                    workers: int = 1, executor=None, out: str | Path | None = None,
-                    progress: bool = False, use_cache: bool = True,
-                    scheduler: str | None = None) -> dict:
+def compute_margins(
+    policy="passive",
+    budget: str | Budget = "quick",
+    gait: str = "default",
+    workers: int = 1,
+    executor=None,
+    out: str | Path | None = None,
+    progress: bool = False,
+    use_cache: bool = True,
+    scheduler: str | None = None,
+) -> dict:
     """All margins of ``policy`` (``"passive"``, a path, or a controller) as a JSON-able dict.
 
     ``policy`` may be any object with the controller protocol (module docstring).
@@ -844,14 +996,23 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
     controller = as_controller(policy, gait)
     g = load_gait(gait)
     z_star = np.asarray(g.z0, dtype=float)
-    scale = {"names": list(Z_LABELS), "units": list(Z_UNITS),
-             "zstar": np.abs(z_star).tolist(), "cycle": cycle_scale(gait).tolist()}
+    scale = {
+        "names": list(Z_LABELS),
+        "units": list(Z_UNITS),
+        "zstar": np.abs(z_star).tolist(),
+        "cycle": cycle_scale(gait).tolist(),
+    }
     out_dir = Path(out) if out is not None else None
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
     cache = TaskCache(out_dir / "cache.jsonl" if (out_dir is not None and use_cache) else None)
-    setup = Setup(controller=controller, gait=gait, budget=budget, z_star=z_star,
-                  key=setup_key(controller, gait, budget))
+    setup = Setup(
+        controller=controller,
+        gait=gait,
+        budget=budget,
+        z_star=z_star,
+        key=setup_key(controller, gait, budget),
+    )
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
         if executor is None:
@@ -859,8 +1020,12 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
         cyc = _run_all(executor, setup, [("cycle", ())], cache, False, "cycle")[("cycle", ())]
         if "error" in cyc:
             raise RuntimeError(f"no closed-loop cycle: {cyc['error']}")
-        setup = replace(setup, z_cl=np.array(cyc["z_cl"]), cycle_steps=int(cyc["cycle_steps"]),
-                        period=float(cyc["period"]))
+        setup = replace(
+            setup,
+            z_cl=np.array(cyc["z_cl"]),
+            cycle_steps=int(cyc["cycle_steps"]),
+            period=float(cyc["period"]),
+        )
         jobs = [("basin", (i, s)) for i in range(6) for s in (1, -1)]
         jobs += [("ceiling", (i, s)) for i in range(6) for s in (1, -1)]
         jobs += [("curve", (r,)) for r in budget.curve_sizes]
@@ -868,8 +1033,9 @@ def compute_margins(policy="passive", budget: str | Budget = "quick", gait: str 
         jobs += [("window", (k, s)) for k in ("alpha_deg", "kc") for s in (-1, 1)]
         jobs += [("push", ("xdot", v, j)) for j, v in enumerate(budget.push_xdot)]
         jobs += [("push", ("th1dot", v, j)) for j, v in enumerate(budget.push_th1dot)]
-        res = _run_all(executor, setup, jobs, cache, progress,
-                       f"margins {controller_name(controller)}")
+        res = _run_all(
+            executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}"
+        )
     result = assemble(controller, gait, budget, z_star, cyc, res, scale)
     result["seconds"] = time.perf_counter() - t0
     if out_dir is not None:
@@ -893,16 +1059,26 @@ def _rate_curve(xs, items) -> dict:
     ci = [wilson_interval(a, b) for a, b in zip(k, n, strict=True)]
     lo, hi = [c[0] for c in ci], [c[1] for c in ci]
     x50 = crossing_on_grid(xs, rates)
-    return {"success": rates, "k": k, "n": n, "ci_low": lo, "ci_high": hi,
-            "x50": x50,
-            "x50_ci": [min(x50, crossing_on_grid(xs, lo)), max(x50, crossing_on_grid(xs, hi))],
-            "x50_grid": threshold_on_grid(xs, rates),
-            "x50_at_grid_end": bool(rates and rates[-1] >= 0.5)}
+    return {
+        "success": rates,
+        "k": k,
+        "n": n,
+        "ci_low": lo,
+        "ci_high": hi,
+        "x50": x50,
+        "x50_ci": [min(x50, crossing_on_grid(xs, lo)), max(x50, crossing_on_grid(xs, hi))],
+        "x50_grid": threshold_on_grid(xs, rates),
+        "x50_at_grid_end": bool(rates and rates[-1] >= 0.5),
+    }
 
 
 def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
-    scale = scale or {"names": list(Z_LABELS), "units": list(Z_UNITS),
-                      "zstar": np.abs(z_star).tolist(), "cycle": [math.nan] * 6}
+    scale = scale or {
+        "names": list(Z_LABELS),
+        "units": list(Z_UNITS),
+        "zstar": np.abs(z_star).tolist(),
+        "cycle": [math.nan] * 6,
+    }
     basin, ceiling = {}, {}
     worst = (math.inf, None, math.nan)
     worst_cycle = (math.inf, None)
@@ -935,8 +1111,12 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
     push = {}
     for kind, sizes in (("xdot", budget.push_xdot), ("th1dot", budget.push_th1dot)):
         rates = [res[("push", (kind, v, j))]["success"] for j, v in enumerate(sizes)]
-        push[kind] = {"unit": "m/s" if kind == "xdot" else "rad/s", "sizes": list(sizes),
-                      "success": rates, "p50": threshold_on_grid(sizes, rates)}
+        push[kind] = {
+            "unit": "m/s" if kind == "xdot" else "rad/s",
+            "sizes": list(sizes),
+            "success": rates,
+            "p50": threshold_on_grid(sizes, rates),
+        }
     win = {(k, s): res[("window", (k, s))] for k in ("alpha_deg", "kc") for s in (-1, 1)}
     z_cl = np.array(cyc["z_cl"])
     curve_sizes = [c["size"] for c in curve]
@@ -954,21 +1134,36 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
         "basin_ceiling": ceiling,
         "basin_share_min": worst_share[0] if worst_share[1] else None,
         "basin_share_min_direction": worst_share[1],
-        "basin_curve": {"sizes": curve_sizes, "success": ccurve["success"], "k": ccurve["k"],
-                        "n": ccurve["n"], "ci_low": ccurve["ci_low"],
-                        "ci_high": ccurve["ci_high"], "interval": "95% Wilson",
-                        "r50": ccurve["x50"], "r50_ci": ccurve["x50_ci"],
-                        "r50_grid": ccurve["x50_grid"],
-                        "r50_at_grid_end": ccurve["x50_at_grid_end"],
-                        "directions": budget.curve_dirs, "direction_seed": CURVE_SEED,
-                        "scale": "zstar"},
-        "terrain": {"sigmas_deg": list(budget.terrain_sigmas), "survival": tcurve["success"],
-                    "k": tcurve["k"], "n": tcurve["n"], "ci_low": tcurve["ci_low"],
-                    "ci_high": tcurve["ci_high"], "interval": "95% Wilson",
-                    "runs": budget.terrain_runs, "strides": budget.terrain_strides,
-                    "seeds": [TERRAIN_SEED, TERRAIN_SEED + budget.terrain_runs - 1],
-                    "mean_strides": [t["mean_strides"] for t in terr],
-                    "failures": [t["failures"] for t in terr]},
+        "basin_curve": {
+            "sizes": curve_sizes,
+            "success": ccurve["success"],
+            "k": ccurve["k"],
+            "n": ccurve["n"],
+            "ci_low": ccurve["ci_low"],
+            "ci_high": ccurve["ci_high"],
+            "interval": "95% Wilson",
+            "r50": ccurve["x50"],
+            "r50_ci": ccurve["x50_ci"],
+            "r50_grid": ccurve["x50_grid"],
+            "r50_at_grid_end": ccurve["x50_at_grid_end"],
+            "directions": budget.curve_dirs,
+            "direction_seed": CURVE_SEED,
+            "scale": "zstar",
+        },
+        "terrain": {
+            "sigmas_deg": list(budget.terrain_sigmas),
+            "survival": tcurve["success"],
+            "k": tcurve["k"],
+            "n": tcurve["n"],
+            "ci_low": tcurve["ci_low"],
+            "ci_high": tcurve["ci_high"],
+            "interval": "95% Wilson",
+            "runs": budget.terrain_runs,
+            "strides": budget.terrain_strides,
+            "seeds": [TERRAIN_SEED, TERRAIN_SEED + budget.terrain_runs - 1],
+            "mean_strides": [t["mean_strides"] for t in terr],
+            "failures": [t["failures"] for t in terr],
+        },
         "terrain_sigma50_deg": tcurve["x50"],
         "terrain_sigma50_grid_deg": tcurve["x50_grid"],
         "terrain_sigma50_ci_deg": tcurve["x50_ci"],
@@ -990,18 +1185,25 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
         "effort_frac": cyc["effort"] / cyc["max_torque"],
         "max_torque": cyc["max_torque"],
         "period": cyc["period"],
-        "settings": {"return_tol": RETURN_TOL, "rtol": EVAL_RTOL,
-                     "basin_strides": budget.basin_strides, "basin_iters": budget.basin_iters,
-                     "basin_first_bracket": [BASIN_LO, BASIN_HI], "basin_cap": BASIN_CAP,
-                     "window_strides": budget.window_strides,
-                     "push_samples": budget.push_samples,
-                     "ceiling": {"strides": budget.ceiling_strides,
-                                 "iters": budget.ceiling_iters,
-                                 "random_profiles": budget.ceiling_random,
-                                 "optimizer_iters": budget.ceiling_opt,
-                                 "piece_intervals": PROFILE_SEG},
-                     "terrain_runs": budget.terrain_runs,
-                     "terrain_strides": budget.terrain_strides},
+        "settings": {
+            "return_tol": RETURN_TOL,
+            "rtol": EVAL_RTOL,
+            "basin_strides": budget.basin_strides,
+            "basin_iters": budget.basin_iters,
+            "basin_first_bracket": [BASIN_LO, BASIN_HI],
+            "basin_cap": BASIN_CAP,
+            "window_strides": budget.window_strides,
+            "push_samples": budget.push_samples,
+            "ceiling": {
+                "strides": budget.ceiling_strides,
+                "iters": budget.ceiling_iters,
+                "random_profiles": budget.ceiling_random,
+                "optimizer_iters": budget.ceiling_opt,
+                "piece_intervals": PROFILE_SEG,
+            },
+            "terrain_runs": budget.terrain_runs,
+            "terrain_strides": budget.terrain_strides,
+        },
     }
 
 
@@ -1016,32 +1218,70 @@ def write_outputs(result: dict, out_dir: Path) -> None:
     for name, key in (("basin.csv", "basin"), ("ceiling.csv", "basin_ceiling")):
         with (out_dir / name).open("w", newline="") as f:
             w = csv.writer(f)
-            w.writerow(["component", "unit", "sign", "rel", "abs", "capped", "rel_cycle",
-                        "share", "cap", "beyond_rel", "beyond_reason", "beyond_stride",
-                        "beyond_phase", "mechanisms"])
+            w.writerow(
+                [
+                    "component",
+                    "unit",
+                    "sign",
+                    "rel",
+                    "abs",
+                    "capped",
+                    "rel_cycle",
+                    "share",
+                    "cap",
+                    "beyond_rel",
+                    "beyond_reason",
+                    "beyond_stride",
+                    "beyond_phase",
+                    "mechanisms",
+                ]
+            )
             for label, e in result[key].items():
                 for sym in ("+", "-"):
                     v = e.get(sym)
                     if v is None:
                         continue
                     bey = v.get("beyond") or {}
-                    w.writerow([label, e["unit"], sym, v["rel"], v["abs"], v["capped"],
-                                v.get("rel_cycle"), v.get("share"), v.get("cap"),
-                                bey.get("rel"), bey.get("reason"), bey.get("stride"),
-                                bey.get("phase"), "; ".join(bey.get("mechanisms") or [])])
+                    w.writerow(
+                        [
+                            label,
+                            e["unit"],
+                            sym,
+                            v["rel"],
+                            v["abs"],
+                            v["capped"],
+                            v.get("rel_cycle"),
+                            v.get("share"),
+                            v.get("cap"),
+                            bey.get("rel"),
+                            bey.get("reason"),
+                            bey.get("stride"),
+                            bey.get("phase"),
+                            "; ".join(bey.get("mechanisms") or []),
+                        ]
+                    )
     c = result["basin_curve"]
     with (out_dir / "curve.csv").open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["size_rel", "success", "k", "n", "ci_low", "ci_high"])
-        for row in zip(c["sizes"], c["success"], c["k"], c["n"], c["ci_low"], c["ci_high"],
-                       strict=True):
+        for row in zip(
+            c["sizes"], c["success"], c["k"], c["n"], c["ci_low"], c["ci_high"], strict=True
+        ):
             w.writerow(row)
     t = result["terrain"]
     with (out_dir / "terrain.csv").open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["sigma_deg", "survival", "k", "n", "ci_low", "ci_high", "mean_strides"])
-        for row in zip(t["sigmas_deg"], t["survival"], t["k"], t["n"], t["ci_low"],
-                       t["ci_high"], t["mean_strides"], strict=True):
+        for row in zip(
+            t["sigmas_deg"],
+            t["survival"],
+            t["k"],
+            t["n"],
+            t["ci_low"],
+            t["ci_high"],
+            t["mean_strides"],
+            strict=True,
+        ):
             w.writerow(row)
     with (out_dir / "push.csv").open("w", newline="") as f:
         w = csv.writer(f)
@@ -1086,8 +1326,9 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
         c = r["basin_curve"]
         line = ax.plot(c["sizes"], c["success"], "o-", label=lab, ms=3)[0]
         if "ci_low" in c:
-            ax.fill_between(c["sizes"], c["ci_low"], c["ci_high"], color=line.get_color(),
-                            alpha=0.15)
+            ax.fill_between(
+                c["sizes"], c["ci_low"], c["ci_high"], color=line.get_color(), alpha=0.15
+            )
     ax.set_xscale("log")
     ax.set_xlabel("relative perturbation size r (random direction)")
     ax.set_ylabel("P(return)")
@@ -1116,8 +1357,9 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
         for r, lab in zip(results, labels, strict=True):
             t = r["terrain"]
             line = ax.plot(t["sigmas_deg"], t["survival"], "o-", label=lab, ms=3)[0]
-            ax.fill_between(t["sigmas_deg"], t["ci_low"], t["ci_high"],
-                            color=line.get_color(), alpha=0.15)
+            ax.fill_between(
+                t["sigmas_deg"], t["ci_low"], t["ci_high"], color=line.get_color(), alpha=0.15
+            )
         ax.set_xscale("log")
         ax.set_xlabel("slope noise sigma per apex [deg]")
         ax.set_ylabel(f"P(survive {results[0]['terrain']['strides']} strides)")

@@ -35,8 +35,7 @@ def parse_seeds(text: str) -> list[int]:
     except ValueError:
         seeds = []
     if not seeds or len(set(seeds)) != len(seeds) or min(seeds) < 0:
-        raise ValueError(f"--seeds must be distinct non-negative integers like 0,1,2, got "
-                         f"{text!r}")
+        raise ValueError(f"--seeds must be distinct non-negative integers like 0,1,2, got {text!r}")
     return seeds
 
 
@@ -56,8 +55,7 @@ def train_task(kwargs: dict, transfer: str) -> dict:
         buf = io.BytesIO()
         with tarfile.open(fileobj=buf, mode="w:gz") as tar:
             tar.add(run, arcname=run.name)
-        return {"name": run.name, "archive": buf.getvalue(),
-                "seconds": time.perf_counter() - t0}
+        return {"name": run.name, "archive": buf.getvalue(), "seconds": time.perf_counter() - t0}
 
 
 def unpack_run(archive: bytes, runs_dir: Path) -> Path:
@@ -77,9 +75,17 @@ def unpack_run(archive: bytes, runs_dir: Path) -> Path:
     return dest
 
 
-def train_seeds(seeds: list[int], name: str, runs_dir: str | Path, train_kwargs: dict,
-                scheduler: str | None = None, workers: int = 2, transfer: str = "shared",
-                compare_budget: str | None = "quick", progress: bool = True) -> dict:
+def train_seeds(
+    seeds: list[int],
+    name: str,
+    runs_dir: str | Path,
+    train_kwargs: dict,
+    scheduler: str | None = None,
+    workers: int = 2,
+    transfer: str = "shared",
+    compare_budget: str | None = "quick",
+    progress: bool = True,
+) -> dict:
     """Train ``name``_s<seed> for every seed through one executor, then compare them with
     the passive gait (unless ``compare_budget`` is None). Returns {"runs": [...],
     "compare": path of the page or None}."""
@@ -90,15 +96,19 @@ def train_seeds(seeds: list[int], name: str, runs_dir: str | Path, train_kwargs:
     runs_dir = Path(runs_dir)
     tasks = {}
     for seed in seeds:
-        kw = {**train_kwargs, "seed": seed, "name": f"{name}_s{seed}",
-              "runs_dir": str(runs_dir.resolve()), "progress_bar": False}
+        kw = {
+            **train_kwargs,
+            "seed": seed,
+            "name": f"{name}_s{seed}",
+            "runs_dir": str(runs_dir.resolve()),
+            "progress_bar": False,
+        }
         tasks[f"train {name}_s{seed}"] = (train_task, (kw, transfer), ({"seed": seed},))
     runs = {}
     with open_pool(scheduler, workers) as pool:
         done, failures = run_tasks(pool.executor, tasks, progress, f"train {name}")
         for key, res in done.items():
-            run = Path(res["run"]) if transfer == "shared" else unpack_run(res["archive"],
-                                                                             runs_dir)
+            run = Path(res["run"]) if transfer == "shared" else unpack_run(res["archive"], runs_dir)
             runs[key] = run
         if failures:
             raise TasksFailed(failures, len(tasks))
@@ -111,8 +121,15 @@ def train_seeds(seeds: list[int], name: str, runs_dir: str | Path, train_kwargs:
             gait = load_controller(ordered[0]).env_kwargs.get("gait") or "default"
             passive = [e for e in default_entries() if e[1] == ["passive"] and e[2] == gait]
             entries = (passive or [("passive", ["passive"], gait)])[:1] + [
-                (f"{name} ({len(seeds)} seeds)", [str(r) for r in ordered], gait)]
+                (f"{name} ({len(seeds)} seeds)", [str(r) for r in ordered], gait)
+            ]
             out = runs_dir / f"{name}_seeds"
-            page = compare(entries, budget=compare_budget, out=out / "margins", docs=out,
-                           progress=progress, executor=pool.executor)
+            page = compare(
+                entries,
+                budget=compare_budget,
+                out=out / "margins",
+                docs=out,
+                progress=progress,
+                executor=pool.executor,
+            )
     return {"runs": [str(r) for r in ordered], "compare": None if page is None else str(page)}

@@ -29,8 +29,14 @@ import yaml
 # Environment keyword arguments that shape the dynamics, the observation or the action; the
 # evaluation environment takes these from the policy's run config (reward weights and start
 # noise do not matter for evaluation).
-DYNAMICS_KWARGS = ("gait", "gait_overrides", "dt", "max_torque", "apex_scales",
-                   "exclude_current_positions_from_observation")
+DYNAMICS_KWARGS = (
+    "gait",
+    "gait_overrides",
+    "dt",
+    "max_torque",
+    "apex_scales",
+    "exclude_current_positions_from_observation",
+)
 _ACTIVATIONS = {
     "Tanh": np.tanh,
     "ReLU": lambda x: np.maximum(x, 0.0),
@@ -79,8 +85,11 @@ class MLPController:
             x = x[self.obs_index]
         if self.obs_mean is None:
             return x
-        return np.clip((x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
-                       -self.clip_obs, self.clip_obs)
+        return np.clip(
+            (x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
+            -self.clip_obs,
+            self.clip_obs,
+        )
 
     def __call__(self, obs: np.ndarray) -> float:
         act = _ACTIVATIONS[self.activation]
@@ -100,8 +109,11 @@ class MLPController:
         if self.obs_index is not None:
             x = x[:, self.obs_index]
         if self.obs_mean is not None:
-            x = np.clip((x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
-                        -self.clip_obs, self.clip_obs)
+            x = np.clip(
+                (x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
+                -self.clip_obs,
+                self.clip_obs,
+            )
         for W, b in self.layers[:-1]:
             x = act(_affine_rows(x, W, b))
         W, b = self.layers[-1]
@@ -173,9 +185,11 @@ def _classical(name: str, gait=None):
 
 
 # the classical stride-level controllers, specs in configs/controllers/
-for _name, _what in (("lqr", "stride-to-stride LQR on the linearized stride map"),
-                     ("deadbeat", "one-stride deadbeat on the linearized stride map"),
-                     ("damping", "extra spine damping tau = -c theta2dot")):
+for _name, _what in (
+    ("lqr", "stride-to-stride LQR on the linearized stride map"),
+    ("deadbeat", "one-stride deadbeat on the linearized stride map"),
+    ("damping", "extra spine damping tau = -c theta2dot"),
+):
     register_controller(_name, partial(_classical, _name), _what)
 
 
@@ -203,12 +217,16 @@ def resolve_policy(spec: str | Path) -> str | Path:
     if not p.exists():
         raise FileNotFoundError(
             f"policy {text!r} does not exist (give a name: {', '.join(policy_names())}; or a "
-            "run or policy directory with model.zip, or a model .zip)")
+            "run or policy directory with model.zip, or a model .zip)"
+        )
     return p
 
 
-_INFERENCE_ONLY = {"learning_rate": 0.0, "lr_schedule": lambda _: 0.0,
-                   "clip_range": lambda _: 0.0}  # replaces training-only pickled objects
+_INFERENCE_ONLY = {
+    "learning_rate": 0.0,
+    "lr_schedule": lambda _: 0.0,
+    "clip_range": lambda _: 0.0,
+}  # replaces training-only pickled objects
 FINGERPRINT_FILE = "fingerprint.json"  # sha256 of the model and its statistics, as one unit
 
 
@@ -244,8 +262,10 @@ def find_policy_files(path: str | Path) -> PolicyFiles:
     """
     p = Path(path)
     if not p.exists():
-        raise FileNotFoundError(f"policy {str(path)!r} does not exist (give a run or policy "
-                                "directory with model.zip, a model .zip, or 'passive')")
+        raise FileNotFoundError(
+            f"policy {str(path)!r} does not exist (give a run or policy "
+            "directory with model.zip, a model .zip, or 'passive')"
+        )
     folder = p if p.is_dir() else p.parent
     if (folder / "config.yml").is_file() and not (folder / "model.zip").is_file():
         folder = folder.parent  # the params folder of an rl-zoo3 run was given
@@ -258,11 +278,13 @@ def find_policy_files(path: str | Path) -> PolicyFiles:
             cands = [folder / f"{zoo.name}.zip", folder / "best_model.zip"]
             model = next((c for c in cands if c.is_file()), None)
             if model is None:
-                raise FileNotFoundError(f"rl-zoo3 run folder {folder} has no {cands[0].name} "
-                                        "or best_model.zip")
+                raise FileNotFoundError(
+                    f"rl-zoo3 run folder {folder} has no {cands[0].name} or best_model.zip"
+                )
         vn = zoo / "vecnormalize.pkl"
-        return PolicyFiles(model, vn if vn.is_file() else None, zoo / "config.yml", "rl-zoo3",
-                           zoo.name)
+        return PolicyFiles(
+            model, vn if vn.is_file() else None, zoo / "config.yml", "rl-zoo3", zoo.name
+        )
     if p.is_dir():
         model = p / "model.zip"
         if not model.is_file():
@@ -288,9 +310,11 @@ class _ZooLoader(yaml.SafeLoader):
 
 _ZooLoader.add_constructor(
     "tag:yaml.org,2002:python/object/apply:collections.OrderedDict",
-    lambda loader, node: dict(loader.construct_sequence(node.value[0], deep=True)
-                              if isinstance(node, yaml.SequenceNode) else
-                              loader.construct_mapping(node, deep=True).get("args", [[]])[0]),
+    lambda loader, node: dict(
+        loader.construct_sequence(node.value[0], deep=True)
+        if isinstance(node, yaml.SequenceNode)
+        else loader.construct_mapping(node, deep=True).get("args", [[]])[0]
+    ),
 )
 
 
@@ -341,8 +365,9 @@ def section_env_kwargs(section: dict, env_id: str) -> dict:
         try:
             spec_kwargs = gym.spec(env_id).kwargs or {}
         except gym.error.Error:
-            raise ValueError(f"the policy was trained on {env_id!r}, which is not a "
-                             "registered environment") from None
+            raise ValueError(
+                f"the policy was trained on {env_id!r}, which is not a registered environment"
+            ) from None
         env_kwargs = {**spec_kwargs, **env_kwargs}
     return {k: v for k, v in env_kwargs.items() if k in DYNAMICS_KWARGS}
 
@@ -395,15 +420,19 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
     """
     warnings = []
     if files.config is None:
-        msg = (f"policy {files.model}: no config.yaml beside it, so the environment it was "
-               "trained on (max_torque, dt, observation filter) is unknown")
+        msg = (
+            f"policy {files.model}: no config.yaml beside it, so the environment it was "
+            "trained on (max_torque, dt, observation filter) is unknown"
+        )
         if not force:
             raise ValueError(msg + "; pass --force to evaluate it with the env's defaults")
         warnings.append(msg)
     if section.get("normalize") and files.vecnormalize is None:
         where = files.config.parent if files.config is not None else files.model.parent
-        raise ValueError(f"policy {files.model} was trained with normalize="
-                         f"{section['normalize']!r} but {where} has no vecnormalize.pkl")
+        raise ValueError(
+            f"policy {files.model} was trained with normalize="
+            f"{section['normalize']!r} but {where} has no vecnormalize.pkl"
+        )
     fp = files.fingerprint
     if fp.is_file():
         import json
@@ -415,11 +444,15 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
         pairs = [("model.zip", files.model), ("vecnormalize.pkl", files.vecnormalize)]
         for key, path in pairs:
             if key in want and (path is None or file_sha256(path) != want[key]):
-                raise ValueError(f"{path or key} does not match {fp} (sha256): the model and "
-                                 "its normalization statistics belong to different policies")
+                raise ValueError(
+                    f"{path or key} does not match {fp} (sha256): the model and "
+                    "its normalization statistics belong to different policies"
+                )
     elif files.vecnormalize is not None and files.layout == "bound_env":
-        warnings.append(f"{files.model.parent}: no {FINGERPRINT_FILE}, so it cannot be checked "
-                        "that vecnormalize.pkl belongs to this model")
+        warnings.append(
+            f"{files.model.parent}: no {FINGERPRINT_FILE}, so it cannot be checked "
+            "that vecnormalize.pkl belongs to this model"
+        )
     return warnings
 
 
@@ -438,8 +471,10 @@ def check_gait(controller, gait, force: bool = False) -> None:
     if gait is None or trained is None or force or isinstance(controller, ZeroController):
         return
     if not same_gait(trained, gait):
-        raise ValueError(f"policy {controller.name} was trained on gait {trained!r}, not "
-                         f"{str(gait)!r}; pass --force to evaluate it there on purpose")
+        raise ValueError(
+            f"policy {controller.name} was trained on gait {trained!r}, not "
+            f"{str(gait)!r}; pass --force to evaluate it there on purpose"
+        )
 
 
 def load_controller(path: str | Path, gait: str | Path | None = None, force: bool = False):
@@ -476,22 +511,31 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     for w in check_policy_files(files, section, force):
         print(f"warning: {w}", file=sys.stderr)
     layers, activation = _extract_actor(model, model_path)
-    ctrl = MLPController(name=str(path), layers=layers, activation=activation,
-                         env_kwargs=env_kwargs, obs_shape=tuple(model.observation_space.shape),
-                         seed=seed, obs_index=obs_index)
+    ctrl = MLPController(
+        name=str(path),
+        layers=layers,
+        activation=activation,
+        env_kwargs=env_kwargs,
+        obs_shape=tuple(model.observation_space.shape),
+        seed=seed,
+        obs_index=obs_index,
+    )
     if vecnorm_path is not None:
         try:
             with vecnorm_path.open("rb") as f:
                 vn = pickle.load(f)
         except Exception as e:  # noqa: BLE001 - a truncated or foreign pickle
-            raise ValueError(f"cannot read {vecnorm_path} as VecNormalize statistics: "
-                             f"{type(e).__name__}: {e}") from None
+            raise ValueError(
+                f"cannot read {vecnorm_path} as VecNormalize statistics: {type(e).__name__}: {e}"
+            ) from None
         if getattr(vn, "norm_obs", False):
             rms = getattr(vn, "obs_rms", None)
             if rms is None or tuple(np.shape(rms.mean)) != ctrl.obs_shape:
-                raise ValueError(f"{vecnorm_path}: statistics for observations of shape "
-                                 f"{np.shape(getattr(rms, 'mean', None))}, the model expects "
-                                 f"{ctrl.obs_shape}")
+                raise ValueError(
+                    f"{vecnorm_path}: statistics for observations of shape "
+                    f"{np.shape(getattr(rms, 'mean', None))}, the model expects "
+                    f"{ctrl.obs_shape}"
+                )
             ctrl.obs_mean = np.asarray(rms.mean, dtype=np.float64)
             ctrl.obs_var = np.asarray(rms.var, dtype=np.float64)
             ctrl.epsilon = float(vn.epsilon)
@@ -542,15 +586,17 @@ def _extract_actor(model, model_path: Path) -> tuple[list, str]:
     layers, activation = [], "Identity"
     for m in policy.mlp_extractor.policy_net:
         if isinstance(m, nn.Linear):
-            layers.append((m.weight.detach().double().numpy().copy(),
-                           m.bias.detach().double().numpy().copy()))
+            layers.append(
+                (m.weight.detach().double().numpy().copy(), m.bias.detach().double().numpy().copy())
+            )
         elif type(m).__name__ in _ACTIVATIONS:
             activation = type(m).__name__
         else:
             raise ValueError(f"{model_path}: unsupported layer {m} in the policy network")
     an = policy.action_net
-    layers.append((an.weight.detach().double().numpy().copy(),
-                   an.bias.detach().double().numpy().copy()))
+    layers.append(
+        (an.weight.detach().double().numpy().copy(), an.bias.detach().double().numpy().copy())
+    )
     if getattr(policy, "squash_output", False):
         raise ValueError(f"{model_path}: squashed (gSDE) policies are not supported")
     return layers, activation

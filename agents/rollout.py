@@ -95,8 +95,15 @@ def load_policy(path, gait=None, force: bool = False):
     return env_factory, act
 
 
-def rollout(policy="default", gait=None, strides: int = 50, seed: int = 0, noise: float = 0.0,
-            video: str | Path | None = None, force: bool = False) -> dict:
+def rollout(
+    policy="default",
+    gait=None,
+    strides: int = 50,
+    seed: int = 0,
+    noise: float = 0.0,
+    video: str | Path | None = None,
+    force: bool = False,
+) -> dict:
     """One episode of ``strides`` strides (or until a fall); a JSON-able summary.
 
     Keys: ``policy``, ``gait``, ``env_kwargs``, ``seed``, ``noise`` (the env's
@@ -117,8 +124,11 @@ def rollout(policy="default", gait=None, strides: int = 50, seed: int = 0, noise
     make_env, act = load_policy(policy, gait=gait, force=force)
     dt = float(make_env.env_kwargs.get("dt", 0.01))
     max_steps = strides * (int(math.ceil(NO_APEX_TIME / dt)) + 2)
-    env = make_env(reset_noise_scale=float(noise), max_episode_steps=max_steps,
-                   render_mode="rgb_array" if video else None)
+    env = make_env(
+        reset_noise_scale=float(noise),
+        max_episode_steps=max_steps,
+        render_mode="rgb_array" if video else None,
+    )
     frames = []
     task = env.unwrapped.task
     z_ref, scales = np.asarray(task.z_ref), np.asarray(task.apex_scales)
@@ -147,14 +157,22 @@ def rollout(policy="default", gait=None, strides: int = 50, seed: int = 0, noise
     if video:
         write_video(frames, video, fps=round(1 / dt))
     return {
-        "policy": str(policy), "gait": str(make_env.env_kwargs.get("gait", "default")),
-        "env_kwargs": _jsonable(make_env.env_kwargs), "seed": seed, "noise": noise,
-        "requested_strides": strides, "strides": len(errors), "fell": failure is not None,
-        "failure": failure, "apex_error": errors,
+        "policy": str(policy),
+        "gait": str(make_env.env_kwargs.get("gait", "default")),
+        "env_kwargs": _jsonable(make_env.env_kwargs),
+        "seed": seed,
+        "noise": noise,
+        "requested_strides": strides,
+        "strides": len(errors),
+        "fell": failure is not None,
+        "failure": failure,
+        "apex_error": errors,
         "mean_abs_tau": float(np.mean(taus)) if taus else 0.0,
-        "max_torque": float(task.max_torque), "steps": steps, "time": steps * dt,
+        "max_torque": float(task.max_torque),
+        "steps": steps,
+        "time": steps * dt,
         "video": str(video) if video else None,
-    }  # fmt: skip
+    }
 
 
 def _jsonable(d: dict) -> dict:
@@ -174,8 +192,10 @@ def write_video(frames, path, fps: int) -> Path:
         try:
             import imageio.v2 as imageio
         except ModuleNotFoundError:
-            raise ValueError("--video F.mp4 needs imageio with ffmpeg (pip install "
-                             "imageio-ffmpeg); --video F.gif works without it") from None
+            raise ValueError(
+                "--video F.mp4 needs imageio with ffmpeg (pip install "
+                "imageio-ffmpeg); --video F.gif works without it"
+            ) from None
         try:
             imageio.mimwrite(tmp, frames, fps=fps)
         except Exception as e:  # noqa: BLE001 - no ffmpeg backend
@@ -188,10 +208,12 @@ def summary_text(r: dict) -> str:
     err = r["apex_error"]
     last = f"{err[-1]:.3g}" if err else "-"
     fell = f"fell: {r['failure']}" if r["fell"] else "no fall"
-    return (f"{r['policy']} on gait {r['gait']}: {r['strides']}/{r['requested_strides']} "
-            f"strides, {fell}; apex error (apex_scales units) last {last}, max "
-            f"{max(err) if err else float('nan'):.3g}; mean |tau| {r['mean_abs_tau']:.3g} N m "
-            f"of {r['max_torque']:g}")
+    return (
+        f"{r['policy']} on gait {r['gait']}: {r['strides']}/{r['requested_strides']} "
+        f"strides, {fell}; apex error (apex_scales units) last {last}, max "
+        f"{max(err) if err else float('nan'):.3g}; mean |tau| {r['mean_abs_tau']:.3g} N m "
+        f"of {r['max_torque']:g}"
+    )
 
 
 __all__ = ["check_gait", "load_policy", "rollout"]

@@ -83,8 +83,9 @@ class DirectionStarts(gym.Wrapper):
     :param axis_prob: probability of a single-axis direction (the basin's 12 directions).
     """
 
-    def __init__(self, env: gym.Env, r_max: float = 0.3, r_min: float = 0.0,
-                 axis_prob: float = 0.25):
+    def __init__(
+        self, env: gym.Env, r_max: float = 0.3, r_min: float = 0.0, axis_prob: float = 0.25
+    ):
         super().__init__(env)
         u = _stride_env(env)
         if not (0.0 <= r_min <= r_max and math.isfinite(r_max)):
@@ -123,8 +124,11 @@ class BaseGain:
 
     @classmethod
     def from_json(cls, data: dict) -> BaseGain:
-        return cls(np.asarray(data["gain"], dtype=float), np.asarray(data["z_ref"], dtype=float),
-                   str(data.get("name", "lqr")))
+        return cls(
+            np.asarray(data["gain"], dtype=float),
+            np.asarray(data["z_ref"], dtype=float),
+            str(data.get("name", "lqr")),
+        )
 
 
 def design_base(base: str, gait: str, basis_name: str, K: int, max_torque: float) -> BaseGain:
@@ -138,9 +142,11 @@ def design_base(base: str, gait: str, basis_name: str, K: int, max_torque: float
     if ctrl.basis.name != basis_name or ctrl.basis.K != K or ctrl.max_torque != max_torque:
         raise ValueError(
             f"base {base!r} uses basis {ctrl.basis.name!r}, K={ctrl.basis.K}, max_torque="
-            f"{ctrl.max_torque}; the env has {basis_name!r}, K={K}, max_torque={max_torque}")
-    return BaseGain(np.array(ctrl.gain, dtype=float), np.array(ctrl.z_ref, dtype=float),
-                    Path(str(base)).stem)
+            f"{ctrl.max_torque}; the env has {basis_name!r}, K={K}, max_torque={max_torque}"
+        )
+    return BaseGain(
+        np.array(ctrl.gain, dtype=float), np.array(ctrl.z_ref, dtype=float), Path(str(base)).stem
+    )
 
 
 class StrideControl(gym.Wrapper):
@@ -151,8 +157,9 @@ class StrideControl(gym.Wrapper):
     :param base_gain: an explicit `BaseGain` (or its JSON dict) instead of designing ``base``.
     """
 
-    def __init__(self, env: gym.Env, base: str | None = "lqr", residual_scale: float = 1.0,
-                 base_gain=None):
+    def __init__(
+        self, env: gym.Env, base: str | None = "lqr", residual_scale: float = 1.0, base_gain=None
+    ):
         super().__init__(env)
         u = _stride_env(env)
         task = u.task
@@ -164,8 +171,9 @@ class StrideControl(gym.Wrapper):
         if isinstance(base_gain, dict):
             base_gain = BaseGain.from_json(base_gain)
         if base_gain is None and base is not None:
-            base_gain = design_base(base, str(task.gait.path), task.basis.name, task.K,
-                                    task.max_torque)
+            base_gain = design_base(
+                base, str(task.gait.path), task.basis.name, task.K, task.max_torque
+            )
         self.base = base_gain
         big = np.float32(1e3)
         self.observation_space = gym.spaces.Box(-big, big, (6,), dtype=np.float32)
@@ -187,21 +195,37 @@ class StrideControl(gym.Wrapper):
         z = self.env.unwrapped.z
         obs, reward, terminated, truncated, info = self.env.step(self.coefficients(z, action))
         z1 = info.get("apex_z")
-        return (self.observe(z1) if z1 is not None else self.observe(self.env.unwrapped.z),
-                reward, terminated, truncated, info)
+        return (
+            self.observe(z1) if z1 is not None else self.observe(self.env.unwrapped.z),
+            reward,
+            terminated,
+            truncated,
+            info,
+        )
 
 
 class YardstickReward(gym.Wrapper):
     """The reward of the yardstick (see the module docstring); the env's own reward is kept in
     ``info["reward_env"]``."""
 
-    def __init__(self, env: gym.Env, alive: float = 1.0, contraction_weight: float = 1.0,
-                 ctrl_weight: float = 0.5, fall_penalty: float = 20.0, horizon: int = 30,
-                 e_floor: float = 1e-3):
+    def __init__(
+        self,
+        env: gym.Env,
+        alive: float = 1.0,
+        contraction_weight: float = 1.0,
+        ctrl_weight: float = 0.5,
+        fall_penalty: float = 20.0,
+        horizon: int = 30,
+        e_floor: float = 1e-3,
+    ):
         super().__init__(env)
         u = _stride_env(env)
-        for key, v in (("alive", alive), ("contraction_weight", contraction_weight),
-                       ("ctrl_weight", ctrl_weight), ("fall_penalty", fall_penalty)):
+        for key, v in (
+            ("alive", alive),
+            ("contraction_weight", contraction_weight),
+            ("ctrl_weight", ctrl_weight),
+            ("fall_penalty", fall_penalty),
+        ):
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"{key} must be a non-negative number, got {v!r}")
         if not (horizon >= 1 and e_floor > 0):
@@ -230,8 +254,9 @@ class YardstickReward(gym.Wrapper):
             r -= self.fall_penalty * max(0.0, 1.0 - k / self.horizon)
         else:
             e1 = self.error(info["apex_z"])
-            r += self.alive + self.contraction_weight * float(np.clip(math.log(self._e / e1),
-                                                                      -1.0, 1.0))
+            r += self.alive + self.contraction_weight * float(
+                np.clip(math.log(self._e / e1), -1.0, 1.0)
+            )
             self._e = e1
         info["reward_env"] = reward
         return obs, r, terminated, truncated, info
@@ -296,7 +321,7 @@ def anchored_policy_class():
                 mean = self.action_net(latent_pi) - self.action_net(latent0)
                 if self.gate_scale > 0:
                     q = th.sum(th.square(obs.float()), dim=-1, keepdim=True)
-                    mean = mean * (q / (q + self.gate_scale ** 2))
+                    mean = mean * (q / (q + self.gate_scale**2))
                 return self.action_dist.proba_distribution(mean, self.log_std)
 
             def forward(self, obs, deterministic: bool = False):
@@ -321,8 +346,11 @@ def anchored_policy_class():
                     latent_pi = self.mlp_extractor.forward_actor(features[0])
                     latent_vf = self.mlp_extractor.forward_critic(features[1])
                 distribution = self._dist(obs, latent_pi)
-                return (self.value_net(latent_vf), distribution.log_prob(actions),
-                        distribution.entropy())
+                return (
+                    self.value_net(latent_vf),
+                    distribution.log_prob(actions),
+                    distribution.entropy(),
+                )
 
             def get_distribution(self, obs):
                 features = super().extract_features(obs, self.pi_features_extractor)
@@ -401,14 +429,17 @@ class StridePolicyController:
         x = (np.asarray(z, dtype=float) - self.z_ref) / np.abs(self.z_ref)
         x = np.clip(x, -1e3, 1e3).astype(np.float32).astype(float)  # the env's observation
         if self.obs_mean is not None:
-            x = np.clip((x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
-                        -self.clip_obs, self.clip_obs)
+            x = np.clip(
+                (x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
+                -self.clip_obs,
+                self.clip_obs,
+            )
         mean = self._net(x)
         if self.anchored:
             mean = mean - self._net(np.zeros_like(x))
             if self.gate_scale > 0:
                 q = float(np.dot(x, x))
-                mean = mean * (q / (q + self.gate_scale ** 2))
+                mean = mean * (q / (q + self.gate_scale**2))
         return np.clip(mean, -1.0, 1.0)
 
     def coefficients(self, z) -> np.ndarray:
@@ -443,8 +474,19 @@ class StridePolicyController:
             arrays += [self.obs_mean, self.obs_var]
         for a in arrays:
             h.update(np.ascontiguousarray(a, dtype=float).tobytes())
-        h.update(repr((self.max_torque, self.dt, self.gait, self.residual_scale,
-                       self.activation, self.anchored, self.gate_scale)).encode())
+        h.update(
+            repr(
+                (
+                    self.max_torque,
+                    self.dt,
+                    self.gait,
+                    self.residual_scale,
+                    self.activation,
+                    self.anchored,
+                    self.gate_scale,
+                )
+            ).encode()
+        )
         return h.hexdigest()[:16]
 
     def __getstate__(self):
@@ -497,13 +539,18 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
     except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
         raise ValueError(f"cannot load {model_path} as an SB3 PPO model: {e}") from None
     trained_gait = str(env_kwargs.get("gait", "default"))
-    task = StrideTask(gait=trained_gait, basis=env_kwargs.get("basis", "windows"),
-                      K=env_kwargs.get("K"), max_torque=env_kwargs.get("max_torque", 80.0),
-                      rtol=BASIS_RTOL)
-    if tuple(model.observation_space.shape) != (6,) or \
-            tuple(model.action_space.shape) != (task.K,):
-        raise ValueError(f"policy {model_path} has spaces {model.observation_space.shape} -> "
-                         f"{model.action_space.shape}; its stride env needs (6,) -> ({task.K},)")
+    task = StrideTask(
+        gait=trained_gait,
+        basis=env_kwargs.get("basis", "windows"),
+        K=env_kwargs.get("K"),
+        max_torque=env_kwargs.get("max_torque", 80.0),
+        rtol=BASIS_RTOL,
+    )
+    if tuple(model.observation_space.shape) != (6,) or tuple(model.action_space.shape) != (task.K,):
+        raise ValueError(
+            f"policy {model_path} has spaces {model.observation_space.shape} -> "
+            f"{model.action_space.shape}; its stride env needs (6,) -> ({task.K},)"
+        )
     base = None
     if ctl.get("base") is not None:
         base_path = model_path.parent / BASE_FILE
@@ -512,13 +559,20 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
         base = BaseGain.from_json(json.loads(base_path.read_text()))
     layers, activation = _extract_actor(model, model_path)
     ctrl = StridePolicyController(
-        name=str(path), layers=layers, activation=activation, z_ref=task.z_ref.copy(),
-        edges=task.basis.edges.copy(), phi=task.basis.phi.copy(), max_torque=task.max_torque,
-        base=base, residual_scale=float(ctl.get("residual_scale", 1.0)), gait=trained_gait,
+        name=str(path),
+        layers=layers,
+        activation=activation,
+        z_ref=task.z_ref.copy(),
+        edges=task.basis.edges.copy(),
+        phi=task.basis.phi.copy(),
+        max_torque=task.max_torque,
+        base=base,
+        residual_scale=float(ctl.get("residual_scale", 1.0)),
+        gait=trained_gait,
         seed=seed,
         anchored=type(model.policy).__name__ == "AnchoredMlpPolicy",
         gate_scale=float(getattr(model.policy, "gate_scale", 0.0)),
-    )  # fmt: skip
+    )
     if vecnorm_path is not None:
         with vecnorm_path.open("rb") as f:
             vn = pickle.load(f)
@@ -553,9 +607,16 @@ def write_base(run_dir: Path, venv) -> None:
 VALIDATION_SEED = 2024  # margins' random directions use 12345; these are other directions
 
 
-def stride_curve(ctrl, sizes=(0.05, 0.1, 0.15, 0.2, 0.25, 0.3), n_dirs: int = 64,
-                 seed: int = VALIDATION_SEED, strides: int = 60, tol: float = 1e-4,
-                 gait: str = "default", settle: int = 200) -> dict:
+def stride_curve(
+    ctrl,
+    sizes=(0.05, 0.1, 0.15, 0.2, 0.25, 0.3),
+    n_dirs: int = 64,
+    seed: int = VALIDATION_SEED,
+    strides: int = 60,
+    tol: float = 1e-4,
+    gait: str = "default",
+    settle: int = 200,
+) -> dict:
     """Return probability of a stride-level controller (``stride_action(z)``; a controller
     without it is passive) against the relative start size r, on the *stride* map of
     PassiveBoundStride-v0 (exact profiles, rtol 1e-10), from z* + r |z*| xi with ``n_dirs``
@@ -566,20 +627,28 @@ def stride_curve(ctrl, sizes=(0.05, 0.1, 0.15, 0.2, 0.25, 0.3), n_dirs: int = 64
     A validation curve, cheaper than `agents.margins` and not a substitute for it."""
     from bound_env.stride_task import StrideTask
 
-    task = StrideTask(gait=gait, basis="windows", K=getattr(getattr(ctrl, "basis", None),
-                                                            "K", 4))
+    task = StrideTask(gait=gait, basis="windows", K=getattr(getattr(ctrl, "basis", None), "K", 4))
     act = getattr(ctrl, "stride_action", None)
     z_ref = task.z_ref
     u = np.random.default_rng(seed).standard_normal((n_dirs, 6))
     dirs = u / np.max(np.abs(u), axis=1, keepdims=True)
-    taus_of = (lambda z: task.basis.torques(act(z), task.max_torque)) if act is not None \
+    taus_of = (
+        (lambda z: task.basis.torques(act(z), task.max_torque))
+        if act is not None
         else (lambda z: np.zeros(task.basis.phi.shape[0]))
+    )
     z_cl, effort = z_ref.copy(), 0.0  # the closed loop's own cycle, by iteration from z*
     for _ in range(settle):
         o = task.sim.run_torques(z_cl, taus_of(z_cl))
         if o.z1 is None:
-            return {"sizes": list(sizes), "p_return": [0.0] * len(sizes), "n_dirs": n_dirs,
-                    "seed": seed, "r50": 0.0, "failure_on_cycle": o.failure}
+            return {
+                "sizes": list(sizes),
+                "p_return": [0.0] * len(sizes),
+                "n_dirs": n_dirs,
+                "seed": seed,
+                "r50": 0.0,
+                "failure_on_cycle": o.failure,
+            }
         z_cl, effort = o.z1, o.effort
     out = []
     for r in sizes:
@@ -595,9 +664,15 @@ def stride_curve(ctrl, sizes=(0.05, 0.1, 0.15, 0.2, 0.25, 0.3), n_dirs: int = 64
                     ok += 1
                     break
         out.append(ok / n_dirs)
-    return {"sizes": list(sizes), "p_return": out, "n_dirs": n_dirs, "seed": seed,
-            "r50": r50_of(sizes, out), "effort": effort,
-            "fixed_point_shift": (z_cl - z_ref).tolist()}
+    return {
+        "sizes": list(sizes),
+        "p_return": out,
+        "n_dirs": n_dirs,
+        "seed": seed,
+        "r50": r50_of(sizes, out),
+        "effort": effort,
+        "fixed_point_shift": (z_cl - z_ref).tolist(),
+    }
 
 
 def r50_of(sizes, p) -> float:

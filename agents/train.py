@@ -58,8 +58,16 @@ from .config import (
 )
 
 RUNS_DIR = Path("runs")
-EVAL_FIELDS = ("timesteps", "mean_reward", "std_reward", "mean_length", "mean_strides",
-               "fall_rate", "noise_scale", "wall_time_s")
+EVAL_FIELDS = (
+    "timesteps",
+    "mean_reward",
+    "std_reward",
+    "mean_length",
+    "mean_strides",
+    "fall_rate",
+    "noise_scale",
+    "wall_time_s",
+)
 _CKPT = re.compile(r"rl_model_(\d+)_steps\.zip$")
 # Test hook: "SECONDS" or "SECONDS@TIMESTEPS", a sleep inside a checkpoint write (of every
 # checkpoint, or of the one at TIMESTEPS), between the model and its statistics: the window in
@@ -72,8 +80,14 @@ CHECKPOINT_SLEEP_ENV = "BOUND_ENV_TEST_CHECKPOINT_SLEEP"
 # --------------------------------------------------------------------------------------------
 
 
-def make_env(env_id: str, env_kwargs: dict | None = None, spec: TrainSpec | None = None,
-             seed: int | None = None, monitor_file: str | None = None, append: bool = False):
+def make_env(
+    env_id: str,
+    env_kwargs: dict | None = None,
+    spec: TrainSpec | None = None,
+    seed: int | None = None,
+    monitor_file: str | None = None,
+    append: bool = False,
+):
     """One environment: ``gymnasium.make`` -> ``Monitor`` -> the config's ``env_wrapper``s.
 
     Module-level (and importing ``bound_env``) so that `SubprocVecEnv` workers can rebuild it.
@@ -88,8 +102,9 @@ def make_env(env_id: str, env_kwargs: dict | None = None, spec: TrainSpec | None
     gym.register_envs(bound_env)
     register_envs()
     env = gym.make(env_id, **(env_kwargs or {}))
-    env = Monitor(env, filename=monitor_file, info_keywords=("stride",),
-                  override_existing=not append)  # a resumed run appends to its monitor logs
+    env = Monitor(
+        env, filename=monitor_file, info_keywords=("stride",), override_existing=not append
+    )  # a resumed run appends to its monitor logs
     if spec is not None:
         env = spec.wrap(env)
     if seed is not None:
@@ -97,8 +112,15 @@ def make_env(env_id: str, env_kwargs: dict | None = None, spec: TrainSpec | None
     return env
 
 
-def make_vec(env_id: str, spec: TrainSpec, n_envs: int, seed: int, vec_env: str = "auto",
-             monitor_dir: Path | None = None, append: bool = False):
+def make_vec(
+    env_id: str,
+    spec: TrainSpec,
+    n_envs: int,
+    seed: int,
+    vec_env: str = "auto",
+    monitor_dir: Path | None = None,
+    append: bool = False,
+):
     """``n_envs`` environments in a `SubprocVecEnv` (n_envs > 1) or a `DummyVecEnv`."""
     from functools import partial
 
@@ -124,7 +146,6 @@ def make_vec(env_id: str, spec: TrainSpec, n_envs: int, seed: int, vec_env: str 
 # --------------------------------------------------------------------------------------------
 
 
-
 def save_policy(model, folder: Path) -> None:
     """Save ``model.zip``, its ``vecnormalize.pkl`` (when normalizing) and ``fingerprint.json``
     binding the two, each under a temporary name and then renamed; the fingerprint last."""
@@ -142,6 +163,7 @@ def save_policy(model, folder: Path) -> None:
         os.replace(tmp, folder / "vecnormalize.pkl")
     write_fingerprint(folder)
 
+
 class NoiseCurriculumCallback(BaseCallback):
     """Raise the start perturbation of `agents.wrappers.PerturbedStarts` over training.
 
@@ -151,8 +173,7 @@ class NoiseCurriculumCallback(BaseCallback):
     continues where it stopped. Logged as ``curriculum/noise_scale``.
     """
 
-    def __init__(self, start: float = 0.5, end: float = 3.0, ramp: float = 0.6,
-                 verbose: int = 0):
+    def __init__(self, start: float = 0.5, end: float = 3.0, ramp: float = 0.6, verbose: int = 0):
         super().__init__(verbose)
         if not (0 <= start and 0 <= end and 0 < ramp <= 1):
             raise ValueError(f"need start, end >= 0 and 0 < ramp <= 1, got {start}, {end}, {ramp}")
@@ -199,9 +220,16 @@ class BasinValidationCallback(BaseCallback):
     monitoring.
     """
 
-    def __init__(self, eval_freq: int = 100_000, directions=None, n_directions: int = 8,
-                 direction_seed: int = VALIDATION_SEED, iters: int = 8, strides: int = 100,
-                 verbose: int = 0):
+    def __init__(
+        self,
+        eval_freq: int = 100_000,
+        directions=None,
+        n_directions: int = 8,
+        direction_seed: int = VALIDATION_SEED,
+        iters: int = 8,
+        strides: int = 100,
+        verbose: int = 0,
+    ):
         super().__init__(verbose)
         self.eval_freq = int(eval_freq)
         self.directions = None if directions is None else [tuple(d) for d in directions]
@@ -238,11 +266,16 @@ class BasinValidationCallback(BaseCallback):
 
         layers, activation = _extract_actor(self.model, Path("(training)"))
         kwargs = {k: v for k, v in self.env_kwargs.items() if k in DYNAMICS_KWARGS}
-        names = task_mod.PassiveBoundTask(**{k: v for k, v in kwargs.items()
-                                             if k != "apex_scales"}).obs_names
-        ctrl = MLPController(name="validation", layers=layers, activation=activation,
-                             env_kwargs=kwargs, obs_index=observation_index(self.env_wrapper,
-                                                                            names))
+        names = task_mod.PassiveBoundTask(
+            **{k: v for k, v in kwargs.items() if k != "apex_scales"}
+        ).obs_names
+        ctrl = MLPController(
+            name="validation",
+            layers=layers,
+            activation=activation,
+            env_kwargs=kwargs,
+            obs_index=observation_index(self.env_wrapper, names),
+        )
         vn = self.model.get_vec_normalize_env()
         if vn is not None and vn.norm_obs:
             ctrl.obs_mean = np.array(vn.obs_rms.mean, dtype=np.float64)
@@ -267,6 +300,7 @@ class BasinValidationCallback(BaseCallback):
             return 0.0
         worst = BASIN_HI
         for u in self.validation_directions():
+
             def ok(s, u=u):
                 return loop.run(zc + s * np.abs(zs) * u, zc, self.strides)[0]
 
@@ -288,8 +322,9 @@ class BasinValidationCallback(BaseCallback):
                 f.write(f"{self.num_timesteps},{value},{time.perf_counter() - t0:.2f}\n")
             if value > self.best:
                 save_policy(self.model, self.run_dir / "best")
-                (self.run_dir / "best" / "best.json").write_text(json.dumps(
-                    {"timesteps": self.num_timesteps, "basin_validation": value}) + "\n")
+                (self.run_dir / "best" / "best.json").write_text(
+                    json.dumps({"timesteps": self.num_timesteps, "basin_validation": value}) + "\n"
+                )
         self.best = max(self.best, value)
         return value
 
@@ -301,8 +336,16 @@ class CSVEvalCallback(EvalCallback):
     episodes that ended in a fall and the mean number of strides per episode.
     """
 
-    def __init__(self, *args, csv_path: Path, png_path: Path, noise_scale: float = math.nan,
-                 every: int | None = None, done: int = 0, **kwargs):
+    def __init__(
+        self,
+        *args,
+        csv_path: Path,
+        png_path: Path,
+        noise_scale: float = math.nan,
+        every: int | None = None,
+        done: int = 0,
+        **kwargs,
+    ):
         super().__init__(*args, **kwargs)
         # the schedule counts timesteps (every ``every``), so a resumed run continues it
         self.every = int(every) if every else None
@@ -369,8 +412,10 @@ def append_csv(path: Path, row: dict) -> None:
 def read_csv(path: Path) -> dict[str, np.ndarray]:
     with Path(path).open() as f:
         rows = list(csv.DictReader(f))
-    return {k: np.array([float(r[k]) if r.get(k) not in (None, "") else math.nan for r in rows])
-            for k in EVAL_FIELDS}
+    return {
+        k: np.array([float(r[k]) if r.get(k) not in (None, "") else math.nan for r in rows])
+        for k in EVAL_FIELDS
+    }
 
 
 def plot_eval(csv_path: Path, png_path: Path, title: str | None = None) -> None:
@@ -385,13 +430,19 @@ def plot_eval(csv_path: Path, png_path: Path, title: str | None = None) -> None:
     val_path = Path(csv_path).parent / "basin_validation.csv"
     val = np.loadtxt(val_path, delimiter=",", skiprows=1, ndmin=2) if val_path.exists() else None
     rows = 2 if val is not None and len(val) else 1
-    fig, axes = plt.subplots(rows, 1, figsize=(6.4, 3.6 * rows), dpi=100, sharex=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        rows, 1, figsize=(6.4, 3.6 * rows), dpi=100, sharex=True, squeeze=False
+    )
     ax = axes[0, 0]
     t = d["timesteps"]
     ax.plot(t, d["mean_reward"], color="C0", label="mean return")
-    ax.fill_between(t, d["mean_reward"] - d["std_reward"], d["mean_reward"] + d["std_reward"],
-                    color="C0", alpha=0.2)
+    ax.fill_between(
+        t,
+        d["mean_reward"] - d["std_reward"],
+        d["mean_reward"] + d["std_reward"],
+        color="C0",
+        alpha=0.2,
+    )
     ax.set_ylabel("evaluation return", color="C0")
     ax2 = ax.twinx()
     ax2.plot(t, d["fall_rate"], color="C3", ls="--", label="fall rate")
@@ -420,8 +471,11 @@ def plot_eval(csv_path: Path, png_path: Path, title: str | None = None) -> None:
 def checkpoint_paths(folder: Path, n: int) -> tuple[Path, Path, Path]:
     """(model zip, VecNormalize pkl, manifest) of the checkpoint at ``n`` timesteps."""
     folder = Path(folder)
-    return (folder / f"rl_model_{n}_steps.zip", folder / f"rl_model_vecnormalize_{n}_steps.pkl",
-            folder / f"rl_model_{n}_steps.json")
+    return (
+        folder / f"rl_model_{n}_steps.zip",
+        folder / f"rl_model_vecnormalize_{n}_steps.pkl",
+        folder / f"rl_model_{n}_steps.json",
+    )
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -450,8 +504,11 @@ def save_checkpoint(model, folder: Path, n: int) -> Path:
     sleep, _, at = hook.partition("@")
     sleep = float(sleep) if sleep and (not at or int(at) == n) else 0.0
     if sleep > 0:  # test hook: a reproducible window between the model and its statistics
-        print(f"[checkpoint hook] {n} steps: model written, sleeping {sleep:g} s",
-              file=sys.stderr, flush=True)
+        print(
+            f"[checkpoint hook] {n} steps: model written, sleeping {sleep:g} s",
+            file=sys.stderr,
+            flush=True,
+        )
         time.sleep(sleep)
     entry = {"timesteps": int(n), "model": zip_path.name, "model_sha256": file_sha256(zip_path)}
     vn = model.get_vec_normalize_env()
@@ -491,8 +548,14 @@ def last_checkpoint(run_dir: Path) -> tuple[Path, Path | None, int] | None:
     import zipfile
 
     folder = Path(run_dir) / "checkpoints"
-    found = sorted(((int(m.group(1)), p) for p in folder.glob("rl_model_*_steps.zip")
-                    if (m := _CKPT.search(p.name))), reverse=True)
+    found = sorted(
+        (
+            (int(m.group(1)), p)
+            for p in folder.glob("rl_model_*_steps.zip")
+            if (m := _CKPT.search(p.name))
+        ),
+        reverse=True,
+    )
     legacy = not any(folder.glob("rl_model_*_steps.json"))
     for n, zip_path in found:
         _, pkl_path, manifest = checkpoint_paths(folder, n)
@@ -501,8 +564,11 @@ def last_checkpoint(run_dir: Path) -> tuple[Path, Path | None, int] | None:
                 return zip_path, (pkl_path if pkl_path.exists() else None), n
         elif _complete(zip_path, pkl_path, manifest):
             return zip_path, (pkl_path if pkl_path.exists() else None), n
-        print(f"warning: skipping incomplete checkpoint {zip_path} (interrupted while it was "
-              "written)", file=sys.stderr)
+        print(
+            f"warning: skipping incomplete checkpoint {zip_path} (interrupted while it was "
+            "written)",
+            file=sys.stderr,
+        )
     return None
 
 
@@ -570,8 +636,10 @@ def read_run_files(run_dir: Path) -> tuple[dict, dict]:
         if not isinstance(data[env_id], dict):
             raise TypeError
     except (yaml.YAMLError, UnicodeDecodeError, KeyError, TypeError, ValueError):
-        raise ValueError(f"{saved} is truncated or malformed (it needs a 'run:' entry with "
-                         "env_id and seed, and that env id's section)") from None
+        raise ValueError(
+            f"{saved} is truncated or malformed (it needs a 'run:' entry with "
+            "env_id and seed, and that env id's section)"
+        ) from None
     info_path = run_dir / "run.json"
     info = {}
     if info_path.is_file():
@@ -580,8 +648,9 @@ def read_run_files(run_dir: Path) -> tuple[dict, dict]:
             if not isinstance(info, dict):
                 raise ValueError
         except (ValueError, UnicodeDecodeError):
-            raise ValueError(f"{info_path} is truncated or malformed JSON; repair it or move "
-                             "it away to resume") from None
+            raise ValueError(
+                f"{info_path} is truncated or malformed JSON; repair it or move it away to resume"
+            ) from None
     return data, info
 
 
@@ -596,12 +665,14 @@ def check_algo_kwargs(algo_kwargs: dict, algo_class) -> None:
     unknown = sorted(set(algo_kwargs) - set(params) - {"policy"})
     if unknown:
         known = sorted(k for k in params if k not in ("self", "env", "policy"))
-        raise ValueError(f"unknown hyperparameter(s) {unknown} for {algo_class.__name__}; "
-                         f"known: {known}")
+        raise ValueError(
+            f"unknown hyperparameter(s) {unknown} for {algo_class.__name__}; known: {known}"
+        )
 
 
-def resolve_section(config: str | Path, env_id: str, sets: list[str] | None,
-                    n_timesteps: int | None) -> dict:
+def resolve_section(
+    config: str | Path, env_id: str, sets: list[str] | None, n_timesteps: int | None
+) -> dict:
     hp = apply_sets(load_hyperparams(config, env_id), sets)
     if n_timesteps is not None:
         hp["n_timesteps"] = int(n_timesteps)
@@ -633,8 +704,7 @@ def train(
     name = name or f"{env_id}_s{seed}"
     run_dir = Path(runs_dir) / name
     prev_info: dict = {}
-    schedule = {"eval_freq": eval_freq, "save_freq": save_freq,
-                "n_eval_episodes": n_eval_episodes}
+    schedule = {"eval_freq": eval_freq, "save_freq": save_freq, "n_eval_episodes": n_eval_episodes}
     if resume:
         data, prev_info = read_run_files(run_dir)
         env_id = data["run"]["env_id"]
@@ -647,8 +717,9 @@ def train(
             hp["n_timesteps"] = int(n_timesteps)
         ckpt = last_checkpoint(run_dir)
         if ckpt is None:
-            raise FileNotFoundError(f"--resume: no complete checkpoint under "
-                                    f"{run_dir / 'checkpoints'}")
+            raise FileNotFoundError(
+                f"--resume: no complete checkpoint under {run_dir / 'checkpoints'}"
+            )
     else:
         hp = resolve_section(config, env_id, sets, n_timesteps)
         if (run_dir / "model.zip").exists() or last_checkpoint(run_dir) is not None:
@@ -671,17 +742,30 @@ def train(
         truncate_csv(run_dir / "basin_validation.csv", done)
     info_path = run_dir / "run.json"
     sessions = list(prev_info.get("sessions", [])) if resume else []
-    sessions.append({"from": done, "to": None, "wall_time_s": None,
-                     "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "resumed": bool(resume)})
-    info = {**(prev_info if resume else {}), "env_id": env_id, "seed": seed,
-            "n_timesteps": spec.n_timesteps, "sessions": sessions,
-            "command": " ".join(sys.argv)}  # fmt: skip
+    sessions.append(
+        {
+            "from": done,
+            "to": None,
+            "wall_time_s": None,
+            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "resumed": bool(resume),
+        }
+    )
+    info = {
+        **(prev_info if resume else {}),
+        "env_id": env_id,
+        "seed": seed,
+        "n_timesteps": spec.n_timesteps,
+        "sessions": sessions,
+        "command": " ".join(sys.argv),
+    }
     _atomic_write_text(info_path, json.dumps(info, indent=2) + "\n")
 
     th.set_num_threads(1)
     set_random_seed(seed)
-    venv = make_vec(env_id, spec, spec.n_envs, seed, vec_env, run_dir / "monitor",
-                    append=ckpt is not None)
+    venv = make_vec(
+        env_id, spec, spec.n_envs, seed, vec_env, run_dir / "monitor", append=ckpt is not None
+    )
     from .stride import write_base
 
     write_base(run_dir, venv)  # a residual stride policy's base controller (agents/stride.py)
@@ -717,24 +801,46 @@ def train(
         model = PPO.load(str(ckpt[0]), env=venv, device="cpu", tensorboard_log=str(run_dir / "tb"))
         model.num_timesteps = done
     else:
-        model = PPO(env=venv, seed=seed, device="cpu", tensorboard_log=str(run_dir / "tb"),
-                    verbose=verbose, **spec.algo_kwargs)
+        model = PPO(
+            env=venv,
+            seed=seed,
+            device="cpu",
+            tensorboard_log=str(run_dir / "tb"),
+            verbose=verbose,
+            **spec.algo_kwargs,
+        )
     n_envs = spec.n_envs
     # evaluation before the checkpoint of the same step, so a checkpoint never precedes an
     # evaluation it should include; both count timesteps, so a resume keeps their schedules
-    callbacks.append(CSVEvalCallback(
-        eval_env, n_eval_episodes=n_eval_episodes, eval_freq=max(eval_freq // n_envs, 1),
-        log_path=str(run_dir), best_model_save_path=None, deterministic=True,
-        csv_path=run_dir / "eval.csv", png_path=run_dir / "eval.png", noise_scale=curriculum_end,
-        every=eval_freq, done=done, warn=False, verbose=verbose,
-    ))  # fmt: skip
+    callbacks.append(
+        CSVEvalCallback(
+            eval_env,
+            n_eval_episodes=n_eval_episodes,
+            eval_freq=max(eval_freq // n_envs, 1),
+            log_path=str(run_dir),
+            best_model_save_path=None,
+            deterministic=True,
+            csv_path=run_dir / "eval.csv",
+            png_path=run_dir / "eval.png",
+            noise_scale=curriculum_end,
+            every=eval_freq,
+            done=done,
+            warn=False,
+            verbose=verbose,
+        )
+    )
     callbacks.append(AtomicCheckpointCallback(save_freq, run_dir / "checkpoints", done=done))
     if ckpt is not None:  # SB3's evaluations.npz continues too (its rows up to the checkpoint)
         _continue_evaluations(callbacks[-2], run_dir / "evaluations.npz", done)
     remaining = max(0, spec.n_timesteps - done)
     t0 = time.perf_counter()
-    model.learn(total_timesteps=remaining, callback=callbacks, progress_bar=progress_bar,
-                reset_num_timesteps=ckpt is None, tb_log_name="PPO")
+    model.learn(
+        total_timesteps=remaining,
+        callback=callbacks,
+        progress_bar=progress_bar,
+        reset_num_timesteps=ckpt is None,
+        tb_log_name="PPO",
+    )
     wall = time.perf_counter() - t0
     save_policy(model, run_dir)
     if (run_dir / "eval.csv").exists():
@@ -742,12 +848,17 @@ def train(
     venv.close()
     eval_env.close()
     sessions[-1].update(to=int(model.num_timesteps), wall_time_s=wall)
-    info.update({
-        "timesteps_done": int(model.num_timesteps), "n_envs": n_envs,
-        "wall_time_s": sum(x.get("wall_time_s") or 0.0 for x in sessions),
-        "sessions": sessions, "python": platform.python_version(),
-        "versions": _versions(), "machine": f"{platform.machine()}, {_ncpu()} cores",
-    })  # fmt: skip
+    info.update(
+        {
+            "timesteps_done": int(model.num_timesteps),
+            "n_envs": n_envs,
+            "wall_time_s": sum(x.get("wall_time_s") or 0.0 for x in sessions),
+            "sessions": sessions,
+            "python": platform.python_version(),
+            "versions": _versions(),
+            "machine": f"{platform.machine()}, {_ncpu()} cores",
+        }
+    )
     _atomic_write_text(info_path, json.dumps(info, indent=2) + "\n")
     return run_dir
 
@@ -768,12 +879,17 @@ def _versions() -> dict:
     import stable_baselines3
     import torch
 
-    return {"stable_baselines3": stable_baselines3.__version__, "torch": torch.__version__,
-            "gymnasium": gymnasium.__version__, "numpy": np.__version__}
+    return {
+        "stable_baselines3": stable_baselines3.__version__,
+        "torch": torch.__version__,
+        "gymnasium": gymnasium.__version__,
+        "numpy": np.__version__,
+    }
 
 
-def write_config(path: Path, env_id: str, hp: dict, seed: int,
-                 schedule: dict | None = None) -> None:
+def write_config(
+    path: Path, env_id: str, hp: dict, seed: int, schedule: dict | None = None
+) -> None:
     """The resolved section in rl-zoo3's format, plus a ``run:`` entry (env id, seed, and the
     evaluation and checkpoint schedule), written atomically."""
     data = {env_id: hp, "run": {"env_id": env_id, "seed": int(seed), **(schedule or {})}}

@@ -34,8 +34,9 @@ class PerturbedStarts(gym.Wrapper):
         e.g. to emphasise forward speed and height, the directions the passive gait is weakest in.
     """
 
-    def __init__(self, env: gym.Env, noise_scale: float = 1.0, axis_prob: float = 0.5,
-                 weights=None):
+    def __init__(
+        self, env: gym.Env, noise_scale: float = 1.0, axis_prob: float = 0.5, weights=None
+    ):
         super().__init__(env)
         task = getattr(env.unwrapped, "task", None)
         if task is None or not hasattr(task, "apex_scales"):
@@ -94,8 +95,14 @@ class ObservationFilter(gym.ObservationWrapper):
     :param drop: observation names to remove.
     """
 
-    DEFAULT_DROP = ("contact_back", "contact_front", "touched_back", "touched_front",
-                    "leg_angle_back", "leg_angle_front")
+    DEFAULT_DROP = (
+        "contact_back",
+        "contact_front",
+        "touched_back",
+        "touched_front",
+        "leg_angle_back",
+        "leg_angle_front",
+    )
 
     def __init__(self, env: gym.Env, drop=DEFAULT_DROP):
         super().__init__(env)
@@ -106,8 +113,9 @@ class ObservationFilter(gym.ObservationWrapper):
         self.index = np.array([i for i, n in enumerate(names) if n not in set(drop)])
         self.names = tuple(names[i] for i in self.index)
         space = env.observation_space
-        self.observation_space = gym.spaces.Box(space.low[self.index], space.high[self.index],
-                                                dtype=space.dtype)
+        self.observation_space = gym.spaces.Box(
+            space.low[self.index], space.high[self.index], dtype=space.dtype
+        )
 
     def observation(self, observation):
         return observation[self.index]
@@ -118,8 +126,9 @@ def observation_index(env_wrappers, obs_names) -> np.ndarray | None:
     `ObservationFilter`, or None when it has none."""
     from .config import _entries
 
-    filters = [kw for name, kw in _entries(env_wrappers)
-               if name.rsplit(".", 1)[-1] == "ObservationFilter"]
+    filters = [
+        kw for name, kw in _entries(env_wrappers) if name.rsplit(".", 1)[-1] == "ObservationFilter"
+    ]
     if not filters:
         return None
     if len(filters) > 1:

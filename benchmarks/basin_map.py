@@ -43,16 +43,24 @@ def spec_for(grid: int, controller=None, gait: str = "default", chunk: int = 128
     ax = parse_axes("xdot_g,y_g")
     values = axis_values(ax, parse_range(None, ax, z_star), grid)
     target = z_star if controller is None else controller_cycle(controller, z_star, gait)[0]
-    return BasinSpec(axes=ax, values=values, z_slice=z_star, z_target=target,
-                     controller=controller, gait=gait, chunk=chunk)
+    return BasinSpec(
+        axes=ax,
+        values=values,
+        z_slice=z_star,
+        z_target=target,
+        controller=controller,
+        gait=gait,
+        chunk=chunk,
+    )
 
 
 def timed(spec: BasinSpec, scheduler: str | None, workers: int) -> tuple[float, float]:
     """(seconds to open and warm up, seconds for the grid)."""
     t0 = time.perf_counter()
     with open_pool(scheduler, workers, quiet=True) as pool:
-        warm = BasinSpec(**{**spec.__dict__, "values": (spec.values[0][:2], spec.values[1][:1]),
-                            "chunk": 1})
+        warm = BasinSpec(
+            **{**spec.__dict__, "values": (spec.values[0][:2], spec.values[1][:1]), "chunk": 1}
+        )
         futs = [pool.executor.submit(run_chunk, warm, i % 2) for i in range(2 * workers)]
         for f in futs:
             f.result()
@@ -65,8 +73,11 @@ def timed(spec: BasinSpec, scheduler: str | None, workers: int) -> tuple[float, 
 
 def row(name: str, n: int, setup: float, seconds: float, base: float | None) -> None:
     ratio = f"{base / seconds:5.2f}x" if base else "    1x"
-    print(f"| {name:38s} | {n:6d} | {setup:6.1f} | {seconds:7.1f} | {n / seconds:8.1f} | {ratio} |"
-          f" {os.getloadavg()[0]:4.1f} |", flush=True)
+    print(
+        f"| {name:38s} | {n:6d} | {setup:6.1f} | {seconds:7.1f} | {n / seconds:8.1f} | {ratio} |"
+        f" {os.getloadavg()[0]:4.1f} |",
+        flush=True,
+    )
 
 
 def main() -> None:
@@ -97,8 +108,13 @@ def main() -> None:
         ctrl = load_controller(args.policy)
         pspec = spec_for(args.policy_grid, ctrl, ctrl.env_kwargs.get("gait") or "default")
         su, ptime = timed(pspec, None, 2)
-        row(f"policy {args.policy} {args.policy_grid}x{args.policy_grid}, pool 2",
-            pspec.n_starts, su, ptime, None)
+        row(
+            f"policy {args.policy} {args.policy_grid}x{args.policy_grid}, pool 2",
+            pspec.n_starts,
+            su,
+            ptime,
+            None,
+        )
     print(f"load average at end: {os.getloadavg()}")
 
 

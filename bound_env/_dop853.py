@@ -225,8 +225,7 @@ def make_dop853(f):
             return y, t, n_steps, n_rejected, SUCCESS
         direction = 1.0 if t_end > t0 else -1.0
         f(t, y, aux, fy)
-        h_abs = initial_step(t, y, fy, aux, rtol, atol, direction,
-                             abs(t_end - t0), y_new, f_new)
+        h_abs = initial_step(t, y, fy, aux, rtol, atol, direction, abs(t_end - t0), y_new, f_new)
         rejected = False
         while direction * (t - t_end) < 0.0:
             if n_steps + n_rejected >= max_steps:
@@ -259,7 +258,9 @@ def make_dop853(f):
         return y, t, n_steps, n_rejected, SUCCESS
 
     ns = SimpleNamespace(
-        rk_step=rk_step, dense_prepare=dense_prepare, initial_step=initial_step,
+        rk_step=rk_step,
+        dense_prepare=dense_prepare,
+        initial_step=initial_step,
         integrate=integrate,
     )
     _INTEGRATORS[f] = ns

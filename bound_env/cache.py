@@ -64,8 +64,12 @@ def read_lines(path) -> list[str]:
     lines = text.split("\n")
     tail = lines.pop()  # "" when the file ends with a newline
     if tail:
-        warnings.warn(f"{path}: skipping a truncated last line ({len(tail)} characters; an "
-                      "interrupted write)", RuntimeWarning, stacklevel=2)  # fmt: skip
+        warnings.warn(
+            f"{path}: skipping a truncated last line ({len(tail)} characters; an "
+            "interrupted write)",
+            RuntimeWarning,
+            stacklevel=2,
+        )
         with open(path, "r+b") as f:
             f.truncate(len(text.encode("utf-8")) - len(tail.encode("utf-8")))
     return lines
@@ -89,8 +93,11 @@ class TaskCache:
                 rec = json.loads(line)
                 self.data[rec["key"]] = rec["result"]
             except (json.JSONDecodeError, KeyError, TypeError):
-                warnings.warn(f"{self.path}:{n}: skipping an unreadable cache line",
-                              RuntimeWarning, stacklevel=2)  # fmt: skip
+                warnings.warn(
+                    f"{self.path}:{n}: skipping an unreadable cache line",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
 
     def __contains__(self, key) -> bool:
         return key in self.data

@@ -50,8 +50,10 @@ def cmd_stride(args) -> int:
     print("z1 [m, deg, deg, m/s, deg/s, deg/s] =", _fmt(out["z1"]) if out["z1"] else None)
     print("phases    ", " -> ".join(out["phases"]))
     print("durations ", ", ".join(f"{d * 1e3:.2f} ms" for d in out["durations"]))
-    print(f"period     {out['period']:.4f} s   energy {out['energy']['start']:.4f} -> "
-          f"{out['energy']['end']:.4f} J   failure: {out['failure']}")
+    print(
+        f"period     {out['period']:.4f} s   energy {out['energy']['start']:.4f} -> "
+        f"{out['energy']['end']:.4f} J   failure: {out['failure']}"
+    )
     return 0
 
 
@@ -70,13 +72,21 @@ def build_parser(registrars=None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("stride", help="simulate one apex-to-apex stride")
     add_gait_args(p, default="paper")
-    p.add_argument("--z", help="start apex state v1,...,v6 in [m, deg, deg, m/s, deg/s, deg/s] "
-                   "(default: the gait's z_star, else z_published); use --z=-0.1,... for negatives")
-    p.add_argument("--repeat", type=number(int, 1, 10_000_000), default=1,
-                   help="evaluate the stride N times (timing after a warm-up stride)")
+    p.add_argument(
+        "--z",
+        help="start apex state v1,...,v6 in [m, deg, deg, m/s, deg/s, deg/s] "
+        "(default: the gait's z_star, else z_published); use --z=-0.1,... for negatives",
+    )
+    p.add_argument(
+        "--repeat",
+        type=number(int, 1, 10_000_000),
+        default=1,
+        help="evaluate the stride N times (timing after a warm-up stride)",
+    )
     p.add_argument("--backend", choices=("fast", "reference"), default="fast")
-    p.add_argument("--strict", action="store_true",
-                   help="end the stride at the first apex after any touchdown")
+    p.add_argument(
+        "--strict", action="store_true", help="end the stride at the first apex after any touchdown"
+    )
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_stride)
 

@@ -12,10 +12,17 @@ import json
 
 def add_gait_args(parser, default="paper"):
     """Add ``--gait NAME|PATH`` (defaulting to ``default``) and repeatable ``--set KEY=VALUE``."""
-    parser.add_argument("--gait", default=default,
-                        help="gait file path or name under configs/gaits/ (default: %(default)s)")
-    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
-                        help="override a gait key, e.g. --set kc=300 --set alpha_deg=2.0")
+    parser.add_argument(
+        "--gait",
+        default=default,
+        help="gait file path or name under configs/gaits/ (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a gait key, e.g. --set kc=300 --set alpha_deg=2.0",
+    )
 
 
 def gait_overrides(args) -> dict:
@@ -34,8 +41,13 @@ def gait_from_args(args):
 
 def add_progress_args(parser):
     """``--no-progress`` (alias ``--quiet``): silence progress bars and progress lines."""
-    parser.add_argument("--no-progress", "--quiet", dest="no_progress", action="store_true",
-                        help="no progress output (alias: --quiet)")
+    parser.add_argument(
+        "--no-progress",
+        "--quiet",
+        dest="no_progress",
+        action="store_true",
+        help="no progress output (alias: --quiet)",
+    )
 
 
 def add_json_arg(parser, what="a JSON summary"):
@@ -99,8 +111,9 @@ def number(kind=float, lo=None, hi=None, lo_open=False, allow_zero=True):
         try:
             v = kind(text)
         except (TypeError, ValueError):
-            raise argparse.ArgumentTypeError(f"not {'an integer' if kind is int else 'a number'}:"
-                                             f" {text!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"not {'an integer' if kind is int else 'a number'}: {text!r}"
+            ) from None
         if isinstance(v, float) and not math.isfinite(v):
             raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
         if lo is not None and (v < lo or (lo_open and v == lo)):

@@ -46,7 +46,7 @@ from .params import (  # A_* and N_AUX are re-exported from here
     P_M1,
     P_M2,
     P_TAU,
-)  # fmt: skip
+)
 
 jit = nb.njit(cache=True, fastmath={"contract", "arcp", "nsz", "reassoc"}, error_model="numpy")
 
@@ -87,8 +87,7 @@ def body_points(q, aux, s1, c1, sp, cp):
     ry = l1 * s1 + l2 * sp
     x1, y1 = q[0] - mu1 * rx, q[1] - mu1 * ry  # eqs. (5)-(6)
     x2, y2 = q[0] + mu2 * rx, q[1] + mu2 * ry  # eqs. (7)-(8)
-    return (x1 - l1 * c1, y1 - l1 * s1, x1 + l1 * c1, y1 + l1 * s1,
-            x2 + l2 * cp, y2 + l2 * sp)
+    return (x1 - l1 * c1, y1 - l1 * s1, x1 + l1 * c1, y1 + l1 * s1, x2 + l2 * cp, y2 + l2 * sp)
 
 
 @jit

@@ -269,14 +269,16 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
         config: TaskConfig | None = None,
     ):
         settings = {k: v for k, v in locals().items() if k in TASK_SETTINGS}
-        utils.EzPickle.__init__(self, **settings, render_mode=render_mode, width=width,
-                                height=height, config=config)  # fmt: skip
+        utils.EzPickle.__init__(
+            self, **settings, render_mode=render_mode, width=width, height=height, config=config
+        )
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(
                 f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}"
             )
         self.task = PassiveBoundTask(
-            TaskConfig.resolve(config, settings, defaults_keep_config=True))
+            TaskConfig.resolve(config, settings, defaults_keep_config=True)
+        )
         self.dt = self.task.dt
         self.metadata = {"render_modes": list(RENDER_MODES), "render_fps": round(1 / self.dt)}
         self.observation_space, self.action_space = make_spaces(self.task)

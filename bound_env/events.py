@@ -43,7 +43,7 @@ from .dynamics import (
     jit,
     spine_joint,
     trig,
-)  # fmt: skip
+)
 from .params import P_GB, P_GF, P_LB, P_LF, P_MINLEG
 
 G_TD_B, G_TD_F, G_LO_B, G_LO_F, G_SHORT_B, G_SHORT_F = range(6)
@@ -51,10 +51,18 @@ G_GROUND_B, G_GROUND_J, G_GROUND_F, G_BACKWARD, G_APEX = range(6, 11)
 N_GUARDS = 11
 GUARD_DIRECTION = np.array([-1, -1, 1, 1, -1, -1, -1, -1, -1, -1, -1], dtype=np.int64)
 GUARD_NAMES = (
-    "touchdown_back", "touchdown_front", "liftoff_back", "liftoff_front",
-    "short_back", "short_front", "ground_back_hip", "ground_spine_joint",
-    "ground_front_hip", "backward", "apex",
-)  # fmt: skip
+    "touchdown_back",
+    "touchdown_front",
+    "liftoff_back",
+    "liftoff_front",
+    "short_back",
+    "short_front",
+    "ground_back_hip",
+    "ground_spine_joint",
+    "ground_front_hip",
+    "backward",
+    "apex",
+)
 
 # Status codes returned by `apply_events` and the fast loop; failures are >= FAIL_FIRST.
 CONTINUE, APEX, TIME_UP = 0, 1, 2
@@ -72,8 +80,19 @@ FAILURES = (
     "non_finite",
     "integration_failed",
 )
-(F_GROUND_B, F_GROUND_J, F_GROUND_F, F_BACKWARD, F_SHORT_B, F_SHORT_F, F_EXT_B, F_EXT_F,
- F_NO_APEX, F_NON_FINITE, F_INTEGRATION) = range(FAIL_FIRST, FAIL_FIRST + len(FAILURES))
+(
+    F_GROUND_B,
+    F_GROUND_J,
+    F_GROUND_F,
+    F_BACKWARD,
+    F_SHORT_B,
+    F_SHORT_F,
+    F_EXT_B,
+    F_EXT_F,
+    F_NO_APEX,
+    F_NON_FINITE,
+    F_INTEGRATION,
+) = range(FAIL_FIRST, FAIL_FIRST + len(FAILURES))
 
 # Flags carried along a stride: has each leg touched down since the start?
 FL_TOUCHED_B, FL_TOUCHED_F, FL_STRICT = range(3)

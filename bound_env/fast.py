@@ -65,16 +65,26 @@ EV_LOGGED, EV_APEXES = 0, 1  # entries of EventLog.count
 @jit
 def event_log(capacity, apex_y):
     """An empty `EventLog` for ``capacity`` events, storing apex states into ``apex_y``."""
-    return EventLog(np.empty(capacity), np.empty(capacity, dtype=np.int64),
-                    np.empty(capacity, dtype=np.int64), apex_y, np.zeros(2, dtype=np.int64))
+    return EventLog(
+        np.empty(capacity),
+        np.empty(capacity, dtype=np.int64),
+        np.empty(capacity, dtype=np.int64),
+        apex_y,
+        np.zeros(2, dtype=np.int64),
+    )
 
 
 @jit
 def recorder(capacity, dt):
     """An empty `Recorder` for ``capacity`` samples every ``dt`` seconds (``dt`` <= 0: off)."""
-    return Recorder(dt, np.empty(capacity), np.empty((capacity, 8)),
-                    np.empty(capacity, dtype=np.int64), np.empty(capacity),
-                    np.zeros(1, dtype=np.int64))
+    return Recorder(
+        dt,
+        np.empty(capacity),
+        np.empty((capacity, 8)),
+        np.empty(capacity, dtype=np.int64),
+        np.empty(capacity),
+        np.zeros(1, dtype=np.int64),
+    )
 
 
 @jit
@@ -202,8 +212,9 @@ def advance(y, aux, flags, t, t_end, h, opts, log, rec):
                 if not dense_ready:
                     dense_prepare(t, y, y_new, h_try, aux, K, F)
                     dense_ready = True
-                ti = _locate(i, t, g_old[i], t + h_try, g_new[i], F, y, t, h_try, aux, flags,
-                             ybuf, gbuf)
+                ti = _locate(
+                    i, t, g_old[i], t + h_try, g_new[i], F, y, t, h_try, aux, flags, ybuf, gbuf
+                )
                 if first < 0 or ti < t_star:
                     t_star, first = ti, i
         if recording:
@@ -262,10 +273,15 @@ def simulate_fast(y0, aux, flags, t0=0.0, t_end=2.0, rtol=1e-10, atol=1e-10, rec
     """Python wrapper with the same return as `bound_env.reference.simulate_reference`."""
     y = np.array(y0, dtype=float)
     cap = int((t_end - t0) / record_dt) + 2 * EVENT_CAPACITY if record_dt else 1
-    status, t, log, rec = _stride(y, aux, flags, float(t0), float(t_end), rtol, atol,
-                                  float(record_dt or 0.0), cap)
-    events = [Event(float(log.t[k]), GUARD_NAMES[log.guard[k]], PHASES[log.phase[k]])
-              for k in range(log.count[EV_LOGGED])]
-    samples = [(float(rec.t[k]), rec.y[k].copy(), PHASES[rec.phase[k]], float(rec.energy[k]))
-               for k in range(rec.count[0])]
+    status, t, log, rec = _stride(
+        y, aux, flags, float(t0), float(t_end), rtol, atol, float(record_dt or 0.0), cap
+    )
+    events = [
+        Event(float(log.t[k]), GUARD_NAMES[log.guard[k]], PHASES[log.phase[k]])
+        for k in range(log.count[EV_LOGGED])
+    ]
+    samples = [
+        (float(rec.t[k]), rec.y[k].copy(), PHASES[rec.phase[k]], float(rec.energy[k]))
+        for k in range(rec.count[0])
+    ]
     return int(status), float(t), y, events, samples

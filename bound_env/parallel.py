@@ -52,14 +52,20 @@ def cpu_count() -> int:
 
 def add_scheduler_args(p, workers_default: int | None = 2) -> None:
     """``--scheduler`` (and ``--workers`` unless ``workers_default`` is None) on a parser."""
-    p.add_argument("--scheduler", metavar="local|tcp://HOST:PORT",
-                   help="run the tasks on Dask: 'local' starts a LocalCluster with one worker "
-                        "process per core ('local:N': N workers), tcp://HOST:PORT connects to a "
-                        f"running scheduler (needs {DASK_HINT}); default: a local process pool")
+    p.add_argument(
+        "--scheduler",
+        metavar="local|tcp://HOST:PORT",
+        help="run the tasks on Dask: 'local' starts a LocalCluster with one worker "
+        "process per core ('local:N': N workers), tcp://HOST:PORT connects to a "
+        f"running scheduler (needs {DASK_HINT}); default: a local process pool",
+    )
     if workers_default is not None:
-        p.add_argument("--workers", type=int, default=workers_default,
-                       help="worker processes of the local pool, without --scheduler "
-                            "(default: %(default)s)")
+        p.add_argument(
+            "--workers",
+            type=int,
+            default=workers_default,
+            help="worker processes of the local pool, without --scheduler (default: %(default)s)",
+        )
 
 
 def check_scheduler(scheduler: str | None) -> None:
@@ -74,16 +80,19 @@ def check_scheduler(scheduler: str | None) -> None:
             raise ValueError(f"--scheduler {scheduler!r}: 'local:N' needs N >= 1 workers")
         return
     if "://" not in scheduler or not scheduler.split("://", 1)[1]:
-        raise ValueError(f"--scheduler must be 'local', 'local:N' or an address like "
-                         f"tcp://HOST:PORT, got {scheduler!r}")
+        raise ValueError(
+            f"--scheduler must be 'local', 'local:N' or an address like "
+            f"tcp://HOST:PORT, got {scheduler!r}"
+        )
 
 
 def _import_distributed():
     try:
         import distributed
     except ModuleNotFoundError:
-        raise ValueError(f"--scheduler needs Dask distributed, which is not installed: "
-                         f"{DASK_HINT}") from None
+        raise ValueError(
+            f"--scheduler needs Dask distributed, which is not installed: {DASK_HINT}"
+        ) from None
     return distributed
 
 
@@ -138,10 +147,15 @@ def open_pool(scheduler: str | None = None, workers: int = 1, quiet: bool = Fals
     with contextlib.ExitStack() as stack:
         if scheduler.startswith(LOCAL):
             n = int(scheduler.split(":", 1)[1]) if ":" in scheduler else cpu_count()
-            cluster = stack.enter_context(distributed.LocalCluster(
-                n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                dashboard_address=":0",  # a free port: other clusters may run beside
-            ))  # fmt: skip
+            cluster = stack.enter_context(
+                distributed.LocalCluster(
+                    n_workers=n,
+                    threads_per_worker=1,
+                    processes=True,
+                    host="127.0.0.1",
+                    dashboard_address=":0",  # a free port: other clusters may run beside
+                )
+            )
             client = stack.enter_context(distributed.Client(cluster))
         else:
             try:
@@ -152,9 +166,14 @@ def open_pool(scheduler: str | None = None, workers: int = 1, quiet: bool = Fals
         info = client.scheduler_info()
         n = len(info.get("workers", {}))
         served = "dashboard" in info.get("services", {}) and _has_dashboard()
-        pool = Pool(client.get_executor(pure=False), "dask", n,
-                    dashboard=client.dashboard_link if served else None,
-                    address=client.scheduler.address, client=client)
+        pool = Pool(
+            client.get_executor(pure=False),
+            "dask",
+            n,
+            dashboard=client.dashboard_link if served else None,
+            address=client.scheduler.address,
+            client=client,
+        )
         if not quiet:
             print(f"[parallel] {pool.describe()}", file=sys.stderr, flush=True)
         yield pool
@@ -181,8 +200,14 @@ class TaskFailure:
         return f"task {self.key} {self.args!r}: {self.error}"
 
 
-def run_tasks(executor, tasks: dict, progress: bool = False, desc: str = "",
-              on_result=None, done_before: int = 0) -> tuple[dict, list[TaskFailure]]:
+def run_tasks(
+    executor,
+    tasks: dict,
+    progress: bool = False,
+    desc: str = "",
+    on_result=None,
+    done_before: int = 0,
+) -> tuple[dict, list[TaskFailure]]:
     """Submit every ``{key: (fn, args)}`` (or ``(fn, args, shown)``: ``shown`` is what a
     failure reports instead of ``args``) and collect the results as they complete.
 
@@ -199,8 +224,9 @@ def run_tasks(executor, tasks: dict, progress: bool = False, desc: str = "",
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(tasks) + done_before, initial=done_before, desc=desc or None,
-                   file=sys.stderr)
+        bar = tqdm(
+            total=len(tasks) + done_before, initial=done_before, desc=desc or None, file=sys.stderr
+        )
     pending = {}
     try:
         for key, (fn, args, *_) in tasks.items():
@@ -214,8 +240,11 @@ def run_tasks(executor, tasks: dict, progress: bool = False, desc: str = "",
                 fail = TaskFailure(key, shown, f"{type(e).__name__}: {e}")
                 failures.append(fail)
                 msg = f"[{desc or 'tasks'}] failed: {fail}"
-                (bar.write(msg, file=sys.stderr) if bar is not None else
-                 print(msg, file=sys.stderr, flush=True))  # fmt: skip
+                (
+                    bar.write(msg, file=sys.stderr)
+                    if bar is not None
+                    else print(msg, file=sys.stderr, flush=True)
+                )
             else:
                 results[key] = res
                 if on_result is not None:

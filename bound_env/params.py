@@ -23,9 +23,23 @@ from .layout import Layout
 from .resources import gaits_dir
 
 GAIT_KEYS = (
-    "g", "m1", "m2", "l1", "l2", "I1", "I2", "lb_bar", "lf_bar",
-    "kb", "kf", "kc", "zeta", "alpha_deg", "gamma_b_deg", "gamma_f_deg",
-)  # fmt: skip
+    "g",
+    "m1",
+    "m2",
+    "l1",
+    "l2",
+    "I1",
+    "I2",
+    "lb_bar",
+    "lf_bar",
+    "kb",
+    "kf",
+    "kc",
+    "zeta",
+    "alpha_deg",
+    "gamma_b_deg",
+    "gamma_f_deg",
+)
 GAITS_DIR = gaits_dir()  # the repository's configs/gaits, or the wheel's copy (package data)
 
 # Layout of the flat float64 parameter vector the compiled dynamics read (`Params.to_array`):
@@ -33,9 +47,27 @@ GAITS_DIR = gaits_dir()  # the repository's configs/gaits, or the wheel's copy (
 # generalized force on theta2); minleg: shortest physical leg length as a fraction of the rest
 # length; gx, gy: gravity along and normal to the slope, g sin(alpha), g cos(alpha) [m/s^2].
 PARAM_FIELDS = (
-    "g", "alpha", "m1", "m2", "l1", "l2", "I1", "I2", "lb", "lf", "kb", "kf", "kc", "cc",
-    "gb", "gf", "tau", "minleg", "gx", "gy",
-)  # fmt: skip
+    "g",
+    "alpha",
+    "m1",
+    "m2",
+    "l1",
+    "l2",
+    "I1",
+    "I2",
+    "lb",
+    "lf",
+    "kb",
+    "kf",
+    "kc",
+    "cc",
+    "gb",
+    "gf",
+    "tau",
+    "minleg",
+    "gx",
+    "gy",
+)
 PARAM_LAYOUT = Layout("P_", PARAM_FIELDS, "N_PARAMS")
 P = PARAM_LAYOUT.ns
 globals().update(PARAM_LAYOUT.constants())  # P_G, P_ALPHA, ..., P_GY, N_PARAMS
@@ -50,7 +82,7 @@ globals().update(AUX_LAYOUT.constants())  # A_CB, A_CF, A_XB, A_XF, N_AUX
 Z_NAMES = ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
 Z_PAPER_UNITS = ("m", "deg", "deg", "m/s", "deg/s", "deg/s")
 Z_SI_UNITS = ("m", "rad", "rad", "m/s", "rad/s", "rad/s")
-Z_SYMBOLS = ('y_g', 'θ1', 'θ2', 'ẋ_g', 'θ̇1', 'θ̇2')  # plain text
+Z_SYMBOLS = ("y_g", "θ1", "θ2", "ẋ_g", "θ̇1", "θ̇2")  # plain text
 Z_TEX = ("y_g", r"\theta_1", r"\theta_2", r"\dot x_g", r"\dot\theta_1", r"\dot\theta_2")  # LaTeX
 Z_IN_Y = (1, 2, 3, 4, 6, 7)  # z = y[Z_IN_Y] for the full state y = [q, qdot] at an apex
 
@@ -174,12 +206,25 @@ class Params:
         """Flat float64 vector for the compiled dynamics (layout: the ``P_*`` constants)."""
         p = np.empty(P.SIZE)
         p[[P.G, P.ALPHA, P.M1, P.M2, P.L1, P.L2, P.I1, P.I2]] = (
-            self.g, self.alpha, self.m1, self.m2, self.l1, self.l2, self.I1, self.I2,
-        )  # fmt: skip
+            self.g,
+            self.alpha,
+            self.m1,
+            self.m2,
+            self.l1,
+            self.l2,
+            self.I1,
+            self.I2,
+        )
         p[[P.LB, P.LF, P.KB, P.KF, P.KC, P.CC, P.GB, P.GF]] = (
-            self.lb_bar, self.lf_bar, self.kb, self.kf, self.kc, self.c_c,
-            self.gamma_b, self.gamma_f,
-        )  # fmt: skip
+            self.lb_bar,
+            self.lf_bar,
+            self.kb,
+            self.kf,
+            self.kc,
+            self.c_c,
+            self.gamma_b,
+            self.gamma_f,
+        )
         p[P.TAU] = tau
         p[P.MINLEG] = self.min_leg_frac
         p[P.GX], p[P.GY] = self.g * math.sin(self.alpha), self.g * math.cos(self.alpha)  # eq. (2)
@@ -212,8 +257,9 @@ class Params:
 
     def with_values(self, **gait_keys) -> Params:
         """A copy with some gait-file keys changed, e.g. ``with_values(alpha_deg=2.0)``."""
-        return Params.from_gait_dict({**self.to_gait_dict(), "min_leg_frac": self.min_leg_frac,
-                                      **gait_keys})
+        return Params.from_gait_dict(
+            {**self.to_gait_dict(), "min_leg_frac": self.min_leg_frac, **gait_keys}
+        )
 
 
 @dataclass(frozen=True)
@@ -298,8 +344,9 @@ def read_gait_file(path: Path) -> dict:
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise ValueError(f"gait file {path}: expected a mapping of gait keys, got "
-                         f"{type(data).__name__}")
+        raise ValueError(
+            f"gait file {path}: expected a mapping of gait keys, got {type(data).__name__}"
+        )
     return data
 
 
@@ -312,13 +359,14 @@ def _gait_z(data: dict, key: str, path: Path) -> np.ndarray | None:
     if ok:
         try:
             z = np.array([float(v) for v in value])
-            ok = bool(np.all(np.isfinite(z))) and not any(isinstance(v, (str, bool))
-                                                          for v in value)
+            ok = bool(np.all(np.isfinite(z))) and not any(isinstance(v, (str, bool)) for v in value)
         except (TypeError, ValueError):
             ok = False
     if not ok:
-        raise ValueError(f"gait file {path}: {key} must be 6 finite numbers {Z_NAMES} in the "
-                         f"paper's units {Z_PAPER_UNITS}, got {value!r}")
+        raise ValueError(
+            f"gait file {path}: {key} must be 6 finite numbers {Z_NAMES} in the "
+            f"paper's units {Z_PAPER_UNITS}, got {value!r}"
+        )
     return z_to_si(z)
 
 

@@ -92,9 +92,17 @@ def _events_for(aux, flags):
 
 
 def simulate_reference(
-    y0, aux, flags, t0=0.0, t_end=2.0, stop_at_apex=True,
-    rtol=1e-12, atol=1e-12, record_dt=None, apexes=None,
-):  # fmt: skip
+    y0,
+    aux,
+    flags,
+    t0=0.0,
+    t_end=2.0,
+    stop_at_apex=True,
+    rtol=1e-12,
+    atol=1e-12,
+    record_dt=None,
+    apexes=None,
+):
     """Integrate the hybrid system from (t0, y0) until the apex (or t_end) with solve_ivp.
 
     ``aux`` and ``flags`` are updated in place. With ``stop_at_apex`` false an apex ends a
@@ -132,9 +140,15 @@ def simulate_reference(
         y0_seg = y
         try:
             sol = solve_ivp(
-                f, (t, t_end), y, method=method, rtol=rtol, atol=atol, events=evs,
+                f,
+                (t, t_end),
+                y,
+                method=method,
+                rtol=rtol,
+                atol=atol,
+                events=evs,
                 dense_output=record_dt is not None,
-            )  # fmt: skip
+            )
         except _OverBudget:
             return F_INTEGRATION, t, y, events, samples
         if sol.status < 0:

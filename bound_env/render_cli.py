@@ -38,8 +38,9 @@ def register(sub) -> None:
         help="play this many times slower than real time (default: %(default)s)",
     )
     p.add_argument("--width", type=number(int, 16, 8192), default=640, help="frame width [pixels]")
-    p.add_argument("--height", type=number(int, 16, 8192), default=360,
-                   help="frame height [pixels]")
+    p.add_argument(
+        "--height", type=number(int, 16, 8192), default=360, help="frame height [pixels]"
+    )
     p.add_argument(
         "--frame",
         metavar="PNG",
@@ -53,8 +54,12 @@ def register(sub) -> None:
     )
     p.add_argument("--gait", default="default", help="gait file or name (default: %(default)s)")
     p.add_argument("--out", default="out/demo", help="folder for summary.json and bound.gif")
-    p.add_argument("--gif-strides", type=number(float, 0, 1000, lo_open=True), default=3.0,
-                   help="strides in the animation")
+    p.add_argument(
+        "--gif-strides",
+        type=number(float, 0, 1000, lo_open=True),
+        default=3.0,
+        help="strides in the animation",
+    )
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     p.set_defaults(func=cmd_demo)
 
@@ -129,8 +134,17 @@ def cmd_animate(args) -> int:
         if not args.json:
             print(f"wrote {args.frame}")
     if args.json:
-        print(strict_json({"gif": str(path), "frames": len(frames), "strides": args.strides,
-                           "period": period, "frame": args.frame}))
+        print(
+            strict_json(
+                {
+                    "gif": str(path),
+                    "frames": len(frames),
+                    "strides": args.strides,
+                    "period": period,
+                    "frame": args.frame,
+                }
+            )
+        )
     return 0
 
 
@@ -173,15 +187,23 @@ def cmd_demo(args) -> int:
     frames, period, frame_dt = animation_frames(args.gait, None, args.gif_strides)
     gif = save_gif(frames, out / "bound.gif", fps=1.0 / frame_dt) if frames else None
     if args.json:
-        print(strict_json({**summary, "summary": str(out / "summary.json"),
-                           "gif": str(gif) if gif else None}))
+        print(
+            strict_json(
+                {**summary, "summary": str(out / "summary.json"), "gif": str(gif) if gif else None}
+            )
+        )
         return 0
     print(f"PassiveBound-v0, zero action from z* of gait {args.gait!r}:")
-    print(f"  {summary['strides']} strides in {summary['sim_time_s']:.2f} s, "
-          f"{summary['distance_m']:.2f} m down the slope, return {ret:.1f}")
+    print(
+        f"  {summary['strides']} strides in {summary['sim_time_s']:.2f} s, "
+        f"{summary['distance_m']:.2f} m down the slope, return {ret:.1f}"
+    )
     err = summary["max_apex_error_si"]
     print(f"  largest apex deviation from z*: {'-' if err is None else f'{err:.2e}'} (SI)")
     print(f"  ended by {'truncation' if truncated else 'termination: ' + str(summary['failure'])}")
-    print(f"wrote {out / 'summary.json'} and {gif} ({len(frames)} frames, period {period:.4f} s)"
-          if gif else f"wrote {out / 'summary.json'} (no frames: the gait fails at once)")
+    print(
+        f"wrote {out / 'summary.json'} and {gif} ({len(frames)} frames, period {period:.4f} s)"
+        if gif
+        else f"wrote {out / 'summary.json'} (no frames: the gait fails at once)"
+    )
     return 0

@@ -92,9 +92,17 @@ def phases_from_events(events: list, t_end: float) -> tuple[list, list]:
 
 
 def simulate_stride(
-    z0, params: Params, *, backend="fast", tau=0.0, strict=False, rtol=None, atol=None,
-    t_max=DEFAULT_T_MAX, record_dt=None,
-) -> StrideResult:  # fmt: skip
+    z0,
+    params: Params,
+    *,
+    backend="fast",
+    tau=0.0,
+    strict=False,
+    rtol=None,
+    atol=None,
+    t_max=DEFAULT_T_MAX,
+    record_dt=None,
+) -> StrideResult:
     """One stride of the Poincare map P (eq. 18) from the apex state ``z0`` (SI).
 
     ``backend`` is ``"fast"`` (compiled, default tolerances 1e-10) or ``"reference"``
@@ -110,14 +118,24 @@ def simulate_stride(
     e0 = total_energy(y0, aux) if np.all(np.isfinite(y0)) else math.nan
     if backend == "reference":
         status, t, y, events, samples = simulate_reference(
-            y0, aux, flags, t_end=t_max, rtol=rtol or 1e-12, atol=atol or 1e-12,
+            y0,
+            aux,
+            flags,
+            t_end=t_max,
+            rtol=rtol or 1e-12,
+            atol=atol or 1e-12,
             record_dt=record_dt,
-        )  # fmt: skip
+        )
     elif backend == "fast":
         status, t, y, events, samples = simulate_fast(
-            y0, aux, flags, t_end=t_max, rtol=rtol or 1e-10, atol=atol or 1e-10,
+            y0,
+            aux,
+            flags,
+            t_end=t_max,
+            rtol=rtol or 1e-10,
+            atol=atol or 1e-10,
             record_dt=record_dt,
-        )  # fmt: skip
+        )
     else:
         raise ValueError(f"backend must be 'fast' or 'reference', got {backend!r}")
     if status == TIME_UP:
@@ -128,11 +146,19 @@ def simulate_stride(
     if record_dt is not None and samples:
         ts = np.array([s[0] for s in samples])
         ys = np.array([s[1] for s in samples])
-        traj = Trajectory(ts, ys[:, :4], ys[:, 4:], [s[2] for s in samples],
-                          np.array([s[3] for s in samples]))
+        traj = Trajectory(
+            ts, ys[:, :4], ys[:, 4:], [s[2] for s in samples], np.array([s[3] for s in samples])
+        )
     return StrideResult(
-        z0=z0, z1=z1, failure=failure_name(status), phases=phases, durations=durations,
-        events=events, energy0=e0,
+        z0=z0,
+        z1=z1,
+        failure=failure_name(status),
+        phases=phases,
+        durations=durations,
+        events=events,
+        energy0=e0,
         energy1=total_energy(y, aux) if np.all(np.isfinite(y)) else math.nan,
-        t_end=t, y_end=y, trajectory=traj,
-    )  # fmt: skip
+        t_end=t,
+        y_end=y,
+        trajectory=traj,
+    )

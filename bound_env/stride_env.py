@@ -188,11 +188,19 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         slope_noise_deg: float = 0.0,
     ):
         kwargs = dict(
-            gait=gait, gait_overrides=gait_overrides, basis=basis, K=K, max_torque=max_torque,
-            reset_noise_scale=reset_noise_scale, alive_reward=alive_reward,
-            tracking_cost_weight=tracking_cost_weight, ctrl_cost_weight=ctrl_cost_weight,
-            apex_scales=apex_scales, rtol=rtol, slope_noise_deg=slope_noise_deg,
-        )  # fmt: skip
+            gait=gait,
+            gait_overrides=gait_overrides,
+            basis=basis,
+            K=K,
+            max_torque=max_torque,
+            reset_noise_scale=reset_noise_scale,
+            alive_reward=alive_reward,
+            tracking_cost_weight=tracking_cost_weight,
+            ctrl_cost_weight=ctrl_cost_weight,
+            apex_scales=apex_scales,
+            rtol=rtol,
+            slope_noise_deg=slope_noise_deg,
+        )
         utils.EzPickle.__init__(self, **kwargs)
         self.task = StrideTask(**kwargs)
         self.observation_space = spaces.Box(Z_LOW, Z_HIGH, dtype=np.float32)
@@ -245,8 +253,9 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         slope = None
         if self.task.slope_noise_deg > 0.0 and self._strides > 0:
             # rough terrain, as PassiveBound-v0: the slope changes at every apex reached
-            alpha = self.task.params.alpha + math.radians(
-                self.task.slope_noise_deg) * float(self.np_random.standard_normal())
+            alpha = self.task.params.alpha + math.radians(self.task.slope_noise_deg) * float(
+                self.np_random.standard_normal()
+            )
             slope = (self._alpha, alpha)
         out = self.task.sim.run_torques(self._z, taus, slope)
         if slope is not None and out.z1 is not None:
@@ -254,10 +263,14 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         failed = out.z1 is None
         alive, tracking, ctrl = self.task.rewards(out.z1, u, failed)
         info = {
-            "failure": out.failure, "reward_alive": alive, "reward_tracking": tracking,
-            "reward_ctrl": ctrl, "period": out.period, "effort": out.effort,
+            "failure": out.failure,
+            "reward_alive": alive,
+            "reward_tracking": tracking,
+            "reward_ctrl": ctrl,
+            "period": out.period,
+            "effort": out.effort,
             "tau_windows": taus,
-        }  # fmt: skip
+        }
         if failed:
             obs = self._obs(z_from_state(out.y_end))
         else:

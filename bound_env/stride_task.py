@@ -247,8 +247,17 @@ class StrideSimulator:
         flags = np.zeros(N_FLAGS, dtype=np.bool_)
         edges, taus = merge_windows(self.basis.edges, np.asarray(taus, dtype=float))
         status, t, impulse = run_profile(
-            y, aux, flags, edges, taus, self.rtol, self.rtol, self.t_max, self._log, self._rec,
-        )  # fmt: skip
+            y,
+            aux,
+            flags,
+            edges,
+            taus,
+            self.rtol,
+            self.rtol,
+            self.t_max,
+            self._log,
+            self._rec,
+        )
         ok = status == APEX
         return StrideOutcome(
             z1=z_from_state(y) if ok else None,
@@ -293,7 +302,7 @@ class StrideTask:
             apex_scales=apex_scales,
             rtol=rtol,
             slope_noise_deg=slope_noise_deg,
-        )  # fmt: skip (validates every number)
+        )  # (validates every number)
         self.slope_noise_deg = self.step_task.slope_noise_deg
         self.gait = self.step_task.gait
         self.params = self.step_task.params

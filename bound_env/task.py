@@ -73,14 +73,43 @@ APEX_SCALES = np.array([0.02, 0.1, 0.2, 0.1, 1.0, 1.0])
 
 # Observation layout (x_g first only when it is included).
 OBS_NAMES = (
-    "x_g", "y_g", "theta1", "theta2", "xdot_g", "ydot_g", "theta1dot", "theta2dot",
-    "contact_back", "contact_front", "leg_length_back", "leg_angle_back",
-    "leg_length_front", "leg_angle_front", "touched_back", "touched_front", "time_since_apex",
-)  # fmt: skip
+    "x_g",
+    "y_g",
+    "theta1",
+    "theta2",
+    "xdot_g",
+    "ydot_g",
+    "theta1dot",
+    "theta2dot",
+    "contact_back",
+    "contact_front",
+    "leg_length_back",
+    "leg_angle_back",
+    "leg_length_front",
+    "leg_angle_front",
+    "touched_back",
+    "touched_front",
+    "time_since_apex",
+)
 OBS_UNITS = (
-    "m", "m", "rad", "rad", "m/s", "m/s", "rad/s", "rad/s", "0/1", "0/1", "m", "rad", "m", "rad",
-    "0/1", "0/1", "s",
-)  # fmt: skip
+    "m",
+    "m",
+    "rad",
+    "rad",
+    "m/s",
+    "m/s",
+    "rad/s",
+    "rad/s",
+    "0/1",
+    "0/1",
+    "m",
+    "rad",
+    "m",
+    "rad",
+    "0/1",
+    "0/1",
+    "s",
+)
 
 # Observation bounds (the observation is clipped to them; only a robot that has already failed,
 # or one flung far beyond anything a 20 kg robot on a slope reaches, could meet one).
@@ -95,39 +124,55 @@ _RATE_BOUND = 1000.0  # |theta1dot|, |theta2dot| [rad/s]
 # Per-robot scalar state, columns of `Batch.s` (float64; counts and codes are exact integers):
 # S.T == S_T == 0, ..., N_S columns.
 N_XI = 4  # slope draws kept per robot (rough terrain; refilled by `draw_slope_noise`)
-STATE_LAYOUT = Layout("S_", (
-    "t",  # simulation time since reset [s]
-    "h",  # integrator step to carry into the next interval [s] (0: choose)
-    "t_apex",  # time of the last apex, or 0 [s]
-    "steps",  # control intervals since reset
-    "strides",  # strides completed since reset
-    "status",  # CONTINUE or a failure code (bound_env.events)
-    "napex",  # strides completed in the last interval
-    "tau",  # spine torque of the last interval [N m]
-    "energy",  # total energy after the last interval [J]
-    "reward",  # reward of the last interval
-    "alive",  # its terms: alive bonus, tracking (<= 0), control (<= 0)
-    "tracking",
-    "ctrl",
-    "x",  # x_g after the last interval [m] (a copy, for the info)
-    "phase",  # stance condition index after the last interval (PHASES)
-    ("xi", N_XI),  # standard normal draws for the slope changes at the next apexes
-), "N_S")  # fmt: skip
+STATE_LAYOUT = Layout(
+    "S_",
+    (
+        "t",  # simulation time since reset [s]
+        "h",  # integrator step to carry into the next interval [s] (0: choose)
+        "t_apex",  # time of the last apex, or 0 [s]
+        "steps",  # control intervals since reset
+        "strides",  # strides completed since reset
+        "status",  # CONTINUE or a failure code (bound_env.events)
+        "napex",  # strides completed in the last interval
+        "tau",  # spine torque of the last interval [N m]
+        "energy",  # total energy after the last interval [J]
+        "reward",  # reward of the last interval
+        "alive",  # its terms: alive bonus, tracking (<= 0), control (<= 0)
+        "tracking",
+        "ctrl",
+        "x",  # x_g after the last interval [m] (a copy, for the info)
+        "phase",  # stance condition index after the last interval (PHASES)
+        ("xi", N_XI),  # standard normal draws for the slope changes at the next apexes
+    ),
+    "N_S",
+)
 S = STATE_LAYOUT.ns
 globals().update(STATE_LAYOUT.constants())  # S_T, ..., S_XI, N_S (imported by env, vector)
 
 # Task constants, entries of the float64 vector `PassiveBoundTask.cfg` the kernel reads:
 # C.DT == C_DT == 0, ..., N_CFG entries.
 N_OBS_FULL = len(OBS_NAMES)
-CONFIG_LAYOUT = Layout("C_", (
-    "dt", "max_torque", "rtol", "atol", "no_apex", "alive", "tracking", "ctrl", "include_x",
-    ("zref", 6),  # the reference apex state z* (SI)
-    ("zscale", 6),  # APEX_SCALES
-    ("obs_low", N_OBS_FULL),  # lower bounds of the full observation (float32 values)
-    ("obs_high", N_OBS_FULL),  # upper bounds
-    "slope_noise",  # sigma of the slope at each apex [rad]
-    "alpha_nominal",  # the nominal slope alpha [rad]
-), "N_CFG")  # fmt: skip
+CONFIG_LAYOUT = Layout(
+    "C_",
+    (
+        "dt",
+        "max_torque",
+        "rtol",
+        "atol",
+        "no_apex",
+        "alive",
+        "tracking",
+        "ctrl",
+        "include_x",
+        ("zref", 6),  # the reference apex state z* (SI)
+        ("zscale", 6),  # APEX_SCALES
+        ("obs_low", N_OBS_FULL),  # lower bounds of the full observation (float32 values)
+        ("obs_high", N_OBS_FULL),  # upper bounds
+        "slope_noise",  # sigma of the slope at each apex [rad]
+        "alpha_nominal",  # the nominal slope alpha [rad]
+    ),
+    "N_CFG",
+)
 C = CONFIG_LAYOUT.ns
 globals().update(CONFIG_LAYOUT.constants())  # C_DT, ..., N_CFG
 
@@ -306,8 +351,9 @@ def step_batch(Y, AUX, FLAGS, S, APEX, OBS, cfg, actions, active):
             step_env(Y[i], AUX[i], FLAGS[i], S[i], APEX[i], OBS[i], cfg, actions[i])
 
 
-@nb.njit(cache=True, parallel=True, fastmath={"contract", "arcp", "nsz", "reassoc"},
-         error_model="numpy")  # fmt: skip
+@nb.njit(
+    cache=True, parallel=True, fastmath={"contract", "arcp", "nsz", "reassoc"}, error_model="numpy"
+)
 def step_batch_parallel(Y, AUX, FLAGS, S, APEX, OBS, cfg, actions, active):
     """`step_batch` with the robots spread over Numba's threads."""
     for i in nb.prange(Y.shape[0]):
@@ -356,21 +402,31 @@ class TaskConfig:
         put = object.__setattr__  # normalize the values of a frozen instance
         for name in ("dt", "max_torque", "rtol"):
             put(self, name, _number(name, getattr(self, name), 0.0, strict=True))
-        for name in ("slope_noise_deg", "reset_noise_scale", "alive_reward",
-                     "tracking_cost_weight", "ctrl_cost_weight"):  # fmt: skip
+        for name in (
+            "slope_noise_deg",
+            "reset_noise_scale",
+            "alive_reward",
+            "tracking_cost_weight",
+            "ctrl_cost_weight",
+        ):
             put(self, name, _number(name, getattr(self, name), 0.0))
         if self.apex_scales is not None:
             scales = np.asarray(self.apex_scales, dtype=float)
             if scales.shape != (6,) or not np.all(np.isfinite(scales)) or np.any(scales <= 0):
-                raise ValueError(f"apex_scales must be 6 positive numbers, got "
-                                 f"{self.apex_scales!r}")  # fmt: skip
+                raise ValueError(
+                    f"apex_scales must be 6 positive numbers, got {self.apex_scales!r}"
+                )
             put(self, "apex_scales", tuple(float(v) for v in scales))
         if self.gait_overrides is not None:
             put(self, "gait_overrides", dict(self.gait_overrides))
 
     @classmethod
-    def resolve(cls, config: TaskConfig | None = None, settings: dict | None = None,
-                defaults_keep_config: bool = False) -> TaskConfig:
+    def resolve(
+        cls,
+        config: TaskConfig | None = None,
+        settings: dict | None = None,
+        defaults_keep_config: bool = False,
+    ) -> TaskConfig:
         """``config`` with ``settings`` (keyword arguments) changed, or a new config from the
         settings alone when ``config`` is None. With ``defaults_keep_config`` (a signature
         that lists every setting with its default) a setting at its default value leaves the
@@ -444,14 +500,21 @@ class PassiveBoundTask:
         self.include_x = not config.exclude_current_positions_from_observation
         rtol = config.rtol
         alive_reward, tracking_cost_weight, ctrl_cost_weight = (
-            config.alive_reward, config.tracking_cost_weight, config.ctrl_cost_weight)
+            config.alive_reward,
+            config.tracking_cost_weight,
+            config.ctrl_cost_weight,
+        )
         self.obs_names = OBS_NAMES if self.include_x else OBS_NAMES[1:]
         self.obs_units = OBS_UNITS if self.include_x else OBS_UNITS[1:]
         self.apex_capacity = 4 + int(self.dt / 0.05)  # strides last ~0.4 s
         cfg = np.zeros(C.SIZE)
         cfg[[C.DT, C.MAX_TORQUE, C.RTOL, C.ATOL, C.NO_APEX]] = (
-            self.dt, self.max_torque, rtol, rtol, NO_APEX_TIME,
-        )  # fmt: skip
+            self.dt,
+            self.max_torque,
+            rtol,
+            rtol,
+            NO_APEX_TIME,
+        )
         cfg[[C.ALIVE, C.TRACKING, C.CTRL]] = alive_reward, tracking_cost_weight, ctrl_cost_weight
         cfg[C.INCLUDE_X] = float(self.include_x)
         cfg[C.ZREF : C.ZREF + 6] = self.z_ref
@@ -460,11 +523,24 @@ class PassiveBoundTask:
         leg, pi = 2.0 * max(p.lb_bar, p.lf_bar), math.pi
         a, w, v = _ANGLE_BOUND, _RATE_BOUND, _SPEED_BOUND
         bounds = [  # in the order of OBS_NAMES
-            (-_X_BOUND, _X_BOUND), _Y_BOUNDS,  # x_g, y_g
-            (-a, a), (-a, a), (-v, v), (-v, v), (-w, w), (-w, w),  # angles, speeds, rates
-            (0, 1), (0, 1), (0, leg), (-pi, pi), (0, leg), (-pi, pi),  # contacts, legs
-            (0, 1), (0, 1), (0, NO_APEX_TIME + self.dt),  # touched flags, time since apex
-        ]  # fmt: skip
+            (-_X_BOUND, _X_BOUND),
+            _Y_BOUNDS,  # x_g, y_g
+            (-a, a),
+            (-a, a),
+            (-v, v),
+            (-v, v),
+            (-w, w),
+            (-w, w),  # angles, speeds, rates
+            (0, 1),
+            (0, 1),
+            (0, leg),
+            (-pi, pi),
+            (0, leg),
+            (-pi, pi),  # contacts, legs
+            (0, 1),
+            (0, 1),
+            (0, NO_APEX_TIME + self.dt),  # touched flags, time since apex
+        ]
         self._obs_low = np.array([b[0] for b in bounds], dtype=np.float32)
         self._obs_high = np.array([b[1] for b in bounds], dtype=np.float32)
         cfg[C.OBS_LOW : C.OBS_LOW + N_OBS_FULL] = self._obs_low

@@ -68,8 +68,10 @@ class PassiveBoundVectorEnv(VectorEnv):
             )
         config = TaskConfig.resolve(config, task_kwargs)
         if config.slope_noise_deg != 0.0:
-            raise ValueError("slope_noise_deg (rough terrain) is supported by the single env "
-                             "PassiveBound-v0 only, not by the native vector env")
+            raise ValueError(
+                "slope_noise_deg (rough terrain) is supported by the single env "
+                "PassiveBound-v0 only, not by the native vector env"
+            )
         self.task = PassiveBoundTask(config)
         self.num_envs = int(num_envs)
         self.max_episode_steps = (

@@ -68,8 +68,12 @@ def main(argv=None) -> int:
         loop = ClosedLoop(ctrl)
         z_cl, res, _ = find_fixed_point(loop.map, z_star, fd_steps(z_star))
         cyc = loop.stride(z_cl)
-        row = {"policy": policy, "max_torque": loop.max_torque, "fixed_point_residual": res,
-               "on_cycle_effort": cyc.effort}
+        row = {
+            "policy": policy,
+            "max_torque": loop.max_torque,
+            "fixed_point_residual": res,
+            "on_cycle_effort": cyc.effort,
+        }
         for r in SIZES:
             efforts, wins = [], 0
             for u in random_directions(N_DIRS):
@@ -85,8 +89,10 @@ def main(argv=None) -> int:
     w = csv.DictWriter(buf, list(rows[0]))
     w.writeheader()
     w.writerows(rows)
-    for name, text in (("effort.csv", buf.getvalue()),
-                       ("effort.json", json.dumps(rows, indent=2) + "\n")):
+    for name, text in (
+        ("effort.csv", buf.getvalue()),
+        ("effort.json", json.dumps(rows, indent=2) + "\n"),
+    ):
         atomic_write(out / name, text)
     return 0
 

@@ -34,9 +34,21 @@ SETTINGS = [  # (label, spec keyword arguments)
     ("deadbeat windows K=6", dict(controller="deadbeat", basis="windows", K=6)),
     ("deadbeat windows K=8", dict(controller="deadbeat", basis="windows", K=8)),
 ]
-COLUMNS = ("label", "rho_design", "emax", "basin_min", "basin_min_direction", "r50",
-           "push_xdot_p50", "push_th1dot_p50", "slope_lo", "slope_hi", "kc_lo", "kc_hi",
-           "effort")
+COLUMNS = (
+    "label",
+    "rho_design",
+    "emax",
+    "basin_min",
+    "basin_min_direction",
+    "r50",
+    "push_xdot_p50",
+    "push_th1dot_p50",
+    "slope_lo",
+    "slope_hi",
+    "kc_lo",
+    "kc_hi",
+    "effort",
+)
 
 
 def main(argv=None) -> int:
@@ -57,24 +69,40 @@ def main(argv=None) -> int:
             policy = load_controller(ControllerSpec(kw.pop("controller", "lqr"), **kw))
             policy.name = label
             rho = policy.design["rho_closed"]
-        r = compute_margins(policy, budget=args.budget, workers=args.workers,
-                            out=out / label.split(" (")[0].replace(" ", "_").replace("=", ""))
-        rows.append({
-            "label": label, "rho_design": rho, "emax": r["emax"], "basin_min": r["basin_min"],
-            "basin_min_direction": r["basin_min_direction"], "r50": r["basin_curve"]["r50"],
-            "push_xdot_p50": r["push"]["xdot"]["p50"],
-            "push_th1dot_p50": r["push"]["th1dot"]["p50"],
-            "slope_lo": r["slope_window_deg"][0], "slope_hi": r["slope_window_deg"][1],
-            "kc_lo": r["kc_window"][0], "kc_hi": r["kc_window"][1], "effort": r["effort"],
-        })  # fmt: skip
+        r = compute_margins(
+            policy,
+            budget=args.budget,
+            workers=args.workers,
+            out=out / label.split(" (")[0].replace(" ", "_").replace("=", ""),
+        )
+        rows.append(
+            {
+                "label": label,
+                "rho_design": rho,
+                "emax": r["emax"],
+                "basin_min": r["basin_min"],
+                "basin_min_direction": r["basin_min_direction"],
+                "r50": r["basin_curve"]["r50"],
+                "push_xdot_p50": r["push"]["xdot"]["p50"],
+                "push_th1dot_p50": r["push"]["th1dot"]["p50"],
+                "slope_lo": r["slope_window_deg"][0],
+                "slope_hi": r["slope_window_deg"][1],
+                "kc_lo": r["kc_window"][0],
+                "kc_hi": r["kc_window"][1],
+                "effort": r["effort"],
+            }
+        )
     buf = io.StringIO()
     w = csv.DictWriter(buf, COLUMNS)
     w.writeheader()
     w.writerows(rows)
     atomic_write(out / "table.csv", buf.getvalue())
     base = rows[0]["basin_min"]
-    lines = ["| setting | ρ(A−BG) design | emax | basin_min (× passive) | r50 | push p50 "
-             "Δẋ / Δθ̇1 | α window [deg] | k_c window |", "| --- |" + " --- |" * 7]
+    lines = [
+        "| setting | ρ(A−BG) design | emax | basin_min (× passive) | r50 | push p50 "
+        "Δẋ / Δθ̇1 | α window [deg] | k_c window |",
+        "| --- |" + " --- |" * 7,
+    ]
     for r in rows:
         lines.append(
             f"| {r['label']} | {r['rho_design']:.3f} | {r['emax']:.3f} | "

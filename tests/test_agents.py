@@ -23,8 +23,16 @@ from agents.margins import (
 from agents.policy import MLPController, ZeroController, load_controller
 
 SHIPPED = Path(__file__).resolve().parent.parent / "agents" / "policies" / "default"
-MARGIN_KEYS = ("basin", "basin_min", "emax", "eigenvalues", "slope_window_deg", "kc_window",
-               "push", "effort")
+MARGIN_KEYS = (
+    "basin",
+    "basin_min",
+    "emax",
+    "eigenvalues",
+    "slope_window_deg",
+    "kc_window",
+    "push",
+    "effort",
+)
 
 
 # -- config --------------------------------------------------------------------------------------
@@ -35,8 +43,18 @@ def test_config_file_parses_in_rl_zoo3_format():
     from stable_baselines3 import PPO
 
     hp = load_hyperparams(DEFAULT_CONFIG, "PassiveBound-v0")
-    for key in ("n_envs", "n_timesteps", "policy", "normalize", "n_steps", "batch_size",
-                "gamma", "learning_rate", "policy_kwargs", "env_kwargs"):
+    for key in (
+        "n_envs",
+        "n_timesteps",
+        "policy",
+        "normalize",
+        "n_steps",
+        "batch_size",
+        "gamma",
+        "learning_rate",
+        "policy_kwargs",
+        "env_kwargs",
+    ):
         assert key in hp, key
     assert isinstance(hp["policy_kwargs"], str)  # rl-zoo3 keeps it a string
     spec = preprocess(hp)
@@ -48,8 +66,10 @@ def test_config_file_parses_in_rl_zoo3_format():
     assert spec.algo_kwargs["learning_rate"](1.0) == pytest.approx(3e-4)
     assert "net_arch" in spec.algo_kwargs["policy_kwargs"]
     assert [c.__name__ for c, _ in spec.wrappers] == ["ObservationFilter", "PerturbedStarts"]
-    assert [c.__name__ for c, _ in spec.callbacks] == ["NoiseCurriculumCallback",
-                                                        "BasinValidationCallback"]
+    assert [c.__name__ for c, _ in spec.callbacks] == [
+        "NoiseCurriculumCallback",
+        "BasinValidationCallback",
+    ]
     literal = preprocess(load_hyperparams(DEFAULT_CONFIG, "PassiveBoundLiteral-v0"))
     assert literal.env_kwargs["gait"] == "literal-cycle"
     assert literal.algo_kwargs["n_steps"] == spec.algo_kwargs["n_steps"]
@@ -60,10 +80,15 @@ def test_config_errors_and_overrides(tmp_path):
         load_hyperparams(DEFAULT_CONFIG, "Nope-v0")
     with pytest.raises(FileNotFoundError):
         load_hyperparams(tmp_path / "missing.yaml", "PassiveBound-v0")
-    hp = apply_sets({"env_kwargs": {"gait": "default"}},
-                    ["env_kwargs.max_torque=20", "n_timesteps=1e5", "learning_rate=lin_1e-3"])
-    assert hp == {"env_kwargs": {"gait": "default", "max_torque": 20},
-                  "n_timesteps": 1e5, "learning_rate": "lin_1e-3"}
+    hp = apply_sets(
+        {"env_kwargs": {"gait": "default"}},
+        ["env_kwargs.max_torque=20", "n_timesteps=1e5", "learning_rate=lin_1e-3"],
+    )
+    assert hp == {
+        "env_kwargs": {"gait": "default", "max_torque": 20},
+        "n_timesteps": 1e5,
+        "learning_rate": "lin_1e-3",
+    }
     assert parse_set("normalize=true") == (["normalize"], True)
     with pytest.raises(ValueError, match="KEY=VALUE"):
         parse_set("n_envs")
@@ -131,11 +156,25 @@ def smoke_run(tmp_path_factory):
     from agents.train import train
 
     runs = tmp_path_factory.mktemp("runs")
-    sets = ["n_envs=2", "n_steps=256", "batch_size=128", "n_epochs=2",
-            "policy_kwargs=dict(net_arch=dict(pi=[16], vf=[16]))",
-            "callback=[{agents.train.BasinValidationCallback: {eval_freq: 1024, iters: 2}}]"]
-    run = train(name="smoke", seed=3, n_timesteps=2048, sets=sets, runs_dir=runs,
-                eval_freq=1024, n_eval_episodes=1, save_freq=1024, progress_bar=False)
+    sets = [
+        "n_envs=2",
+        "n_steps=256",
+        "batch_size=128",
+        "n_epochs=2",
+        "policy_kwargs=dict(net_arch=dict(pi=[16], vf=[16]))",
+        "callback=[{agents.train.BasinValidationCallback: {eval_freq: 1024, iters: 2}}]",
+    ]
+    run = train(
+        name="smoke",
+        seed=3,
+        n_timesteps=2048,
+        sets=sets,
+        runs_dir=runs,
+        eval_freq=1024,
+        n_eval_episodes=1,
+        save_freq=1024,
+        progress_bar=False,
+    )
     return run
 
 
@@ -145,8 +184,17 @@ def test_training_smoke_run_writes_a_model_that_loads_and_acts(smoke_run):
     from stable_baselines3.common.vec_env import VecNormalize
 
     run = smoke_run
-    for name in ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv",
-                 "eval.png", "basin_validation.csv", "best/model.zip", "best/vecnormalize.pkl"):
+    for name in (
+        "model.zip",
+        "vecnormalize.pkl",
+        "config.yaml",
+        "run.json",
+        "eval.csv",
+        "eval.png",
+        "basin_validation.csv",
+        "best/model.zip",
+        "best/vecnormalize.pkl",
+    ):
         assert (run / name).is_file(), name
     assert list((run / "checkpoints").glob("rl_model_*_steps.zip"))
     assert list((run / "tb").iterdir())
@@ -197,8 +245,9 @@ def _dummy_venv(obs_space):
 
     def make():
         env = gym.make("PassiveBound-v0")
-        return ObservationFilter(env) if obs_space.shape[0] < env.observation_space.shape[0] \
-            else env
+        return (
+            ObservationFilter(env) if obs_space.shape[0] < env.observation_space.shape[0] else env
+        )
 
     return DummyVecEnv([make])
 
@@ -214,8 +263,16 @@ def test_resume_continues_from_the_last_checkpoint(smoke_run, tmp_path):
     (run / "model.zip").unlink()
     ckpt = last_checkpoint(run)
     assert ckpt is not None and ckpt[1] is not None
-    train(name="smoke", resume=True, n_timesteps=ckpt[2] + 1024, runs_dir=tmp_path / "runs",
-          eval_freq=10**9, save_freq=10**9, progress_bar=False, vec_env="dummy")
+    train(
+        name="smoke",
+        resume=True,
+        n_timesteps=ckpt[2] + 1024,
+        runs_dir=tmp_path / "runs",
+        eval_freq=10**9,
+        save_freq=10**9,
+        progress_bar=False,
+        vec_env="dummy",
+    )
     info = json.loads((run / "run.json").read_text())
     assert info["timesteps_done"] >= ckpt[2] + 1024
     assert info["sessions"][-1]["from"] == ckpt[2]
@@ -275,14 +332,21 @@ def _check_schema(r):
         for s in ("+", "-"):
             assert 0.0 <= e[s]["rel"] <= e[s]["cap"] and e[s]["abs"] >= 0
             assert e[s]["abs"] == pytest.approx(e[s]["rel"] * abs(e["z_star"]))
-    for key in ("basin_scale", "basin_ceiling", "basin_min_cycle", "basin_share_min",
-                "terrain", "terrain_sigma50_deg"):
+    for key in (
+        "basin_scale",
+        "basin_ceiling",
+        "basin_min_cycle",
+        "basin_share_min",
+        "terrain",
+        "terrain_sigma50_deg",
+    ):
         assert key in r, key
     assert set(r["basin_ceiling"]) == set(r["basin"])
     c = r["basin_curve"]
     assert len(c["ci_low"]) == len(c["sizes"]) and c["r50_ci"][0] <= c["r50"] <= c["r50_ci"][1]
-    assert all(lo <= p <= hi for lo, p, hi in zip(c["ci_low"], c["success"], c["ci_high"],
-                                                  strict=True))
+    assert all(
+        lo <= p <= hi for lo, p, hi in zip(c["ci_low"], c["success"], c["ci_high"], strict=True)
+    )
     assert r["basin_min"] == min(e[s]["rel"] for e in r["basin"].values() for s in "+-")
     assert len(r["eigenvalues"]) == 6 and all(len(v) == 2 for v in r["eigenvalues"])
     assert r["emax"] == pytest.approx(math.hypot(*r["eigenvalues"][0]))
@@ -358,13 +422,42 @@ def test_budgets_are_ordered():
 def test_cli_margins_json_and_compare(tmp_path, capsys):
     from bound_env.cli import main
 
-    assert main(["margins", "--policy", "passive", "--budget", "test", "--json",
-                 "--workers", "1", "--out", str(tmp_path / "m")]) == 0
+    assert (
+        main(
+            [
+                "margins",
+                "--policy",
+                "passive",
+                "--budget",
+                "test",
+                "--json",
+                "--workers",
+                "1",
+                "--out",
+                str(tmp_path / "m"),
+            ]
+        )
+        == 0
+    )
     r = json.loads(capsys.readouterr().out)
     _check_schema(r)
     docs = tmp_path / "docs"
-    assert main(["compare", "--budget", "test", "--workers", "1", "--out", str(tmp_path / "c"),
-                 "--docs", str(docs)]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                "--budget",
+                "test",
+                "--workers",
+                "1",
+                "--out",
+                str(tmp_path / "c"),
+                "--docs",
+                str(docs),
+            ]
+        )
+        == 0
+    )
     page = (docs / "MARGINS.md").read_text()
     assert "basin_min" in page and "passive" in page
     assert (docs / "margins_basin.png").is_file()

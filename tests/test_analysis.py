@@ -112,8 +112,9 @@ def test_arclength_passes_the_fold_in_alpha(gait, fixed):
     """The stable branch ends at a fold near alpha = 2.03 deg: a real eigenvalue reaches +1
     and the branch turns back (unstable); natural continuation cannot pass it."""
     p = gait.params.with_values(alpha_deg=2.02)
-    br = continue_branch(p, fixed.z, "alpha_deg", 2.06, step=0.004, method="arclength",
-                         max_points=12)  # fmt: skip
+    br = continue_branch(
+        p, fixed.z, "alpha_deg", 2.06, step=0.004, method="arclength", max_points=12
+    )
     folds = [pt for pt in br.points if pt.fold]
     assert len(folds) == 1, [(pt.value, pt.emax) for pt in br.points]
     i = br.points.index(folds[0])
@@ -125,8 +126,9 @@ def test_arclength_passes_the_fold_in_alpha(gait, fixed):
 
 def test_free_alpha_with_pinned_speed_recovers_alpha(gait, fixed):
     p = gait.params.with_values(alpha_deg=2.0)
-    res = find_fixed_point(p, fixed.z * 1.01, free=("alpha_deg",), pin=("xdot_g", fixed.z[3]),
-                           recover=False)  # fmt: skip
+    res = find_fixed_point(
+        p, fixed.z * 1.01, free=("alpha_deg",), pin=("xdot_g", fixed.z[3]), recover=False
+    )
     assert res.converged, res.reason
     assert abs(res.free["alpha_deg"] - ALPHA_DEG) < 1e-7
     assert math.isclose(res.params.to_gait_dict()["alpha_deg"], res.free["alpha_deg"])
@@ -182,8 +184,12 @@ def test_start_that_falls_returns_a_reason(gait):
 
 def test_degenerate_problem_returns_a_reason(gait, fixed):
     """Two freed parameters pinned by the same condition twice: a singular Jacobian."""
-    res = find_fixed_point(gait.params, fixed.z * 1.01, free=("alpha_deg", "kb"),
-                           pin=[("xdot_g", fixed.z[3]), ("xdot_g", fixed.z[3])])  # fmt: skip
+    res = find_fixed_point(
+        gait.params,
+        fixed.z * 1.01,
+        free=("alpha_deg", "kb"),
+        pin=[("xdot_g", fixed.z[3]), ("xdot_g", fixed.z[3])],
+    )
     assert not res.converged
     assert "singular" in res.reason
 
@@ -240,16 +246,38 @@ def test_cli_fixed_point_json(capsys, tmp_path):
     rc = main(["fixed-point", "--gait", "default", "--json"])
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
-    for key in ("z", "residual", "eigenvalues", "emax", "phases", "durations",
-                "strides_to_converge", "converged", "reason"):  # fmt: skip
+    for key in (
+        "z",
+        "residual",
+        "eigenvalues",
+        "emax",
+        "phases",
+        "durations",
+        "strides_to_converge",
+        "converged",
+        "reason",
+    ):
         assert key in out
     assert out["converged"] and out["residual"] <= 1e-10
     assert len(out["z"]) == 6 and abs(out["z"][3] - 2.829) < 1e-3  # paper units
     assert len(out["eigenvalues"]) == 6 and all(len(e) == 2 for e in out["eigenvalues"])
     assert out["phases"] == ["df", "bs", "df", "fs", "df"]
-    rc = main(["fixed-point", "--gait", "default", "--set", "alpha_deg=2.0", "--free",
-               "alpha_deg", "--pin", "xdot_g=2.8290929553434365", "--json",
-               "--save", str(tmp_path / "fp.yaml")])  # fmt: skip
+    rc = main(
+        [
+            "fixed-point",
+            "--gait",
+            "default",
+            "--set",
+            "alpha_deg=2.0",
+            "--free",
+            "alpha_deg",
+            "--pin",
+            "xdot_g=2.8290929553434365",
+            "--json",
+            "--save",
+            str(tmp_path / "fp.yaml"),
+        ]
+    )
     out = json.loads(capsys.readouterr().out)
     assert rc == 0 and abs(out["alpha_deg"] - ALPHA_DEG) < 1e-6
     saved = load_gait(tmp_path / "fp.yaml")
@@ -266,8 +294,20 @@ def test_cli_fixed_point_failure(capsys):
 
 
 def test_cli_continue_writes_and_reuses(capsys, tmp_path):
-    args = ["continue", "--gait", "default", "--param", "kc", "--to", "297", "--step", "1",
-            "--out", str(tmp_path), "--quiet"]  # fmt: skip
+    args = [
+        "continue",
+        "--gait",
+        "default",
+        "--param",
+        "kc",
+        "--to",
+        "297",
+        "--step",
+        "1",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    ]
     assert main(args) == 0
     assert (tmp_path / "branch.png").stat().st_size > 0
     pts = read_branch_csv(tmp_path / "branch.csv", "kc")
@@ -338,6 +378,11 @@ def test_natural_engine_calls_on_stall_and_goes_on_from_its_point(gait, fixed):
     assert len(calls) == 1 and calls[0][:2] == (296.0, 1.0) and "not allowed" in calls[0][2]
     for s, u in pts:
         assert _residual(u, gait.params.with_values(kc=s)) < 1e-10
-    gave_up = natural(path, [(295.0, fixed.z.copy())], 297.5, StepControl(1.0, 1.0, 0.3),
-                      on_stall=lambda *a: "the ladder is exhausted")  # fmt: skip
+    gave_up = natural(
+        path,
+        [(295.0, fixed.z.copy())],
+        297.5,
+        StepControl(1.0, 1.0, 0.3),
+        on_stall=lambda *a: "the ladder is exhausted",
+    )
     assert gave_up.kind == "the ladder is exhausted" and not gave_up.reached

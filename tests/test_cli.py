@@ -35,9 +35,20 @@ def test_stride_defaults_to_z_star_and_returns_to_it(cli, default_gait):
 
 def test_stride_overrides_z_backend_and_repeat(cli):
     code, out, _ = cli(
-        "stride", "--gait", "paper", "--set", "kc=300", "--set", "alpha_deg=2.0",
-        "--z=0.25,0.5,-1,2.83,294,-147", "--repeat", "3", "--backend", "reference", "--json",
-    )  # fmt: skip
+        "stride",
+        "--gait",
+        "paper",
+        "--set",
+        "kc=300",
+        "--set",
+        "alpha_deg=2.0",
+        "--z=0.25,0.5,-1,2.83,294,-147",
+        "--repeat",
+        "3",
+        "--backend",
+        "reference",
+        "--json",
+    )
     d = json.loads(out)
     assert code == 0 and d["repeat"] == 3 and d["backend"] == "reference"
     assert d["z0"] == pytest.approx([0.25, 0.5, -1, 2.83, 294, -147])
@@ -65,8 +76,13 @@ def test_console_script_runs_from_the_venv():
     exe = Path(sys.executable).parent / "bound-env"
     if not exe.exists():
         pytest.skip("console script not installed next to this interpreter")
-    res = subprocess.run([str(exe), "stride", "--gait", "paper", "--json"], cwd=ROOT,
-                         capture_output=True, text=True, timeout=300)
+    res = subprocess.run(
+        [str(exe), "stride", "--gait", "paper", "--json"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr
     assert json.loads(res.stdout)["failure"] is None
 

@@ -56,8 +56,10 @@ def test_progress_flag_and_alias_on_long_commands():
 def test_out_that_is_a_file_is_a_one_line_error(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    assert main(["rollout", "--policy", "passive", "--strides", "1",
-                 "--out", str(blocker / "sub")]) == 2
+    assert (
+        main(["rollout", "--policy", "passive", "--strides", "1", "--out", str(blocker / "sub")])
+        == 2
+    )
     err = capsys.readouterr().err
     assert "not a folder" in err and len(err.strip().splitlines()) == 1
 
@@ -82,25 +84,68 @@ def test_commands_in_a_checkout_change_no_tracked_file(tmp_path):
         ["stride", "--gait", "default", "--json"],
         ["fixed-point", "--json"],
         ["demo", "--gif-strides", "1", "--json"],
-        ["sweep", "--param", "kc", "--from", "295", "--to", "296", "--step", "1", "--refine",
-         "0", "--out", "out/sweep", "--json"],
-        ["continue", "--param", "kc", "--to", "296", "--step", "0.5", "--out", "out/kc",
-         "--json"],
+        [
+            "sweep",
+            "--param",
+            "kc",
+            "--from",
+            "295",
+            "--to",
+            "296",
+            "--step",
+            "1",
+            "--refine",
+            "0",
+            "--out",
+            "out/sweep",
+            "--json",
+        ],
+        ["continue", "--param", "kc", "--to", "296", "--step", "0.5", "--out", "out/kc", "--json"],
         ["animate", "--strides", "1", "--out", "out/a.gif", "--json"],
         ["margins", "--policy", "passive", "--budget", "test", "--workers", "1", "--json"],
         ["rollout", "--policy", "default", "--strides", "2", "--json"],
         ["compare", "--budget", "test", "--workers", "1", "--no-progress", "--json"],
-        ["train", "--name", "t", "--n-timesteps", "256", "--eval-freq", "128", "--save-freq",
-         "128", "--n-eval-episodes", "1", "--vec-env", "dummy", "--no-progress",
-         "--set", "n_envs=1", "--set", "n_steps=128", "--set", "batch_size=64",
-         "--set", "n_epochs=1", "--set", "callback=[]", "--json"],
+        [
+            "train",
+            "--name",
+            "t",
+            "--n-timesteps",
+            "256",
+            "--eval-freq",
+            "128",
+            "--save-freq",
+            "128",
+            "--n-eval-episodes",
+            "1",
+            "--vec-env",
+            "dummy",
+            "--no-progress",
+            "--set",
+            "n_envs=1",
+            "--set",
+            "n_steps=128",
+            "--set",
+            "batch_size=64",
+            "--set",
+            "n_epochs=1",
+            "--set",
+            "callback=[]",
+            "--json",
+        ],
     ]
     for cmd in commands:
-        res = subprocess.run([sys.executable, "-m", "bound_env.cli", *cmd], cwd=repo, env=env,
-                             capture_output=True, text=True, timeout=1200)
+        res = subprocess.run(
+            [sys.executable, "-m", "bound_env.cli", *cmd],
+            cwd=repo,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=1200,
+        )
         assert res.returncode == 0, (cmd, res.stderr[-2000:])
         json.loads(res.stdout, parse_constant=_no_nan)  # --json everywhere, strict JSON
-        status = subprocess.run(["git", "status", "--porcelain"], cwd=repo, check=True,
-                                capture_output=True, text=True).stdout
+        status = subprocess.run(
+            ["git", "status", "--porcelain"], cwd=repo, check=True, capture_output=True, text=True
+        ).stdout
         assert status == "", (cmd, status)
     assert (repo / "out" / "margins" / "MARGINS.md").is_file()  # compare wrote into --out

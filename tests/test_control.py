@@ -151,9 +151,23 @@ def test_bad_specs_get_one_line_errors(tmp_path):
     np.testing.assert_array_equal(ctrl.gain, g)
     # the CLI: one line on stderr, exit code 2
     p = spec("controller: lqr\nbogus: 1\n")
-    r = subprocess.run([sys.executable, "-m", "bound_env.cli", "margins", "--policy", str(p),
-                        "--budget", "test", "--no-cache", "--out", str(tmp_path / "m")],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "bound_env.cli",
+            "margins",
+            "--policy",
+            str(p),
+            "--budget",
+            "test",
+            "--no-cache",
+            "--out",
+            str(tmp_path / "m"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2
     assert r.stderr.strip().count("\n") == 0 and "unknown key 'bogus'" in r.stderr
 
@@ -172,12 +186,37 @@ def test_margins_schema_and_acceptance_numbers(tmp_path):
     basin_min >= 5x passive, emax <= 0.7 (lqr), emax < 0.1 (deadbeat)."""
     res = {}
     for name in ("passive", "lqr", "deadbeat"):
-        r = subprocess.run([sys.executable, "-m", "bound_env.cli", "margins", "--policy", name,
-                            "--budget", "quick", "--json", "--out", str(tmp_path / name)],
-                           capture_output=True, text=True, check=True)
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "bound_env.cli",
+                "margins",
+                "--policy",
+                name,
+                "--budget",
+                "quick",
+                "--json",
+                "--out",
+                str(tmp_path / name),
+            ],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         res[name] = json.loads(r.stdout)
-    for key in ("basin", "basin_min", "basin_curve", "emax", "eigenvalues", "effort",
-                "slope_window_deg", "kc_window", "push", "fixed_point_shift"):
+    for key in (
+        "basin",
+        "basin_min",
+        "basin_curve",
+        "emax",
+        "eigenvalues",
+        "effort",
+        "slope_window_deg",
+        "kc_window",
+        "push",
+        "fixed_point_shift",
+    ):
         assert key in res["lqr"]
     assert res["lqr"]["basin_min"] >= 5 * res["passive"]["basin_min"]
     assert res["lqr"]["emax"] <= 0.7

@@ -18,17 +18,44 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 TOTAL, EVAL, SAVE, N_STEPS = 3072, 256, 512, 128
-SETS = ["n_envs=1", f"n_steps={N_STEPS}", "batch_size=64", "n_epochs=1", "callback=[]",
-        "policy_kwargs=dict(net_arch=dict(pi=[8], vf=[8]))"]
+SETS = [
+    "n_envs=1",
+    f"n_steps={N_STEPS}",
+    "batch_size=64",
+    "n_epochs=1",
+    "callback=[]",
+    "policy_kwargs=dict(net_arch=dict(pi=[8], vf=[8]))",
+]
 
 
 def _cmd(runs: Path, resume: bool = False) -> list[str]:
-    cmd = [sys.executable, "-m", "bound_env.cli", "train", "--name", "k", "--runs-dir",
-           str(runs), "--vec-env", "dummy", "--no-progress"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "bound_env.cli",
+        "train",
+        "--name",
+        "k",
+        "--runs-dir",
+        str(runs),
+        "--vec-env",
+        "dummy",
+        "--no-progress",
+    ]
     if resume:
         return cmd + ["--resume"]
-    cmd += ["--seed", "1", "--n-timesteps", str(TOTAL), "--eval-freq", str(EVAL), "--save-freq",
-            str(SAVE), "--n-eval-episodes", "1"]
+    cmd += [
+        "--seed",
+        "1",
+        "--n-timesteps",
+        str(TOTAL),
+        "--eval-freq",
+        str(EVAL),
+        "--save-freq",
+        str(SAVE),
+        "--n-eval-episodes",
+        "1",
+    ]
     for s in SETS:
         cmd += ["--set", s]
     return cmd
@@ -56,8 +83,13 @@ def test_kill_anywhere_then_resume(tmp_path):
     ckpts = run / "checkpoints"
 
     # 1. killed inside the write of the checkpoint at 1024 steps: model written, stats not
-    proc = subprocess.Popen(_cmd(runs), cwd=tmp_path, stderr=subprocess.PIPE, text=True,
-                            env=_env(BOUND_ENV_TEST_CHECKPOINT_SLEEP="60@1024"))
+    proc = subprocess.Popen(
+        _cmd(runs),
+        cwd=tmp_path,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=_env(BOUND_ENV_TEST_CHECKPOINT_SLEEP="60@1024"),
+    )
     for line in proc.stderr:
         if "[checkpoint hook] 1024 steps" in line:
             break
@@ -71,16 +103,23 @@ def test_kill_anywhere_then_resume(tmp_path):
     for name in ("config.yaml", "run.json"):
         good = (run / name).read_text()
         (run / name).write_text(good[: len(good) // 2])
-        res = subprocess.run(_cmd(runs, resume=True), cwd=tmp_path, capture_output=True,
-                             text=True, env=_env(), timeout=600)
+        res = subprocess.run(
+            _cmd(runs, resume=True),
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            env=_env(),
+            timeout=600,
+        )
         assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
         assert name in res.stderr and len(res.stderr.strip().splitlines()) == 1, res.stderr
         (run / name).write_text(good)
 
     # 2. resumed from the newest complete checkpoint (512), killed at a random moment after
     #    the checkpoint at 2048 steps
-    proc = subprocess.Popen(_cmd(runs, resume=True), cwd=tmp_path, stderr=subprocess.PIPE,
-                            text=True, env=_env())
+    proc = subprocess.Popen(
+        _cmd(runs, resume=True), cwd=tmp_path, stderr=subprocess.PIPE, text=True, env=_env()
+    )
     _wait_for(lambda: (ckpts / "rl_model_2048_steps.json").is_file(), proc)
     time.sleep(np.random.default_rng().uniform(0.0, 0.5))
     proc.send_signal(signal.SIGKILL)
@@ -90,8 +129,14 @@ def test_kill_anywhere_then_resume(tmp_path):
     assert [s["from"] for s in info["sessions"]] == [0, 512]
 
     # 3. resumed again, to the end
-    res = subprocess.run(_cmd(runs, resume=True), cwd=tmp_path, capture_output=True, text=True,
-                         env=_env(), timeout=900)
+    res = subprocess.run(
+        _cmd(runs, resume=True),
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env=_env(),
+        timeout=900,
+    )
     assert res.returncode == 0, res.stderr[-3000:]
 
     info = json.loads((run / "run.json").read_text())

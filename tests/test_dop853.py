@@ -50,37 +50,34 @@ def oscillator_exact(t):
 
 
 E_KEPLER = 0.5
-KEPLER_Y0 = np.array([1.0 - E_KEPLER, 0.0, 0.0,
-                      np.sqrt((1.0 + E_KEPLER) / (1.0 - E_KEPLER))])
+KEPLER_Y0 = np.array([1.0 - E_KEPLER, 0.0, 0.0, np.sqrt((1.0 + E_KEPLER) / (1.0 - E_KEPLER))])
 KEPLER_AUX = np.array([1.0])  # GM = 1, a = 1 -> period 2*pi
 
 # name, rhs, y0, t_end, aux, exact solution at t_end (None if unknown),
 # allowed deviation from it.  Kepler (e = 0.5, one orbit) at tol 1e-12 has a
 # global error of 1.3e-10 in v_x, identical with scipy's DOP853.
 PROBLEMS = [
-    ("oscillator", oscillator, np.array([1.0, 0.0]), 10.0, NO_AUX,
-     oscillator_exact(10.0), 1e-10),
+    ("oscillator", oscillator, np.array([1.0, 0.0]), 10.0, NO_AUX, oscillator_exact(10.0), 1e-10),
     ("kepler", kepler, KEPLER_Y0, 2.0 * np.pi, KEPLER_AUX, KEPLER_Y0, 3e-10),
-    ("van_der_pol", van_der_pol, np.array([2.0, 0.0]), 10.0,
-     np.array([1.0]), None, None),
+    ("van_der_pol", van_der_pol, np.array([2.0, 0.0]), 10.0, np.array([1.0]), None, None),
 ]
 
 
 @pytest.mark.slow  # each right-hand side compiles its own integrator (~5-10 s)
-@pytest.mark.parametrize("name,rhs,y0,t_end,aux,exact,exact_tol", PROBLEMS,
-                         ids=[p[0] for p in PROBLEMS])
-def test_integrate_vs_exact_and_scipy(name, rhs, y0, t_end, aux, exact,
-                                      exact_tol):
+@pytest.mark.parametrize(
+    "name,rhs,y0,t_end,aux,exact,exact_tol", PROBLEMS, ids=[p[0] for p in PROBLEMS]
+)
+def test_integrate_vs_exact_and_scipy(name, rhs, y0, t_end, aux, exact, exact_tol):
     tol = 1e-12
-    y, t, n_steps, n_rej, status = d.make_dop853(rhs).integrate(0.0, y0, t_end, aux,
-                                               tol, tol, 100_000)
+    y, t, n_steps, n_rej, status = d.make_dop853(rhs).integrate(
+        0.0, y0, t_end, aux, tol, tol, 100_000
+    )
     assert status == d.SUCCESS
     assert t == t_end
     if exact is not None:
         np.testing.assert_allclose(y, exact, rtol=0, atol=exact_tol)
 
-    sol = solve_ivp(scipy_rhs(rhs, aux), (0.0, t_end), y0, method="DOP853",
-                    rtol=tol, atol=tol)
+    sol = solve_ivp(scipy_rhs(rhs, aux), (0.0, t_end), y0, method="DOP853", rtol=tol, atol=tol)
     assert sol.success
     np.testing.assert_allclose(y, sol.y[:, -1], rtol=0, atol=1e-9)
 
@@ -95,9 +92,9 @@ def test_integrate_vs_exact_and_scipy(name, rhs, y0, t_end, aux, exact,
 
 @pytest.mark.slow
 def test_backward_integration():
-    y, t, n_steps, _, status = d.make_dop853(oscillator).integrate(3.0,
-                                           oscillator_exact(3.0), -2.0,
-                                           NO_AUX, 1e-12, 1e-12, 100_000)
+    y, t, n_steps, _, status = d.make_dop853(oscillator).integrate(
+        3.0, oscillator_exact(3.0), -2.0, NO_AUX, 1e-12, 1e-12, 100_000
+    )
     assert status == d.SUCCESS and t == -2.0 and n_steps > 0
     np.testing.assert_allclose(y, oscillator_exact(-2.0), rtol=0, atol=1e-10)
 
@@ -105,14 +102,16 @@ def test_backward_integration():
 @pytest.mark.slow
 def test_max_steps_and_step_too_small():
     y0 = np.array([1.0, 0.0])
-    _, t, n_steps, n_rej, status = d.make_dop853(oscillator).integrate(0.0, y0, 1000.0,
-                                               NO_AUX, 1e-12, 1e-12, 20)
+    _, t, n_steps, n_rej, status = d.make_dop853(oscillator).integrate(
+        0.0, y0, 1000.0, NO_AUX, 1e-12, 1e-12, 20
+    )
     assert status == d.MAX_STEPS_EXCEEDED
     assert n_steps + n_rej == 20 and 0.0 < t < 1000.0
 
     # A RHS that turns NaN makes every attempt fail -> h shrinks to the floor.
-    _, t, _, n_rej, status = d.make_dop853(nan_rhs).integrate(0.0, np.zeros(1), 1.0,
-                                         NO_AUX, 1e-8, 1e-8, 100_000)
+    _, t, _, n_rej, status = d.make_dop853(nan_rhs).integrate(
+        0.0, np.zeros(1), 1.0, NO_AUX, 1e-8, 1e-8, 100_000
+    )
     assert status == d.STEP_TOO_SMALL
     assert 0.4 < t <= 0.5 and n_rej > 0
 
@@ -132,10 +131,12 @@ def test_initial_step_matches_scipy():
     y0 = KEPLER_Y0
     fy = np.empty(4)
     kepler(0.0, y0, KEPLER_AUX, fy)
-    h0 = d.make_dop853(kepler).initial_step(0.0, y0, fy, KEPLER_AUX, 1e-9, 1e-9, 1.0,
-                        10.0, np.empty(4), np.empty(4))
-    ref = select_initial_step(scipy_rhs(kepler, KEPLER_AUX), 0.0, y0, 10.0,
-                              np.inf, fy, 1.0, 7, 1e-9, 1e-9)
+    h0 = d.make_dop853(kepler).initial_step(
+        0.0, y0, fy, KEPLER_AUX, 1e-9, 1e-9, 1.0, 10.0, np.empty(4), np.empty(4)
+    )
+    ref = select_initial_step(
+        scipy_rhs(kepler, KEPLER_AUX), 0.0, y0, 10.0, np.inf, fy, 1.0, 7, 1e-9, 1e-9
+    )
     assert h0 == pytest.approx(ref, rel=1e-12)
 
 
@@ -147,8 +148,9 @@ def _controlled_step(rhs, t, y, aux, tol):
     K = np.empty((d.N_STAGES_EXTENDED, n))
     y_new = np.empty(n)
     f_new = np.empty(n)
-    h = d.make_dop853(rhs).initial_step(t, y, fy, aux, tol, tol, 1.0, 100.0,
-                       np.empty(n), np.empty(n))
+    h = d.make_dop853(rhs).initial_step(
+        t, y, fy, aux, tol, tol, 1.0, 100.0, np.empty(n), np.empty(n)
+    )
     for _ in range(20):  # iterate the controller to its equilibrium step
         err = d.make_dop853(rhs).rk_step(t, y, fy, h, aux, tol, tol, K, y_new, f_new)
         h *= min(d.step_factor(err), 1.0 if err >= 1.0 else 2.0)
@@ -176,8 +178,9 @@ def test_dense_output_accuracy_and_endpoints():
     np.testing.assert_allclose(out, y_new, rtol=0, atol=1e-14)
 
     # scipy's DOP853 stepping from the same state with the same first step.
-    solver = DOP853(scipy_rhs(oscillator, NO_AUX), t0, y0, t0 + 10.0,
-                    first_step=h, rtol=tol, atol=tol)
+    solver = DOP853(
+        scipy_rhs(oscillator, NO_AUX), t0, y0, t0 + 10.0, first_step=h, rtol=tol, atol=tol
+    )
     solver.step()
     assert solver.t == pytest.approx(t0 + h, rel=1e-15)
     np.testing.assert_allclose(solver.y, y_new, rtol=0, atol=1e-15)
@@ -201,8 +204,7 @@ def test_dense_output_order():
     oscillator(0.0, y0, NO_AUX, fy)
     errs = []
     for h in (0.8, 0.4, 0.2):
-        d.make_dop853(oscillator).rk_step(0.0, y0, fy, h, NO_AUX, 1e-6, 1e-6, K, y_new,
-                  f_new)
+        d.make_dop853(oscillator).rk_step(0.0, y0, fy, h, NO_AUX, 1e-6, 1e-6, K, y_new, f_new)
         d.make_dop853(oscillator).dense_prepare(0.0, y0, y_new, h, NO_AUX, K, F)
         d.dense_eval(F, y0, 0.0, h, 0.37 * h, out)
         errs.append(np.max(np.abs(out - oscillator_exact(0.37 * h))))
@@ -254,12 +256,12 @@ def test_error_norm_matches_scipy():
     f_new = np.empty(n)
     rtol, atol = 1e-8, 1e-9
     for h in (0.05, 0.2, 0.5):
-        err = d.make_dop853(kepler).rk_step(0.0, y0, fy, h, KEPLER_AUX, rtol, atol, K,
-                        y_new, f_new)
-        solver = DOP853(scipy_rhs(kepler, KEPLER_AUX), 0.0, y0, 10.0,
-                        first_step=h, rtol=rtol, atol=atol)
+        err = d.make_dop853(kepler).rk_step(0.0, y0, fy, h, KEPLER_AUX, rtol, atol, K, y_new, f_new)
+        solver = DOP853(
+            scipy_rhs(kepler, KEPLER_AUX), 0.0, y0, 10.0, first_step=h, rtol=rtol, atol=atol
+        )
         scale = atol + rtol * np.maximum(np.abs(y0), np.abs(y_new))
-        ref = solver._estimate_error_norm(K[:d.N_STAGES + 1], h, scale)
+        ref = solver._estimate_error_norm(K[: d.N_STAGES + 1], h, scale)
         # The estimate is a cancelling sum of stages: agreement ~1e-9 relative.
         assert err == pytest.approx(ref, rel=1e-7)
         np.testing.assert_array_equal(K[d.N_STAGES], f_new)

@@ -105,9 +105,13 @@ def test_stride_timing_and_observation_flags():
 
 
 @pytest.mark.parametrize(
-    "kw", [{}, {"render_mode": "rgb_array", "width": 160, "height": 90},
-           {"exclude_current_positions_from_observation": False}],
-)  # fmt: skip
+    "kw",
+    [
+        {},
+        {"render_mode": "rgb_array", "width": 160, "height": 90},
+        {"exclude_current_positions_from_observation": False},
+    ],
+)
 def test_gymnasium_and_sb3_env_checkers_pass_without_warnings(kw):
     from gymnasium.utils.env_checker import check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env

@@ -50,8 +50,24 @@ def _cases(f):
             (["stride", "--gait", g], "gait file"),
             (["fixed-point", "--gait", g], "gait file"),
             (["animate", "--gait", g, "--out", f["dir"] + "/x.gif"], "gait file"),
-            (["sweep", "--gait", g, "--param", "kc", "--from", "290", "--to", "291", "--step",
-              "1", "--out", f["dir"] + "/s"], "gait file"),
+            (
+                [
+                    "sweep",
+                    "--gait",
+                    g,
+                    "--param",
+                    "kc",
+                    "--from",
+                    "290",
+                    "--to",
+                    "291",
+                    "--step",
+                    "1",
+                    "--out",
+                    f["dir"] + "/s",
+                ],
+                "gait file",
+            ),
             (["rollout", "--policy", "passive", "--gait", g, "--strides", "1"], "gait file"),
         ]
     cases += [
@@ -67,16 +83,74 @@ def _cases(f):
         (["fixed-point", "--max-iter", "-1"], "--max-iter"),
         (["continue", "--param", "kc", "--to", "inf", "--out", f["dir"] + "/c"], "--to"),
         (["continue", "--param", "kc", "--to", "300", "--step", "0", "--out", f["dir"]], "--step"),
-        (["continue", "--param", "kc", "--to", "300", "--max-points", "0", "--out", f["dir"]],
-         "--max-points"),
-        (["sweep", "--param", "kc", "--from", "290", "--to", "300", "--step", "1e-12", "--out",
-          f["dir"] + "/s"], "points"),
-        (["sweep", "--param", "kc", "--from", "300", "--to", "290", "--step", "1", "--out",
-          f["dir"] + "/s"], "--from"),
-        (["sweep", "--param", "kc", "--from", "290", "--to", "300", "--step", "0", "--out",
-          f["dir"] + "/s"], "--step"),
-        (["sweep", "--param", "kc", "--from", "290", "--to", "291", "--step", "1", "--out",
-          f["file"]], "not a folder"),
+        (
+            ["continue", "--param", "kc", "--to", "300", "--max-points", "0", "--out", f["dir"]],
+            "--max-points",
+        ),
+        (
+            [
+                "sweep",
+                "--param",
+                "kc",
+                "--from",
+                "290",
+                "--to",
+                "300",
+                "--step",
+                "1e-12",
+                "--out",
+                f["dir"] + "/s",
+            ],
+            "points",
+        ),
+        (
+            [
+                "sweep",
+                "--param",
+                "kc",
+                "--from",
+                "300",
+                "--to",
+                "290",
+                "--step",
+                "1",
+                "--out",
+                f["dir"] + "/s",
+            ],
+            "--from",
+        ),
+        (
+            [
+                "sweep",
+                "--param",
+                "kc",
+                "--from",
+                "290",
+                "--to",
+                "300",
+                "--step",
+                "0",
+                "--out",
+                f["dir"] + "/s",
+            ],
+            "--step",
+        ),
+        (
+            [
+                "sweep",
+                "--param",
+                "kc",
+                "--from",
+                "290",
+                "--to",
+                "291",
+                "--step",
+                "1",
+                "--out",
+                f["file"],
+            ],
+            "not a folder",
+        ),
         (["continue", "--param", "kc", "--to", "296", "--out", f["file"]], "not a folder"),
         (["animate", "--strides", "0"], "--strides"),
         (["animate", "--strides", "inf"], "--strides"),
@@ -91,11 +165,25 @@ def _cases(f):
         (["rollout", "--policy", "passive", "--strides", "1", "--video", "x.avi"], "--video"),
         (["margins", "--workers", "0"], "--workers"),
         (["margins", "--budget", "huge"], "--budget"),
-        (["margins", "--policy", "passive", "--budget", "test", "--out", f["file"]],
-         "not a folder"),
+        (
+            ["margins", "--policy", "passive", "--budget", "test", "--out", f["file"]],
+            "not a folder",
+        ),
         (["train", "--n-timesteps", "inf"], "--n-timesteps"),
-        (["train", "--name", "x", "--runs-dir", f["dir"] + "/r", "--n-timesteps", "64",
-          "--set", "not_a_hyperparameter=1"], "not_a_hyperparameter"),
+        (
+            [
+                "train",
+                "--name",
+                "x",
+                "--runs-dir",
+                f["dir"] + "/r",
+                "--n-timesteps",
+                "64",
+                "--set",
+                "not_a_hyperparameter=1",
+            ],
+            "not_a_hyperparameter",
+        ),
         (["train", "--name", "nope", "--runs-dir", f["dir"] + "/r", "--resume"], "--resume"),
         (["compare", "--workers", "0"], "--workers"),
         (["reproduce"], "--out"),
@@ -144,16 +232,19 @@ def test_fold_is_a_result_exit_0(tmp_path, capsys, monkeypatch):
     from bound_env.analysis import continuation
 
     point = SimpleNamespace(value=303.0, fold=True, pd=False, ns=False)
-    folded = SimpleNamespace(points=[point], reason="fold: a real eigenvalue reached +1",
-                             reached=False)
+    folded = SimpleNamespace(
+        points=[point], reason="fold: a real eigenvalue reached +1", reached=False
+    )
     monkeypatch.setattr(continuation, "continue_branch", lambda *a, **k: folded)
     monkeypatch.setattr(continuation, "plot_branch", lambda *a, **k: None)
     argv = ["continue", "--param", "kc", "--to", "305", "--out", str(tmp_path)]
     assert main(argv) == 0
     assert "fold" in capsys.readouterr().out
-    monkeypatch.setattr(continuation, "continue_branch",
-                        lambda *a, **k: SimpleNamespace(points=[], reason="no fixed point",
-                                                        reached=False))
+    monkeypatch.setattr(
+        continuation,
+        "continue_branch",
+        lambda *a, **k: SimpleNamespace(points=[], reason="no fixed point", reached=False),
+    )
     assert main(argv) == 1
 
 
@@ -173,15 +264,29 @@ def env():
     e.close()
 
 
-@pytest.mark.parametrize("action", [None, np.array([1 + 2j]), 1 + 0j, "0.5", [np.nan],
-                                    np.array([np.inf]), np.zeros(2), [[0.1, 0.2]], object()])
+@pytest.mark.parametrize(
+    "action",
+    [
+        None,
+        np.array([1 + 2j]),
+        1 + 0j,
+        "0.5",
+        [np.nan],
+        np.array([np.inf]),
+        np.zeros(2),
+        [[0.1, 0.2]],
+        object(),
+    ],
+)
 def test_env_step_rejects_bad_actions(env, action):
     with pytest.raises(ValueError, match="action"):
         env.step(action)
 
 
-@pytest.mark.parametrize("z", [np.zeros((2, 3)), np.ones((6, 1)), [1.0] * 5, ["a"] * 6,
-                               [np.nan] * 6, np.ones(6) * (1 + 1j)])
+@pytest.mark.parametrize(
+    "z",
+    [np.zeros((2, 3)), np.ones((6, 1)), [1.0] * 5, ["a"] * 6, [np.nan] * 6, np.ones(6) * (1 + 1j)],
+)
 def test_env_reset_rejects_bad_apex_states(env, z):
     with pytest.raises(ValueError, match="apex_state"):
         env.reset(options={"apex_state": z})

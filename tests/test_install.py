@@ -22,8 +22,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-_ANYWHERE = shutil.ignore_patterns(".git", "__pycache__", "*.egg-info", "*.nbi", "*.nbc",
-                                   "*.pyc", ".pytest_cache", ".ruff_cache")
+_ANYWHERE = shutil.ignore_patterns(
+    ".git", "__pycache__", "*.egg-info", "*.nbi", "*.nbc", "*.pyc", ".pytest_cache", ".ruff_cache"
+)
 _TOP = {".venv", "out", "runs", "build", "dist", "reproduce"}  # outputs at the top level only
 
 
@@ -32,6 +33,8 @@ def _SKIP(folder, names):
     package may be called ``reproduce`` too)."""
     top = {n for n in names if n in _TOP} if Path(folder) == ROOT else set()
     return set(_ANYWHERE(folder, names)) | top
+
+
 # site-packages entries of this project itself (an editable install), hidden from the fresh venv
 _OWN = ("bound_env", "agents", "__editable__", "_bound_env", "__pycache__")
 
@@ -50,16 +53,24 @@ def installed(tmp_path_factory):
     shutil.copytree(ROOT, src, ignore=_SKIP)
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR")}
     # sdist first, then the wheel built from the sdist: both must be complete
-    _run([sys.executable, "-m", "build", "--no-isolation", "-o", str(tmp / "dist"), str(src)],
-         cwd=tmp, env=env)
+    _run(
+        [sys.executable, "-m", "build", "--no-isolation", "-o", str(tmp / "dist"), str(src)],
+        cwd=tmp,
+        env=env,
+    )
     wheel = next((tmp / "dist").glob("*.whl"))
     sdist = next((tmp / "dist").glob("*.tar.gz"))
     venv = tmp / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
     py = venv / "bin" / "python"
-    site = Path(subprocess.run([str(py), "-c", "import sysconfig;print(sysconfig.get_paths()"
-                                "['purelib'])"], capture_output=True, text=True,
-                               check=True).stdout.strip())
+    site = Path(
+        subprocess.run(
+            [str(py), "-c", "import sysconfig;print(sysconfig.get_paths()['purelib'])"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    )
     # the dependencies, without this project's own (editable) install and its metadata
     deps = tmp / "deps"
     deps.mkdir()
@@ -68,23 +79,38 @@ def installed(tmp_path_factory):
             if not item.name.startswith(_OWN) and not (deps / item.name).exists():
                 (deps / item.name).symlink_to(item)
     (site / "_bound_env_test_deps.pth").write_text(f"{deps}\n")
-    _run([str(py), "-m", "pip", "install", "--no-deps", "--no-index", "-q", str(wheel)],
-         cwd=tmp, env=env)
+    _run(
+        [str(py), "-m", "pip", "install", "--no-deps", "--no-index", "-q", str(wheel)],
+        cwd=tmp,
+        env=env,
+    )
     work = tmp / "elsewhere"
     work.mkdir()
     env["XDG_CACHE_HOME"] = str(tmp / "cache")
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
-    return {"tmp": tmp, "wheel": wheel, "sdist": sdist, "py": str(py), "site": site,
-            "cwd": work, "env": env, "exe": str(venv / "bin" / "bound-env")}
+    return {
+        "tmp": tmp,
+        "wheel": wheel,
+        "sdist": sdist,
+        "py": str(py),
+        "site": site,
+        "cwd": work,
+        "env": env,
+        "exe": str(venv / "bin" / "bound-env"),
+    }
 
 
 @pytest.mark.slow
 def test_wheel_and_sdist_hold_data_and_license(installed):
     names = zipfile.ZipFile(installed["wheel"]).namelist()
-    for want in ("bound_env/configs/ppo.yaml", "bound_env/configs/gaits/default.yaml",
-                 "bound_env/configs/gaits/literal-cycle.yaml",
-                 "agents/policies/default/model.zip", "agents/policies/default/vecnormalize.pkl",
-                 "agents/policies/literal-cycle/config.yaml"):
+    for want in (
+        "bound_env/configs/ppo.yaml",
+        "bound_env/configs/gaits/default.yaml",
+        "bound_env/configs/gaits/literal-cycle.yaml",
+        "agents/policies/default/model.zip",
+        "agents/policies/default/vecnormalize.pkl",
+        "agents/policies/literal-cycle/config.yaml",
+    ):
         assert want in names, want
     assert any(n.endswith("licenses/LICENSE") for n in names)
     # every module of the checkout is in the wheel (a new subpackage cannot be left out)
@@ -93,8 +119,14 @@ def test_wheel_and_sdist_hold_data_and_license(installed):
             assert f.relative_to(ROOT).as_posix() in names, f
     with tarfile.open(installed["sdist"]) as t:
         members = {m.split("/", 1)[1] for m in t.getnames() if "/" in m}
-    for want in ("LICENSE", "configs/ppo.yaml", "configs/gaits/paper.yaml",
-                 "agents/policies/default/model.zip", "setup.py", "pyproject.toml"):
+    for want in (
+        "LICENSE",
+        "configs/ppo.yaml",
+        "configs/gaits/paper.yaml",
+        "agents/policies/default/model.zip",
+        "setup.py",
+        "pyproject.toml",
+    ):
         assert want in members, want
 
 
@@ -121,18 +153,29 @@ def test_installed_package_runs_outside_the_checkout(installed):
         assert Path(got[i][0]).resolve().is_relative_to(site.resolve())
         assert got[i][1] and not got[i][2]
 
-    stride = json.loads(_run([installed["exe"], "stride", "--gait", "default", "--json"],
-                             cwd=cwd, env=env))
+    stride = json.loads(
+        _run([installed["exe"], "stride", "--gait", "default", "--json"], cwd=cwd, env=env)
+    )
     assert stride["failure"] is None and stride["z1"] is not None
 
-    margins = json.loads(_run([installed["exe"], "margins", "--policy", "passive", "--budget",
-                               "quick", "--json"], cwd=cwd, env=env))
+    margins = json.loads(
+        _run(
+            [installed["exe"], "margins", "--policy", "passive", "--budget", "quick", "--json"],
+            cwd=cwd,
+            env=env,
+        )
+    )
     assert 0.8 < margins["emax"] < 0.95  # the passive gait's e_max is 0.878 (README)
     assert (cwd / "out" / "margins" / "passive" / "margins.json").is_file()
 
     # the acceptance run of the shipped policy: 50 strides, no fall, its mean |tau|
-    r = json.loads(_run([installed["exe"], "rollout", "--policy", "default", "--strides", "50",
-                         "--json"], cwd=cwd, env=env))
+    r = json.loads(
+        _run(
+            [installed["exe"], "rollout", "--policy", "default", "--strides", "50", "--json"],
+            cwd=cwd,
+            env=env,
+        )
+    )
     assert r["strides"] == 50 and r["fell"] is False and r["failure"] is None
     assert r["max_torque"] == 80.0 and 0.0 < r["mean_abs_tau"] < 80.0
     assert (cwd / "out" / "rollout" / "default" / "summary.json").is_file()

@@ -98,8 +98,10 @@ def test_the_walker_sees_deferred_and_string_imports():
 
 def test_nothing_in_bound_env_imports_agents():
     _, imports, _ = _graph()
-    offenders = {m: sorted(n for n in names if n == "agents" or n.startswith("agents."))
-                 for m, names in imports.items()}
+    offenders = {
+        m: sorted(n for n in names if n == "agents" or n.startswith("agents."))
+        for m, names in imports.items()
+    }
     assert {m: v for m, v in offenders.items() if v} == {}
 
 
@@ -144,8 +146,12 @@ def test_flat_array_layouts_are_contiguous_and_exported():
     import bound_env.task as task
     from bound_env.layout import Layout
 
-    for module, layout in ((params, params.PARAM_LAYOUT), (params, params.AUX_LAYOUT),
-                           (task, task.STATE_LAYOUT), (task, task.CONFIG_LAYOUT)):
+    for module, layout in (
+        (params, params.PARAM_LAYOUT),
+        (params, params.AUX_LAYOUT),
+        (task, task.STATE_LAYOUT),
+        (task, task.CONFIG_LAYOUT),
+    ):
         ns = layout.ns
         offsets = [getattr(ns, n) for n in layout.names]
         assert offsets[0] == layout.start and offsets == sorted(set(offsets))
@@ -158,4 +164,3 @@ def test_flat_array_layouts_are_contiguous_and_exported():
     assert wide.constants() == {"X_A": 2, "X_B": 3, "X_C": 6, "N_X": 7}
     with pytest.raises(ValueError, match="unique"):
         Layout("X_", ("a", "A"), "N_X")
-

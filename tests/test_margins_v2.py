@@ -81,8 +81,9 @@ def test_validation_directions_are_disjoint_from_the_test_set():
     for t in test + [axes]:
         cos = unit(val) @ unit(t).T
         assert np.max(np.abs(cos)) < 0.999  # no validation direction parallel to a test one
-    assert np.array_equal(random_directions(4, seed=CURVE_SEED),
-                          random_directions(4))  # the test set is the default
+    assert np.array_equal(
+        random_directions(4, seed=CURVE_SEED), random_directions(4)
+    )  # the test set is the default
 
 
 class Proportional:
@@ -119,8 +120,15 @@ def test_passive_theta1_basin_is_no_longer_capped_at_one():
 
     z = np.asarray(load_gait("default").z0)
     b = replace(BUDGETS["test"], basin_strides=300)  # e_max 0.878: ~100 strides to return
-    setup = Setup(controller=ZeroController(), gait="default", budget=b, z_star=z, z_cl=z,
-                  key="t-theta1", period=0.39)
+    setup = Setup(
+        controller=ZeroController(),
+        gait="default",
+        budget=b,
+        z_star=z,
+        z_cl=z,
+        key="t-theta1",
+        period=0.39,
+    )
     r = run_task(setup, "basin", (1, 1))
     assert r["rel"] > 1.0 and not r["capped"]  # theta1 grows past |z*_theta1|
     assert r["cap_reason"] == "numeric cap" and r["beyond"]["rel"] > r["rel"]
@@ -140,7 +148,10 @@ def test_every_setting_is_in_the_cache_key(monkeypatch):
 
 def test_compare_entries_take_several_policies():
     assert parse_entry("learned=runs/s0,runs/s1,runs/s2") == (
-        "learned", ["runs/s0", "runs/s1", "runs/s2"], "default")
+        "learned",
+        ["runs/s0", "runs/s1", "runs/s2"],
+        "default",
+    )
     assert parse_entry("lit=a,b@literal-cycle") == ("lit", ["a", "b"], "literal-cycle")
     assert parse_entry("p=passive") == ("p", ["passive"], "default")
     for bad in ("nolabel", "x=", "=a"):

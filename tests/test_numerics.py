@@ -59,8 +59,9 @@ def test_newton_solves_a_fixed_point_and_reports_failures():
 
 def test_map_fixed_point_and_its_multipliers():
     a, b, z_fix = _linear_map(2)
-    z, res, jac = map_fixed_point(lambda z: a @ z + b, z_fix + 0.5, np.full(4, 1e-4),
-                                  settle=2, newton_iters=4)  # fmt: skip
+    z, res, jac = map_fixed_point(
+        lambda z: a @ z + b, z_fix + 0.5, np.full(4, 1e-4), settle=2, newton_iters=4
+    )
     assert res < 1e-11 and np.allclose(z, z_fix, atol=1e-10)
     lam = sorted_eigenvalues(jac)
     assert np.allclose(np.sort_complex(lam), np.sort_complex(np.linalg.eigvals(a)), atol=1e-8)

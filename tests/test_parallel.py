@@ -59,8 +59,7 @@ def test_missing_dask_is_a_one_line_error(monkeypatch, capsys):
 def test_a_failing_task_is_reported_and_the_others_finish(workers, capsys):
     tasks = {f"div-{d}": (operator.truediv, (1.0, d)) for d in (1, 2, 0, 4)}
     with open_pool(None, workers) as pool:
-        assert isinstance(pool.executor, SerialExecutor if workers == 1 else
-                          cf.ProcessPoolExecutor)
+        assert isinstance(pool.executor, SerialExecutor if workers == 1 else cf.ProcessPoolExecutor)
         done, failures = run_tasks(pool.executor, tasks, desc="div")
     assert done == {"div-1": 1.0, "div-2": 0.5, "div-4": 0.25}
     assert [f.key for f in failures] == ["div-0"] and failures[0].args == (1.0, 0)
@@ -80,16 +79,28 @@ def free_port() -> int:
 
 def spawn(args, log: Path) -> subprocess.Popen:
     """A process in its own process group (so that it and its children can be killed)."""
-    return subprocess.Popen(args, stdout=log.open("w"), stderr=subprocess.STDOUT, env=ENV,
-                            cwd=ROOT, start_new_session=True)
+    return subprocess.Popen(
+        args,
+        stdout=log.open("w"),
+        stderr=subprocess.STDOUT,
+        env=ENV,
+        cwd=ROOT,
+        start_new_session=True,
+    )
 
 
 def run(argv, timeout=TIMEOUT_S, cwd=ROOT) -> subprocess.CompletedProcess:
     """Run a command in its own process group; the whole group (pool workers, a
     LocalCluster's processes) is killed afterwards, also on a timeout."""
-    p = subprocess.Popen([str(a) for a in argv], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=ENV, cwd=cwd,
-                         start_new_session=True)
+    p = subprocess.Popen(
+        [str(a) for a in argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=ENV,
+        cwd=cwd,
+        start_new_session=True,
+    )
     try:
         out, err = p.communicate(timeout=timeout)
     finally:
@@ -119,14 +130,41 @@ def dask_cluster(tmp_path: Path, n_workers: int = 2):
     address = f"tcp://127.0.0.1:{port}"
     procs = []
     try:
-        procs.append(spawn([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port",
-                            str(port), "--dashboard-address", ":0", "--no-show"],
-                           tmp_path / "scheduler.log"))
+        procs.append(
+            spawn(
+                [
+                    str(BIN / "dask"),
+                    "scheduler",
+                    "--host",
+                    "127.0.0.1",
+                    "--port",
+                    str(port),
+                    "--dashboard-address",
+                    ":0",
+                    "--no-show",
+                ],
+                tmp_path / "scheduler.log",
+            )
+        )
         workers = []
         for k in range(n_workers):
-            w = spawn([str(BIN / "dask"), "worker", address, "--host", "127.0.0.1",
-                       "--nthreads", "1", "--no-nanny", "--name", f"w{k}",
-                       "--death-timeout", "60"], tmp_path / f"worker{k}.log")
+            w = spawn(
+                [
+                    str(BIN / "dask"),
+                    "worker",
+                    address,
+                    "--host",
+                    "127.0.0.1",
+                    "--nthreads",
+                    "1",
+                    "--no-nanny",
+                    "--name",
+                    f"w{k}",
+                    "--death-timeout",
+                    "60",
+                ],
+                tmp_path / f"worker{k}.log",
+            )
             procs.append(w)
             workers.append(w)
         with Client(address, timeout="60s") as c:
@@ -150,8 +188,20 @@ def assert_same_map(a: Path, b: Path) -> None:
 
 
 def basin_cli(out: Path, *extra) -> subprocess.CompletedProcess:
-    return run([BIN / "bound-env", "basin-map", "--grid", "12", "--chunk", "12", "--out", out,
-                "--json", *extra])
+    return run(
+        [
+            BIN / "bound-env",
+            "basin-map",
+            "--grid",
+            "12",
+            "--chunk",
+            "12",
+            "--out",
+            out,
+            "--json",
+            *extra,
+        ]
+    )
 
 
 # -- the basin atlas -----------------------------------------------------------------------------
@@ -166,9 +216,13 @@ def test_passive_batch_is_the_iterated_passive_map():
 
     g = load_gait("default")
     zs = np.asarray(g.z0)
-    spec = BasinSpec(axes=(3, 0), values=(zs[3] + np.array([-0.3, -0.03, 0.0, 0.05]),
-                                          zs[0] + np.array([0.0, 0.01])),
-                     z_slice=zs, z_target=zs, max_strides=60)
+    spec = BasinSpec(
+        axes=(3, 0),
+        values=(zs[3] + np.array([-0.3, -0.03, 0.0, 0.05]), zs[0] + np.array([0.0, 0.01])),
+        z_slice=zs,
+        z_target=zs,
+        max_strides=60,
+    )
     res = run_chunk(spec, 0)
     outcomes = set()
     for k, z0 in enumerate(spec.starts()):
@@ -176,8 +230,11 @@ def test_passive_batch_is_the_iterated_passive_map():
         for n in range(1, 61):
             r = simulate_stride(z, g.params)
             if r.failure:
-                assert (res["outcome"][k], REASONS[res["reason"][k]], res["strides"][k]) == \
-                    (FELL, r.failure, n)
+                assert (res["outcome"][k], REASONS[res["reason"][k]], res["strides"][k]) == (
+                    FELL,
+                    r.failure,
+                    n,
+                )
                 break
             z = r.z1
             if np.max(np.abs(z - zs)) < 1e-4:
@@ -200,8 +257,9 @@ def test_zero_action_through_the_vector_kernel_matches_the_passive_map():
     zs = np.asarray(load_gait("default").z0)
     vals = (zs[3] + np.linspace(-0.25, 0.25, 6), zs[0] + np.linspace(-0.02, 0.02, 5))
     passive = run_chunk(BasinSpec((3, 0), vals, zs, zs, max_strides=80, chunk=30), 0)
-    zero = run_chunk(BasinSpec((3, 0), vals, zs, zs, controller=ZeroController(),
-                               max_strides=80, chunk=30), 0)
+    zero = run_chunk(
+        BasinSpec((3, 0), vals, zs, zs, controller=ZeroController(), max_strides=80, chunk=30), 0
+    )
     same = passive["outcome"] == zero["outcome"]
     assert same.mean() >= 0.9, (passive["outcome"], zero["outcome"])
     both = same & (passive["outcome"] == 0)
@@ -212,8 +270,25 @@ def test_zero_action_through_the_vector_kernel_matches_the_passive_map():
 @pytest.mark.slow
 def test_basin_map_files_resume_and_bad_input(tmp_path, capsys):
     out = tmp_path / "b"
-    assert main(["basin-map", "--grid", "6", "--chunk", "9", "--workers", "1", "--out", str(out),
-                 "--json", "--axes", "theta1,theta1dot"]) == 0
+    assert (
+        main(
+            [
+                "basin-map",
+                "--grid",
+                "6",
+                "--chunk",
+                "9",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+                "--json",
+                "--axes",
+                "theta1,theta1dot",
+            ]
+        )
+        == 0
+    )
     s = json.loads(capsys.readouterr().out)
     a = npz_arrays(out / "basin.npz")
     assert a["outcome"].shape == (6, 6) and list(a["axes"]) == ["theta1", "theta1dot"]
@@ -226,17 +301,53 @@ def test_basin_map_files_resume_and_bad_input(tmp_path, capsys):
     # a lost chunk is recomputed, the others are read back: the same map
     chunks[1].unlink()
     mtimes = {p: p.stat().st_mtime_ns for p in chunks if p.exists()}
-    assert main(["basin-map", "--grid", "6", "--chunk", "9", "--workers", "1", "--out",
-                 str(tmp_path / "b2"), "--axes", "theta1,theta1dot"]) == 0
+    assert (
+        main(
+            [
+                "basin-map",
+                "--grid",
+                "6",
+                "--chunk",
+                "9",
+                "--workers",
+                "1",
+                "--out",
+                str(tmp_path / "b2"),
+                "--axes",
+                "theta1,theta1dot",
+            ]
+        )
+        == 0
+    )
     os.replace(tmp_path / "b2" / "basin.npz", tmp_path / "ref.npz")
     capsys.readouterr()
-    assert main(["basin-map", "--grid", "6", "--chunk", "9", "--workers", "1", "--out", str(out),
-                 "--axes", "theta1,theta1dot"]) == 0
+    assert (
+        main(
+            [
+                "basin-map",
+                "--grid",
+                "6",
+                "--chunk",
+                "9",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+                "--axes",
+                "theta1,theta1dot",
+            ]
+        )
+        == 0
+    )
     assert all(p.stat().st_mtime_ns == t for p, t in mtimes.items())
     assert chunks[1].exists()
     assert_same_map(out / "basin.npz", tmp_path / "ref.npz")
-    for argv, word in ((["--axes", "xdot_g"], "--axes"), (["--axes", "y_g,y_g"], "--axes"),
-                       (["--range", "1,0,0,1"], "--range"), (["--grid", "1"], "--grid")):
+    for argv, word in (
+        (["--axes", "xdot_g"], "--axes"),
+        (["--axes", "y_g,y_g"], "--axes"),
+        (["--range", "1,0,0,1"], "--range"),
+        (["--grid", "1"], "--grid"),
+    ):
         assert main(["basin-map", "--out", str(tmp_path / "x"), *argv]) == 2
         assert word in capsys.readouterr().err
 
@@ -252,8 +363,20 @@ def test_local_cluster_margins_equal_the_serial_run(tmp_path):
     pytest.importorskip("distributed")
     runs = {}
     for name, extra in (("serial", ["--workers", "1"]), ("dask", ["--scheduler", "local:2"])):
-        p = run([BIN / "bound-env", "margins", "--policy", "passive", "--budget", "test",
-                 "--out", tmp_path / name, "--json", *extra])
+        p = run(
+            [
+                BIN / "bound-env",
+                "margins",
+                "--policy",
+                "passive",
+                "--budget",
+                "test",
+                "--out",
+                tmp_path / name,
+                "--json",
+                *extra,
+            ]
+        )
         assert p.returncode == 0, p.stderr
         runs[name] = json.loads(p.stdout)
         runs[name].pop("seconds")
@@ -273,13 +396,25 @@ def test_remote_scheduler_basin_map_equals_the_process_pool(tmp_path):
         assert_same_map(tmp_path / "pool" / "basin.npz", tmp_path / "dask" / "basin.npz")
         # again, killing worker 0 once the first chunk is in
         out = tmp_path / "killed"
-        client = spawn([str(BIN / "bound-env"), "basin-map", "--grid", "12", "--chunk", "12",
-                        "--out", str(out), "--no-overlay", "--scheduler", address],
-                       tmp_path / "client.log")
+        client = spawn(
+            [
+                str(BIN / "bound-env"),
+                "basin-map",
+                "--grid",
+                "12",
+                "--chunk",
+                "12",
+                "--out",
+                str(out),
+                "--no-overlay",
+                "--scheduler",
+                address,
+            ],
+            tmp_path / "client.log",
+        )
         try:
             t0 = time.monotonic()
-            while not list((out / "chunks").glob("*.npz")) if (out / "chunks").exists() \
-                    else True:
+            while not list((out / "chunks").glob("*.npz")) if (out / "chunks").exists() else True:
                 assert client.poll() is None, (tmp_path / "client.log").read_text()
                 assert time.monotonic() - t0 < TIMEOUT_S
                 time.sleep(0.05)
@@ -299,8 +434,17 @@ def test_killed_client_resumes_with_the_missing_tasks_only(tmp_path):
     pytest.importorskip("distributed")
     out = tmp_path / "m"
     cache = out / "cache.jsonl"
-    argv = [str(BIN / "bound-env"), "margins", "--policy", "passive", "--budget", "test",
-            "--out", str(out), "--json"]
+    argv = [
+        str(BIN / "bound-env"),
+        "margins",
+        "--policy",
+        "passive",
+        "--budget",
+        "test",
+        "--out",
+        str(out),
+        "--json",
+    ]
     client = spawn(argv + ["--scheduler", "local:2"], tmp_path / "client.log")
     try:
         t0 = time.monotonic()
@@ -315,14 +459,17 @@ def test_killed_client_resumes_with_the_missing_tasks_only(tmp_path):
     r = run(argv + ["--workers", "2"])
     assert r.returncode == 0, r.stderr
     after = [json.loads(line)["key"] for line in cache.read_text().splitlines() if line.strip()]
-    assert after[:len(keys_before)] == keys_before
+    assert after[: len(keys_before)] == keys_before
     assert len(after) == len(set(after)), "a cached task ran again"
     full = run(argv[:-3] + ["--out", tmp_path / "full", "--json", "--workers", "2"])
     a, b = json.loads(r.stdout), json.loads(full.stdout)
     a.pop("seconds"), b.pop("seconds")
     assert a == b
-    full_keys = [json.loads(line)["key"] for line in
-                 (tmp_path / "full" / "cache.jsonl").read_text().splitlines() if line.strip()]
+    full_keys = [
+        json.loads(line)["key"]
+        for line in (tmp_path / "full" / "cache.jsonl").read_text().splitlines()
+        if line.strip()
+    ]
     assert sorted(after) == sorted(full_keys)
 
 
@@ -353,8 +500,12 @@ def test_sweep_directions_as_two_tasks_give_the_serial_sweep():
     assert [p.value for p in serial.points] == [p.value for p in par.points]
     assert len(serial.points) == 5  # the base value too
     for a, b in zip(serial.points, par.points, strict=True):
-        assert (a.converged, a.error, a.emax, a.failure) == (b.converged, b.error, b.emax,
-                                                               b.failure)
+        assert (a.converged, a.error, a.emax, a.failure) == (
+            b.converged,
+            b.error,
+            b.emax,
+            b.failure,
+        )
         assert np.array_equal(a.z, b.z)
 
 
@@ -363,12 +514,39 @@ def test_multi_seed_training_on_a_local_cluster_ends_with_compare(tmp_path):
     """``train --seeds 0,1 --scheduler local:2`` with a tiny budget: one run per seed, sent
     back as bytes, then the compare page over both seeds."""
     pytest.importorskip("distributed")
-    sets = ["n_envs=2", "n_steps=256", "batch_size=128", "n_epochs=1",
-            "policy_kwargs=dict(net_arch=dict(pi=[16], vf=[16]))", "callback=[]"]
-    argv = [str(BIN / "bound-env"), "train", "--seeds", "0,1", "--scheduler", "local:2",
-            "--name", "tiny", "--n-timesteps", "2048", "--runs-dir", str(tmp_path / "runs"),
-            "--runs-transfer", "bytes", "--compare-budget", "test", "--eval-freq", "1024",
-            "--n-eval-episodes", "1", "--save-freq", "1024", "--no-progress"]
+    sets = [
+        "n_envs=2",
+        "n_steps=256",
+        "batch_size=128",
+        "n_epochs=1",
+        "policy_kwargs=dict(net_arch=dict(pi=[16], vf=[16]))",
+        "callback=[]",
+    ]
+    argv = [
+        str(BIN / "bound-env"),
+        "train",
+        "--seeds",
+        "0,1",
+        "--scheduler",
+        "local:2",
+        "--name",
+        "tiny",
+        "--n-timesteps",
+        "2048",
+        "--runs-dir",
+        str(tmp_path / "runs"),
+        "--runs-transfer",
+        "bytes",
+        "--compare-budget",
+        "test",
+        "--eval-freq",
+        "1024",
+        "--n-eval-episodes",
+        "1",
+        "--save-freq",
+        "1024",
+        "--no-progress",
+    ]
     for s in sets:
         argv += ["--set", s]
     r = run(argv, timeout=3 * TIMEOUT_S, cwd=tmp_path)

@@ -21,7 +21,7 @@ from bound_env.render import (
     save_gif,
     slope_to_pixel,
     spring_points,
-)  # fmt: skip
+)
 
 W, H, METERS = 640, 360, 1.6
 SCALE = W / METERS  # pixels per metre

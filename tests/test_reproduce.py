@@ -17,16 +17,34 @@ from bound_env.params import load_gait, z_to_paper
 pytestmark = pytest.mark.slow  # the quick reproduction run takes ~20 s (idle)
 
 REQUIRED_ROWS = (
-    "z*: y_g", "z*: θ1", "z*: θ2", "z*: ẋ_g", "z*: θ̇1", "z*: θ̇2",
-    "e_max at the published gait", "strides to converge", "stable α window",
-    "stable kc window", "bs→df and df→fs interval", "damping constant from ζ",
-    "gait type at and beyond the windows", "spine bends per stride",
-    "body vibration amplitude", "α = 1.93 (text) vs 1.9343",
-    "the stiff-spine branch reaches the published gait", "e_max close to 1 at large kc",
-)  # fmt: skip
-FIGURES = ("fig3_fixed_points_vs_kc", "fig4_parameters_vs_kc", "fig5_periodic_solution",
-           "fig6_convergence", "fig7_emax_vs_alpha", "fig8_emax_vs_kc",
-           "figL_literal_kc_path")  # fmt: skip
+    "z*: y_g",
+    "z*: θ1",
+    "z*: θ2",
+    "z*: ẋ_g",
+    "z*: θ̇1",
+    "z*: θ̇2",
+    "e_max at the published gait",
+    "strides to converge",
+    "stable α window",
+    "stable kc window",
+    "bs→df and df→fs interval",
+    "damping constant from ζ",
+    "gait type at and beyond the windows",
+    "spine bends per stride",
+    "body vibration amplitude",
+    "α = 1.93 (text) vs 1.9343",
+    "the stiff-spine branch reaches the published gait",
+    "e_max close to 1 at large kc",
+)
+FIGURES = (
+    "fig3_fixed_points_vs_kc",
+    "fig4_parameters_vs_kc",
+    "fig5_periodic_solution",
+    "fig6_convergence",
+    "fig7_emax_vs_alpha",
+    "fig8_emax_vs_kc",
+    "figL_literal_kc_path",
+)
 
 
 @pytest.fixture(scope="module")
@@ -52,10 +70,15 @@ def test_report_has_every_required_row_and_section(quick):
     rows = _table_rows(text)
     for name in REQUIRED_ROWS:
         assert any(r.startswith(name) for r in rows), f"missing row {name!r}"
-    for heading in ("## Headline", "## Every published number",
-                    "## The two readings of Table II side by side", "## Closest α and kc",
-                    "## The paper's path", "## The literal reading in detail",
-                    "## Edge case: a hip below its touchdown height"):  # fmt: skip
+    for heading in (
+        "## Headline",
+        "## Every published number",
+        "## The two readings of Table II side by side",
+        "## Closest α and kc",
+        "## The paper's path",
+        "## The literal reading in detail",
+        "## Edge case: a hip below its touchdown height",
+    ):
         assert heading in text
     assert "quick mode" in text  # a quick report says so
     for name in FIGURES:
@@ -65,8 +88,7 @@ def test_report_has_every_required_row_and_section(quick):
     for link in re.findall(r"\]\((figures/[^)]+)\)", text):  # relative links resolve
         assert (out / link).is_file(), link
     data = json.loads((out / "results.json").read_text())
-    assert set(data["compute_seconds"]) == {"reproducing", "closest", "sweeps", "stiff",
-                                            "literal"}  # fmt: skip
+    assert set(data["compute_seconds"]) == {"reproducing", "closest", "sweeps", "stiff", "literal"}
 
 
 def test_z_star_in_the_table_comes_from_newton(quick):
@@ -95,8 +117,10 @@ def test_findings_on_the_quick_budget(quick):
     end = paths["speed"]["points"][-1]  # the speed-pinned path lands on z* at alpha = 1.9343
     assert end["kc"] == pytest.approx(295.0) and end["alpha_deg"] == pytest.approx(1.9343)
     assert np.max(np.abs(np.array(end["z"]) - np.array(fp["z"]))) < 1e-6
-    assert paths["energy_star"]["folds_kc"] and 315 < max(
-        q["kc"] for q in paths["energy_star"]["points"]) < 330  # the fold near kc = 322
+    assert (
+        paths["energy_star"]["folds_kc"]
+        and 315 < max(q["kc"] for q in paths["energy_star"]["points"]) < 330
+    )  # the fold near kc = 322
     assert res["stiff"]["family_min_energy"]["energy"] > res["stiff"]["energy_star"]
     lit = res["literal"]["fixed_point"]
     assert lit is not None and lit["emax"] > 1.0 and lit["residual"] <= 1e-10
@@ -122,8 +146,7 @@ def test_rerun_reads_the_cache(quick):
 def test_cli_and_docs_copy(quick, tmp_path, capsys):
     out, _, _ = quick
     docs = tmp_path / "docs"
-    assert main(["reproduce", "--out", str(out), "--quick", "--quiet", "--docs",
-                 str(docs)]) == 0  # fmt: skip
+    assert main(["reproduce", "--out", str(out), "--quick", "--quiet", "--docs", str(docs)]) == 0
     assert "cached stages: reproducing, closest, sweeps, stiff, literal" in capsys.readouterr().out
     text = (docs / "REPRODUCTION.md").read_text()
     for link in re.findall(r"\]\((figures/[^)]+)\)", text):
@@ -140,8 +163,17 @@ def test_gait_files(quick, tmp_path):
     assert d.params == ref.params
     np.testing.assert_allclose(d.z_published, ref.z_published)
     raw = yaml.safe_load((tmp_path / "default.yaml").read_text())
-    for key in ("z_star", "eigenvalues", "emax", "phases", "durations", "found_by",
-                "h_b_unused", "h_f_unused", "reading"):  # fmt: skip
+    for key in (
+        "z_star",
+        "eigenvalues",
+        "emax",
+        "phases",
+        "durations",
+        "found_by",
+        "h_b_unused",
+        "h_f_unused",
+        "reading",
+    ):
         assert key in raw, key
     assert all(len(e) == 2 for e in raw["eigenvalues"]) and raw["residual"] <= 1e-10
     fp = find_fixed_point(d.params, d.z_star, recover=False, analyse=False)

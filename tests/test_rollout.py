@@ -37,8 +37,21 @@ def test_shipped_policies_by_name_and_fingerprinted():
 
 
 def test_rollout_reports_strides_torque_and_apex_error(tmp_path, capsys):
-    assert main(["rollout", "--policy", "default", "--strides", "3", "--json",
-                 "--out", str(tmp_path / "r")]) == 0
+    assert (
+        main(
+            [
+                "rollout",
+                "--policy",
+                "default",
+                "--strides",
+                "3",
+                "--json",
+                "--out",
+                str(tmp_path / "r"),
+            ]
+        )
+        == 0
+    )
     r = json.loads(capsys.readouterr().out)
     assert r["strides"] == 3 and r["fell"] is False and r["failure"] is None
     assert len(r["apex_error"]) == 3
@@ -117,8 +130,9 @@ def test_refuses_missing_config(policy_copy):
 def test_refuses_another_gait_unless_forced(capsys):
     with pytest.raises(ValueError, match="trained on gait"):
         load_controller("literal-cycle", gait="default")
-    assert main(["rollout", "--policy", "literal-cycle", "--gait", "default", "--strides",
-                 "1"]) == 2
+    assert (
+        main(["rollout", "--policy", "literal-cycle", "--gait", "default", "--strides", "1"]) == 2
+    )
     assert "--force" in capsys.readouterr().err
     ctrl = load_controller("literal-cycle", gait="default", force=True)
     assert ctrl.env_kwargs["gait"] == "literal-cycle"

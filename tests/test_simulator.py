@@ -298,11 +298,13 @@ def test_both_back_ends_run_through_apexes_alike(default_gait):
     y0 = state_from_z(g.z0)
     aux_r, flags_r, apexes = make_aux(g.params.to_array()), np.zeros(N_FLAGS, np.bool_), []
     status_r, t_r, _, events_r, _ = simulate_reference(
-        y0, aux_r, flags_r, t_end=t_end, stop_at_apex=False, apexes=apexes)
+        y0, aux_r, flags_r, t_end=t_end, stop_at_apex=False, apexes=apexes
+    )
     y, aux_f, flags_f = y0.copy(), make_aux(g.params.to_array()), np.zeros(N_FLAGS, np.bool_)
     log = event_log(64, np.empty((8, 8)))
-    status_f, t_f, _ = advance(y, aux_f, flags_f, 0.0, t_end, 0.0,
-                               Options(1e-12, 1e-12, False), log, recorder(0, 0.0))
+    status_f, t_f, _ = advance(
+        y, aux_f, flags_f, 0.0, t_end, 0.0, Options(1e-12, 1e-12, False), log, recorder(0, 0.0)
+    )
     assert status_r == status_f == TIME_UP and t_r == pytest.approx(t_end) and t_f == t_end
     n_apex = int(log.count[EV_APEXES])
     assert n_apex == len(apexes) == 2

@@ -59,8 +59,11 @@ def zero_run(tmp_path_factory):
 def test_config_parses_and_wraps_the_stride_env():
     hp = load_hyperparams(CONFIG, STRIDE_ENV_ID)
     spec = preprocess(hp)
-    assert [c.__name__ for c, _ in spec.wrappers] == ["DirectionStarts", "StrideControl",
-                                                      "YardstickReward"]
+    assert [c.__name__ for c, _ in spec.wrappers] == [
+        "DirectionStarts",
+        "StrideControl",
+        "YardstickReward",
+    ]
     assert [c.__name__ for c, _ in spec.callbacks] == ["ZeroActionNet"]
     assert spec.env_kwargs["K"] == 8 and spec.env_kwargs["basis"] == "windows"
 
@@ -154,8 +157,9 @@ def test_direction_starts_use_the_yardstick_scale():
 
 
 def test_yardstick_reward_contraction_and_early_falls_cost_more():
-    env = YardstickReward(StrideControl(_stride_env(), base=None), ctrl_weight=0.0,
-                          fall_penalty=10.0, horizon=10)
+    env = YardstickReward(
+        StrideControl(_stride_env(), base=None), ctrl_weight=0.0, fall_penalty=10.0, horizon=10
+    )
     env.reset(options={"apex_state": env.z_ref})  # on the cycle: e at its floor, no contraction
     _, r, term, _, _ = env.step(np.zeros(env.unwrapped.task.K))
     assert not term and r == pytest.approx(1.0)
@@ -174,9 +178,18 @@ def test_training_smoke_run_exports_a_policy_that_acts(tmp_path):
     from agents.margins import ClosedLoop
     from agents.train import train
 
-    run = train(config=CONFIG, env_id=STRIDE_ENV_ID, seed=0, n_timesteps=256, sets=TINY,
-                runs_dir=tmp_path, vec_env="dummy", eval_freq=10_000, save_freq=10_000,
-                progress_bar=False)
+    run = train(
+        config=CONFIG,
+        env_id=STRIDE_ENV_ID,
+        seed=0,
+        n_timesteps=256,
+        sets=TINY,
+        runs_dir=tmp_path,
+        vec_env="dummy",
+        eval_freq=10_000,
+        save_freq=10_000,
+        progress_bar=False,
+    )
     dest = export_policy(run, tmp_path / "exported")
     assert (dest / BASE_FILE).is_file() and (dest / "model.zip").is_file()
     ctrl = load_stride_policy(dest)
@@ -219,7 +232,16 @@ def test_checkpoint_without_observation_normalization(tmp_path):
     """norm_obs=False (the stride configs): a checkpoint is written and the run resumes."""
     from agents.train import last_checkpoint, train
 
-    run = train(config=CONFIG, env_id=STRIDE_ENV_ID, seed=0, n_timesteps=256, sets=TINY,
-                runs_dir=tmp_path, vec_env="dummy", eval_freq=10_000, save_freq=128,
-                progress_bar=False)
+    run = train(
+        config=CONFIG,
+        env_id=STRIDE_ENV_ID,
+        seed=0,
+        n_timesteps=256,
+        sets=TINY,
+        runs_dir=tmp_path,
+        vec_env="dummy",
+        eval_freq=10_000,
+        save_freq=128,
+        progress_bar=False,
+    )
     assert last_checkpoint(run) is not None

@@ -22,8 +22,25 @@ ACC_TOL = 1e-10
 ENERGY_TOL = 1e-12
 
 # Symbol order of every lambdified function: (q, qdot, params); the params are below.
-PARAM_NAMES = ("g", "alpha", "m1", "m2", "l1", "l2", "I1", "I2", "lb_bar", "lf_bar",
-               "kb", "kf", "kc", "c_c", "tau", "x_toe_b", "x_toe_f")  # fmt: skip
+PARAM_NAMES = (
+    "g",
+    "alpha",
+    "m1",
+    "m2",
+    "l1",
+    "l2",
+    "I1",
+    "I2",
+    "lb_bar",
+    "lf_bar",
+    "kb",
+    "kf",
+    "kc",
+    "c_c",
+    "tau",
+    "x_toe_b",
+    "x_toe_f",
+)
 
 
 def _derive():
@@ -72,12 +89,16 @@ def _derive():
 
     # eq. (15) with L = T - V: d/dt dT/dqd - dT/dq + dV/dq + dDelta/dqd - [0,0,0,tau] = 0
     dT_dqd = [sp.diff(T, v) for v in qd]
-    e_kin = sp.Matrix([
-        sum(sp.diff(p, qj) * qdj + sp.diff(p, qdj) * qddj
-            for qj, qdj, qddj in zip(q, qd, qdd, strict=True))
-        - sp.diff(T, qi)
-        for p, qi in zip(dT_dqd, q, strict=True)
-    ])  # fmt: skip
+    e_kin = sp.Matrix(
+        [
+            sum(
+                sp.diff(p, qj) * qdj + sp.diff(p, qdj) * qddj
+                for qj, qdj, qddj in zip(q, qd, qdd, strict=True)
+            )
+            - sp.diff(T, qi)
+            for p, qi in zip(dT_dqd, q, strict=True)
+        ]
+    )
     M = e_kin.jacobian(qdd)
     h_kin = e_kin.subs(dict.fromkeys(qdd, 0))
     e_force = sp.Matrix([sp.diff(delta, v) for v in qd]) - sp.Matrix([0, 0, 0, tau])
@@ -109,14 +130,23 @@ def _random_params(rng):
     l1 = rng.uniform(0.1, 0.3)
     l2 = l1 * rng.uniform(0.5, 0.8)
     return Params(
-        g=rng.uniform(8.0, 12.0), m1=m1, m2=m2, l1=l1, l2=l2,
-        I1=rng.uniform(0.1, 1.0), I2=rng.uniform(0.1, 1.0),
-        lb_bar=rng.uniform(0.25, 0.4), lf_bar=rng.uniform(0.25, 0.4),
-        kb=rng.uniform(1000.0, 5000.0), kf=rng.uniform(1000.0, 5000.0),
-        kc=rng.uniform(50.0, 500.0), zeta=rng.uniform(0.05, 0.6),
+        g=rng.uniform(8.0, 12.0),
+        m1=m1,
+        m2=m2,
+        l1=l1,
+        l2=l2,
+        I1=rng.uniform(0.1, 1.0),
+        I2=rng.uniform(0.1, 1.0),
+        lb_bar=rng.uniform(0.25, 0.4),
+        lf_bar=rng.uniform(0.25, 0.4),
+        kb=rng.uniform(1000.0, 5000.0),
+        kf=rng.uniform(1000.0, 5000.0),
+        kc=rng.uniform(50.0, 500.0),
+        zeta=rng.uniform(0.05, 0.6),
         alpha=rng.uniform(0.0, 0.15),
-        gamma_b=rng.uniform(0.2, 1.2), gamma_f=rng.uniform(0.2, 1.2),
-    )  # fmt: skip
+        gamma_b=rng.uniform(0.2, 1.2),
+        gamma_f=rng.uniform(0.2, 1.2),
+    )
 
 
 def _cases(sym, condition, seed, n=N_STATES):
@@ -126,12 +156,32 @@ def _cases(sym, condition, seed, n=N_STATES):
     for _ in range(n):
         params = _random_params(rng)
         tau = rng.uniform(-20.0, 20.0)
-        q = np.array([rng.uniform(-1.0, 1.0), rng.uniform(0.2, 0.3),
-                      rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5)])  # fmt: skip
+        q = np.array(
+            [
+                rng.uniform(-1.0, 1.0),
+                rng.uniform(0.2, 0.3),
+                rng.uniform(-0.5, 0.5),
+                rng.uniform(-0.5, 0.5),
+            ]
+        )
         qd = rng.uniform(-5.0, 5.0, 4)
-        base = (params.g, params.alpha, params.m1, params.m2, params.l1, params.l2,
-                params.I1, params.I2, params.lb_bar, params.lf_bar, params.kb, params.kf,
-                params.kc, params.c_c, tau)  # fmt: skip
+        base = (
+            params.g,
+            params.alpha,
+            params.m1,
+            params.m2,
+            params.l1,
+            params.l2,
+            params.I1,
+            params.I2,
+            params.lb_bar,
+            params.lf_bar,
+            params.kb,
+            params.kf,
+            params.kc,
+            params.c_c,
+            tau,
+        )
         hbx, _, hfx, _ = sym["hips"](q, qd, (*base, 0.0, 0.0))
         xtb = hbx + rng.uniform(-0.3, 0.3)
         xtf = hfx + rng.uniform(-0.3, 0.3)

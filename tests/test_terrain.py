@@ -21,8 +21,10 @@ gym.register_envs(bound_env)
 def _world(y, alpha):
     """Centre of mass position and velocity in a world frame (X forward, Y up) whose origin is
     the slope frame's origin: e_x = (cos a, -sin a), e_y = (sin a, cos a)."""
-    ex, ey = np.array([math.cos(alpha), -math.sin(alpha)]), np.array([math.sin(alpha),
-                                                                     math.cos(alpha)])
+    ex, ey = (
+        np.array([math.cos(alpha), -math.sin(alpha)]),
+        np.array([math.sin(alpha), math.cos(alpha)]),
+    )
     return y[0] * ex + y[1] * ey, y[4] * ex + y[5] * ey
 
 
@@ -125,8 +127,12 @@ def test_slope_noise_changes_the_slope_at_each_apex_from_the_seed():
     with pytest.raises(ValueError, match="slope_noise_deg"):
         gym.make("PassiveBound-v0", slope_noise_deg=-1.0)
     with pytest.raises(ValueError, match="slope_noise_deg"):
-        gym.make_vec("PassiveBound-v0", num_envs=2, vectorization_mode="vector_entry_point",
-                     slope_noise_deg=0.5)
+        gym.make_vec(
+            "PassiveBound-v0",
+            num_envs=2,
+            vectorization_mode="vector_entry_point",
+            slope_noise_deg=0.5,
+        )
 
 
 def test_stride_env_slope_noise():
@@ -142,17 +148,15 @@ def test_stride_env_slope_noise():
         return np.array(out), slopes
 
     plain = gym.make("PassiveBoundStride-v0", reset_noise_scale=0.0).unwrapped
-    zero = gym.make("PassiveBoundStride-v0", reset_noise_scale=0.0,
-                    slope_noise_deg=0.0).unwrapped
+    zero = gym.make("PassiveBoundStride-v0", reset_noise_scale=0.0, slope_noise_deg=0.0).unwrapped
     a, _ = apexes(plain, 5)
     b, _ = apexes(zero, 5)
     assert len(a) == 5 and np.array_equal(a, b)  # bit-identical without noise
-    rough = gym.make("PassiveBoundStride-v0", reset_noise_scale=0.0,
-                     slope_noise_deg=0.2).unwrapped
+    rough = gym.make("PassiveBoundStride-v0", reset_noise_scale=0.0, slope_noise_deg=0.2).unwrapped
     c, slopes = apexes(rough, 5, seed=4)
     d, slopes2 = apexes(rough, 5, seed=4)
     nominal = math.degrees(rough.params.alpha)
     assert slopes == slopes2 and np.array_equal(c, d)  # the seed fixes the terrain
-    assert slopes[0] == nominal and all(s != nominal for s in slopes[1:len(c)])
+    assert slopes[0] == nominal and all(s != nominal for s in slopes[1 : len(c)])
     assert np.array_equal(c[0], a[0])  # the first stride runs on the nominal slope
-    assert not np.allclose(c[1:], a[1:len(c)], atol=1e-9)
+    assert not np.allclose(c[1:], a[1 : len(c)], atol=1e-9)

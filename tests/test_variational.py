@@ -59,8 +59,12 @@ def test_matches_finite_differences_at_fixed_point(fixed_point):
     err = np.abs(DP - J).max()  # measured: 1.3e-8 (reference back-end), 2.7e-8 (fast)
     assert err <= 1e-6, err
     assert [n for _, n in info["events"]] == [
-        "touchdown_back", "liftoff_back", "touchdown_front", "liftoff_front", "apex",
-    ]  # fmt: skip
+        "touchdown_back",
+        "liftoff_back",
+        "touchdown_front",
+        "liftoff_front",
+        "apex",
+    ]
     assert info["max_event_time_error"] < 1e-9
 
 

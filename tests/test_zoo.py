@@ -22,8 +22,14 @@ def test_rl_zoo3_preprocessing_takes_env_kwargs_from_the_config(env_id, tmp_path
     from agents.train import BasinValidationCallback, NoiseCurriculumCallback
 
     ours = load_hyperparams(DEFAULT_CONFIG, env_id)
-    em = ExperimentManager(argparse.Namespace(), "ppo", env_id, str(tmp_path),
-                           config=str(ROOT / "configs" / "ppo.yaml"), n_timesteps=1000)
+    em = ExperimentManager(
+        argparse.Namespace(),
+        "ppo",
+        env_id,
+        str(tmp_path),
+        config=str(ROOT / "configs" / "ppo.yaml"),
+        n_timesteps=1000,
+    )
     hp, _ = em.read_hyperparameters()
     _, wrapper, callbacks, _ = em._preprocess_hyperparams(hp)
     assert em.env_kwargs == ours["env_kwargs"] and em.env_kwargs  # from the file, no flag

@@ -33,11 +33,18 @@ import importlib
 _EXPORTS = {
     "continuation": ("Branch", "BranchPoint", "continue_branch", "plot_branch"),
     "fixed_point": ("FixedPointResult", "find_fixed_point", "paper_search", "slope_secant"),
-    "poincare": ("ANALYSIS_TOL", "IterationResult", "StrideFailure", "apex_energy", "iterate",
-                 "paper_convergence", "poincare_map"),
+    "poincare": (
+        "ANALYSIS_TOL",
+        "IterationResult",
+        "StrideFailure",
+        "apex_energy",
+        "iterate",
+        "paper_convergence",
+        "poincare_map",
+    ),
     "stability": ("jacobian", "recovery", "recovery_all", "spine_oscillations"),
     "sweeps": ("SweepResult", "plot_sweep", "sweep", "write_sweep_csv"),
-}  # fmt: skip
+}
 _WHERE = {name: mod for mod, names in _EXPORTS.items() for name in names}
 __all__ = sorted(_WHERE)
 

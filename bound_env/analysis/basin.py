@@ -73,8 +73,9 @@ CYCLE_TOL = 1e-11  # successive apex states closer than this: settled (SI)
 
 
 @jit
-def passive_batch(Z, aux0, z_ref, max_strides, tol, rtol, t_max, outcome, reason, strides,
-                  phase, error, z_last):  # fmt: skip
+def passive_batch(
+    Z, aux0, z_ref, max_strides, tol, rtol, t_max, outcome, reason, strides, phase, error, z_last
+):
     """Iterate the passive map P (eq. 18) from each row of ``Z`` (SI apex states).
 
     Every stride starts like `bound_env.hybrid.simulate_stride`: y from z with x_g = 0,
@@ -138,13 +139,21 @@ def _task_for(controller, gait: str, rtol: float):
         overrides = kwargs.pop("gait_overrides", None)
         if len(_TASKS) > 16:
             _TASKS.clear()
-        _TASKS[key] = PassiveBoundTask(gait=gait, gait_overrides=overrides or None, rtol=rtol,
-                                       reset_noise_scale=0.0, **kwargs)
+        _TASKS[key] = PassiveBoundTask(
+            gait=gait, gait_overrides=overrides or None, rtol=rtol, reset_noise_scale=0.0, **kwargs
+        )
     return _TASKS[key]
 
 
-def controller_batch(controller, Z, z_ref, gait: str = "default", max_strides=DEFAULT_STRIDES,
-                     tol=RETURN_TOL, rtol=EVAL_RTOL) -> dict:
+def controller_batch(
+    controller,
+    Z,
+    z_ref,
+    gait: str = "default",
+    max_strides=DEFAULT_STRIDES,
+    tol=RETURN_TOL,
+    rtol=EVAL_RTOL,
+) -> dict:
     """Iterate the closed-loop apex map of ``controller`` from each row of ``Z`` (SI); the
     same outputs as `passive_batch`, as a dict of arrays."""
     from ..task import NO_APEX_TIME, S_NAPEX, S_PHASE, S_STATUS
@@ -232,14 +241,19 @@ def _fell(out, i, code, stride, phase):
 
 
 def _empty_outputs(n: int, max_strides: int) -> dict:
-    return {"outcome": np.full(n, UNDECIDED, dtype=np.int8), "reason": np.zeros(n, np.int8),
-            "strides": np.full(n, max_strides, dtype=np.int32),
-            "phase": np.full(n, -1, dtype=np.int8), "error": np.full(n, np.inf),
-            "z_last": np.zeros((n, 6))}
+    return {
+        "outcome": np.full(n, UNDECIDED, dtype=np.int8),
+        "reason": np.zeros(n, np.int8),
+        "strides": np.full(n, max_strides, dtype=np.int32),
+        "phase": np.full(n, -1, dtype=np.int8),
+        "error": np.full(n, np.inf),
+        "z_last": np.zeros((n, 6)),
+    }
 
 
-def controller_cycle(controller, z0, gait: str = "default", rtol=EVAL_RTOL,
-                     strides=CYCLE_STRIDES) -> tuple[np.ndarray, float]:
+def controller_cycle(
+    controller, z0, gait: str = "default", rtol=EVAL_RTOL, strides=CYCLE_STRIDES
+) -> tuple[np.ndarray, float]:
     """The closed loop's cycle apex state by iterating its map from ``z0`` (one robot of the
     batch kernel): (z_cl, last successive difference, SI). Iterates until the difference is
     below `CYCLE_TOL` or ``strides`` strides; raises RuntimeError if the loop falls."""
@@ -248,8 +262,10 @@ def controller_cycle(controller, z0, gait: str = "default", rtol=EVAL_RTOL,
     for _ in range(strides):
         r = controller_batch(controller, z[None], z + 1e9, gait, max_strides=1, rtol=rtol)
         if r["outcome"][0] == FELL:
-            raise RuntimeError(f"the closed loop falls from its start ({REASONS[r['reason'][0]]})"
-                               " while settling on its cycle")
+            raise RuntimeError(
+                f"the closed loop falls from its start ({REASONS[r['reason'][0]]})"
+                " while settling on its cycle"
+            )
         z1 = r["z_last"][0]
         diff = float(np.max(np.abs(z1 - z)))
         z = z1
@@ -298,15 +314,24 @@ class BasinSpec:
         Z[:, self.axes[1]] = gy.ravel()
         if i is None:
             return Z
-        return Z[i * self.chunk:(i + 1) * self.chunk]
+        return Z[i * self.chunk : (i + 1) * self.chunk]
 
     def key(self) -> str:
         fp = "passive" if self.controller is None else self.controller.fingerprint()
-        text = json.dumps([fp, self.gait, list(self.axes), [list(map(float, v)) for v in
-                                                              self.values],
-                           list(map(float, self.z_slice)), list(map(float, self.z_target)),
-                           self.max_strides, self.tol,
-                           self.rtol, self.chunk])
+        text = json.dumps(
+            [
+                fp,
+                self.gait,
+                list(self.axes),
+                [list(map(float, v)) for v in self.values],
+                list(map(float, self.z_slice)),
+                list(map(float, self.z_target)),
+                self.max_strides,
+                self.tol,
+                self.rtol,
+                self.chunk,
+            ]
+        )
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -317,13 +342,31 @@ def run_chunk(spec: BasinSpec, i: int) -> dict:
     if spec.controller is None:
         gait = load_gait(spec.gait)
         out = _empty_outputs(len(Z), spec.max_strides)
-        passive_batch(Z, make_aux(gait.params.to_array()), np.asarray(spec.z_target, float),
-                      int(spec.max_strides), float(spec.tol), float(spec.rtol),
-                      float(DEFAULT_T_MAX), out["outcome"], out["reason"], out["strides"],
-                      out["phase"], out["error"], out["z_last"])  # fmt: skip
+        passive_batch(
+            Z,
+            make_aux(gait.params.to_array()),
+            np.asarray(spec.z_target, float),
+            int(spec.max_strides),
+            float(spec.tol),
+            float(spec.rtol),
+            float(DEFAULT_T_MAX),
+            out["outcome"],
+            out["reason"],
+            out["strides"],
+            out["phase"],
+            out["error"],
+            out["z_last"],
+        )
     else:
-        out = controller_batch(spec.controller, Z, np.asarray(spec.z_target, float), spec.gait,
-                               spec.max_strides, spec.tol, spec.rtol)
+        out = controller_batch(
+            spec.controller,
+            Z,
+            np.asarray(spec.z_target, float),
+            spec.gait,
+            spec.max_strides,
+            spec.tol,
+            spec.rtol,
+        )
     out["seconds"] = time.perf_counter() - t0
     return out
 
@@ -335,8 +378,13 @@ def _save_npz(path: Path, **arrays) -> None:
     atomic_write(path, buf.getvalue())
 
 
-def run_grid(spec: BasinSpec, executor, out_dir: Path | None = None, progress: bool = False,
-             desc: str = "basin") -> dict:
+def run_grid(
+    spec: BasinSpec,
+    executor,
+    out_dir: Path | None = None,
+    progress: bool = False,
+    desc: str = "basin",
+) -> dict:
     """All chunks of ``spec`` through ``executor`` (cached per chunk under ``out_dir``);
     returns the outputs reshaped to the grid (rows: axis 1, columns: axis 0)."""
     from ..parallel import TasksFailed, run_tasks
@@ -363,8 +411,11 @@ def run_grid(spec: BasinSpec, executor, out_dir: Path | None = None, progress: b
 
     done, failures = run_tasks(executor, tasks, progress, desc, keep, done_before=len(parts))
     if failures:
-        raise TasksFailed(failures, spec.n_chunks, "; the others are cached: rerun to retry"
-                          if cache_dir is not None else "")
+        raise TasksFailed(
+            failures,
+            spec.n_chunks,
+            "; the others are cached: rerun to retry" if cache_dir is not None else "",
+        )
     for k, res in done.items():
         parts[int(k.rsplit("-", 1)[1])] = res
     shape = (len(spec.values[1]), len(spec.values[0]))
@@ -385,8 +436,10 @@ def parse_axes(text: str | tuple) -> tuple[int, int]:
     """``"xdot_g,y_g"`` -> indices into `Z_NAMES` (two different apex components)."""
     names = [t.strip() for t in text.split(",")] if isinstance(text, str) else list(text)
     if len(names) != 2 or names[0] == names[1] or not all(n in Z_NAMES for n in names):
-        raise ValueError(f"--axes must be two different apex components from {Z_NAMES}, "
-                         f"e.g. xdot_g,y_g; got {text!r}")
+        raise ValueError(
+            f"--axes must be two different apex components from {Z_NAMES}, "
+            f"e.g. xdot_g,y_g; got {text!r}"
+        )
     return Z_NAMES.index(names[0]), Z_NAMES.index(names[1])
 
 
@@ -417,11 +470,22 @@ def axis_values(axes: tuple, ranges_paper, grid: int) -> tuple[np.ndarray, np.nd
     return vals[0], vals[1]
 
 
-def basin_map(controller=None, label: str = "passive", axes="xdot_g,y_g",
-              grid: int = DEFAULT_GRID, ranges: str | None = None, gait: str = "default",
-              max_strides: int = DEFAULT_STRIDES, chunk: int = DEFAULT_CHUNK, executor=None,
-              scheduler: str | None = None, workers: int = 1, out: str | Path | None = None,
-              progress: bool = False, overlay_passive: bool = True) -> dict:
+def basin_map(
+    controller=None,
+    label: str = "passive",
+    axes="xdot_g,y_g",
+    grid: int = DEFAULT_GRID,
+    ranges: str | None = None,
+    gait: str = "default",
+    max_strides: int = DEFAULT_STRIDES,
+    chunk: int = DEFAULT_CHUNK,
+    executor=None,
+    scheduler: str | None = None,
+    workers: int = 1,
+    out: str | Path | None = None,
+    progress: bool = False,
+    overlay_passive: bool = True,
+) -> dict:
     """The basin map of the passive gait (``controller=None``) or of a controller on a
     ``grid x grid`` slice (see the module docstring). The slice passes through the gait's
     z* for every controller (so maps of different controllers share their starts); a
@@ -446,9 +510,17 @@ def basin_map(controller=None, label: str = "passive", axes="xdot_g,y_g",
     z_target = z_star
     if controller is not None:
         z_target, cycle_diff = controller_cycle(controller, z_star, gait)
-    spec = BasinSpec(axes=ax, values=values, z_slice=z_star, z_target=z_target,
-                     controller=controller, gait=gait, max_strides=int(max_strides),
-                     chunk=int(chunk), label=label)
+    spec = BasinSpec(
+        axes=ax,
+        values=values,
+        z_slice=z_star,
+        z_target=z_target,
+        controller=controller,
+        gait=gait,
+        max_strides=int(max_strides),
+        chunk=int(chunk),
+        label=label,
+    )
     out_dir = Path(out) if out is not None else None
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -459,18 +531,34 @@ def basin_map(controller=None, label: str = "passive", axes="xdot_g,y_g",
         res = run_grid(spec, executor, out_dir, progress, f"basin {label}")
         seconds = time.perf_counter() - t0
         if controller is not None and overlay_passive:
-            pspec = BasinSpec(axes=ax, values=values, z_slice=z_star, z_target=z_star,
-                              gait=gait, max_strides=int(max_strides), chunk=int(chunk))
+            pspec = BasinSpec(
+                axes=ax,
+                values=values,
+                z_slice=z_star,
+                z_target=z_star,
+                gait=gait,
+                max_strides=int(max_strides),
+                chunk=int(chunk),
+            )
             passive = run_grid(pspec, executor, out_dir, progress, "basin passive (overlay)")
     summary = {
-        "policy": label, "gait": gait, "axes": [Z_NAMES[a] for a in ax],
-        "units": [Z_PAPER_UNITS[a] for a in ax], "range": rng.tolist(), "grid": int(grid),
-        "max_strides": int(max_strides), "return_tol": RETURN_TOL, "rtol": EVAL_RTOL,
-        "chunk": int(chunk), "z_slice": z_star.tolist(), "z_target": z_target.tolist(),
-        "cycle_settle_diff": cycle_diff, "starts": spec.n_starts,
-        "fraction": {name: float(np.mean(res["outcome"] == k)) for k, name in
-                     enumerate(OUTCOMES)},
-        "seconds": seconds, "starts_per_s": spec.n_starts / seconds,
+        "policy": label,
+        "gait": gait,
+        "axes": [Z_NAMES[a] for a in ax],
+        "units": [Z_PAPER_UNITS[a] for a in ax],
+        "range": rng.tolist(),
+        "grid": int(grid),
+        "max_strides": int(max_strides),
+        "return_tol": RETURN_TOL,
+        "rtol": EVAL_RTOL,
+        "chunk": int(chunk),
+        "z_slice": z_star.tolist(),
+        "z_target": z_target.tolist(),
+        "cycle_settle_diff": cycle_diff,
+        "starts": spec.n_starts,
+        "fraction": {name: float(np.mean(res["outcome"] == k)) for k, name in enumerate(OUTCOMES)},
+        "seconds": seconds,
+        "starts_per_s": spec.n_starts / seconds,
     }
     if out_dir is not None:
         write_basin(out_dir, summary, values, res, passive)
@@ -481,17 +569,26 @@ def write_basin(out_dir: Path, summary: dict, values, res: dict, passive: dict |
     """``basin.npz`` (every array of the map, plus the passive map when overlaid) and
     ``basin.png``; both written atomically."""
     arrays = {
-        "axes": np.array(summary["axes"]), "units": np.array(summary["units"]),
-        "x": values[0], "y": values[1],  # SI, columns / rows
+        "axes": np.array(summary["axes"]),
+        "units": np.array(summary["units"]),
+        "x": values[0],
+        "y": values[1],  # SI, columns / rows
         "x_paper": np.linspace(*summary["range"][:2], len(values[0])),
         "y_paper": np.linspace(*summary["range"][2:], len(values[1])),
-        "outcome": res["outcome"], "outcome_names": np.array(OUTCOMES),
-        "reason": res["reason"], "reason_names": np.array(REASONS),
-        "strides": res["strides"], "phase": res["phase"], "phase_names": np.array(PHASES),
-        "error": res["error"], "z_last": res["z_last"],
-        "z_slice": np.array(summary["z_slice"]), "z_target": np.array(summary["z_target"]),
-        "settings": np.array(json.dumps({k: v for k, v in summary.items()
-                                         if k not in ("seconds", "starts_per_s")})),
+        "outcome": res["outcome"],
+        "outcome_names": np.array(OUTCOMES),
+        "reason": res["reason"],
+        "reason_names": np.array(REASONS),
+        "strides": res["strides"],
+        "phase": res["phase"],
+        "phase_names": np.array(PHASES),
+        "error": res["error"],
+        "z_last": res["z_last"],
+        "z_slice": np.array(summary["z_slice"]),
+        "z_target": np.array(summary["z_target"]),
+        "settings": np.array(
+            json.dumps({k: v for k, v in summary.items() if k not in ("seconds", "starts_per_s")})
+        ),
     }
     if passive is not None:
         arrays["passive_outcome"] = passive["outcome"]
@@ -519,18 +616,34 @@ def plot_basin(path: Path, summary: dict, a: dict) -> Path:
     bg = np.where(a["outcome"] == FELL, 0.85, np.where(a["outcome"] == UNDECIDED, 0.45, np.nan))
     ax.imshow(bg, origin="lower", extent=ext, aspect="auto", cmap="gray", vmin=0, vmax=1)
     ret = np.where(a["outcome"] == RETURNED, a["strides"], np.nan).astype(float)
-    im = ax.imshow(ret, origin="lower", extent=ext, aspect="auto", cmap="viridis",
-                   vmin=1, vmax=summary["max_strides"])
+    im = ax.imshow(
+        ret,
+        origin="lower",
+        extent=ext,
+        aspect="auto",
+        cmap="viridis",
+        vmin=1,
+        vmax=summary["max_strides"],
+    )
     fig.colorbar(im, ax=ax, label="strides to return")
     if "passive_outcome" in a:
-        ax.contour(x, y, (a["passive_outcome"] == RETURNED).astype(float), levels=[0.5],
-                   colors="red", linewidths=1.2)
+        ax.contour(
+            x,
+            y,
+            (a["passive_outcome"] == RETURNED).astype(float),
+            levels=[0.5],
+            colors="red",
+            linewidths=1.2,
+        )
         ax.plot([], [], "r-", label="passive basin boundary")
     ax.plot(zt[ix], zt[iy], "wx", ms=8, mew=2, label="cycle")
     ax.legend(fontsize=7, loc="upper right")
     f = summary["fraction"]
-    ax.set_title(f"{summary['policy']}: returned {100 * f['returned']:.1f} %, fell "
-                 f"{100 * f['fell']:.1f} %, undecided {100 * f['undecided']:.1f} %", fontsize=9)
+    ax.set_title(
+        f"{summary['policy']}: returned {100 * f['returned']:.1f} %, fell "
+        f"{100 * f['fell']:.1f} %, undecided {100 * f['undecided']:.1f} %",
+        fontsize=9,
+    )
     ax.set_xlabel(lab[0])
     ax.set_ylabel(lab[1])
     ax = axs[1]
@@ -539,21 +652,31 @@ def plot_basin(path: Path, summary: dict, a: dict) -> Path:
         codes = np.full(a["reason"].shape, np.nan)
         for k, r in enumerate(used):
             codes[(a["reason"] == r) & (a["outcome"] == FELL)] = k
-        cmap = ListedColormap(plt.get_cmap("tab10").colors[:len(used)])
-        ax.imshow(codes, origin="lower", extent=ext, aspect="auto", cmap=cmap,
-                  vmin=-0.5, vmax=len(used) - 0.5, interpolation="nearest")
+        cmap = ListedColormap(plt.get_cmap("tab10").colors[: len(used)])
+        ax.imshow(
+            codes,
+            origin="lower",
+            extent=ext,
+            aspect="auto",
+            cmap=cmap,
+            vmin=-0.5,
+            vmax=len(used) - 0.5,
+            interpolation="nearest",
+        )
         for k, r in enumerate(used):
             phases = a["phase"][(a["reason"] == r) & (a["outcome"] == FELL)]
-            ph = ", ".join(f"{PHASES[p]}" for p in sorted(set(int(v) for v in phases))
-                           if p >= 0)
+            ph = ", ".join(f"{PHASES[p]}" for p in sorted(set(int(v) for v in phases)) if p >= 0)
             ax.plot([], [], "s", color=cmap(k), label=f"{REASONS[r]} (in {ph or '?'})")
         ax.legend(fontsize=7, loc="upper right")
     ax.set_title("fell: reason (stance condition)", fontsize=9)
     ax.set_xlabel(lab[0])
     ax.set_ylabel(lab[1])
-    fig.suptitle(f"basin on the {summary['axes'][0]} x {summary['axes'][1]} slice through z* "
-                 f"(gait {summary['gait']}; returned = within {summary['return_tol']:g} of the "
-                 f"cycle in {summary['max_strides']} strides)", fontsize=9)
+    fig.suptitle(
+        f"basin on the {summary['axes'][0]} x {summary['axes'][1]} slice through z* "
+        f"(gait {summary['gait']}; returned = within {summary['return_tol']:g} of the "
+        f"cycle in {summary['max_strides']} strides)",
+        fontsize=9,
+    )
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
@@ -564,10 +687,12 @@ def plot_basin(path: Path, summary: dict, a: dict) -> Path:
 
 def summary_text(s: dict) -> str:
     f = s["fraction"]
-    return (f"basin {s['policy']} on {s['axes'][0]} x {s['axes'][1]} ({s['grid']}x{s['grid']}, "
-            f"{s['starts']} starts): returned {100 * f['returned']:.1f} %, fell "
-            f"{100 * f['fell']:.1f} %, undecided {100 * f['undecided']:.1f} %  "
-            f"({s['seconds']:.1f} s, {s['starts_per_s']:.0f} starts/s)")
+    return (
+        f"basin {s['policy']} on {s['axes'][0]} x {s['axes'][1]} ({s['grid']}x{s['grid']}, "
+        f"{s['starts']} starts): returned {100 * f['returned']:.1f} %, fell "
+        f"{100 * f['fell']:.1f} %, undecided {100 * f['undecided']:.1f} %  "
+        f"({s['seconds']:.1f} s, {s['starts_per_s']:.0f} starts/s)"
+    )
 
 
 def _say(text: str) -> None:

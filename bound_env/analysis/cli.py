@@ -59,8 +59,12 @@ def register(sub) -> None:
         default="fd",
         help="how nabla P is computed for the eigenvalues (default: %(default)s)",
     )
-    p.add_argument("--tol", type=number(float, 0, 1, lo_open=True), default=1e-10,
-                   help="Newton tolerance on |P(z) - z|")
+    p.add_argument(
+        "--tol",
+        type=number(float, 0, 1, lo_open=True),
+        default=1e-10,
+        help="Newton tolerance on |P(z) - z|",
+    )
     p.add_argument("--max-iter", type=number(int, 1, 10_000), default=50, help="Newton iterations")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--save", metavar="PATH", help="write a gait file with the fixed point")
@@ -76,8 +80,11 @@ def register(sub) -> None:
         help="continuation parameter, usually kc or alpha_deg",
     )
     p.add_argument("--to", type=number(float), required=True, help="target value (gait units)")
-    p.add_argument("--step", type=number(float, allow_zero=False),
-                   help="parameter step (default: 1/10 of the range)")
+    p.add_argument(
+        "--step",
+        type=number(float, allow_zero=False),
+        help="parameter step (default: 1/10 of the range)",
+    )
     p.add_argument("--method", choices=("natural", "arclength"), default="natural")
     p.add_argument(
         "--free",
@@ -94,40 +101,72 @@ def register(sub) -> None:
         metavar="DIR",
         help="output directory: branch.csv, branch.json, branch.png",
     )
-    p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
-                   help="no progress lines on stderr (alias: --no-progress)")
+    p.add_argument(
+        "--quiet",
+        "--no-progress",
+        dest="quiet",
+        action="store_true",
+        help="no progress lines on stderr (alias: --no-progress)",
+    )
     add_json_arg(p)
     p.set_defaults(func=cmd_continue)
 
-    p = sub.add_parser("sweep", help="e_max against alpha_deg or kc, the paper's way "
-                       "(Figs. 7-8), and the stability windows")  # fmt: skip
+    p = sub.add_parser(
+        "sweep",
+        help="e_max against alpha_deg or kc, the paper's way "
+        "(Figs. 7-8), and the stability windows",
+    )
     _gait_args(p, z_and_pins=False)
     p.add_argument("--param", required=True, choices=GAIT_KEYS, metavar="NAME")
     p.add_argument("--from", dest="lo", type=number(float), required=True)
     p.add_argument("--to", dest="hi", type=number(float), required=True)
     p.add_argument("--step", type=number(float, 0, lo_open=True), required=True)
-    p.add_argument("--refine", type=number(int, 0, 60), default=6,
-                   help="bisections of each window edge")
+    p.add_argument(
+        "--refine", type=number(int, 0, 60), default=6, help="bisections of each window edge"
+    )
     p.add_argument("--out", required=True, metavar="DIR", help="sweep.csv and sweep.png")
-    p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
-                   help="no progress lines on stderr (alias: --no-progress)")
+    p.add_argument(
+        "--quiet",
+        "--no-progress",
+        dest="quiet",
+        action="store_true",
+        help="no progress lines on stderr (alias: --no-progress)",
+    )
     add_scheduler_args(p, workers_default=1)  # the two directions as two tasks
     add_json_arg(p)
     p.set_defaults(func=cmd_sweep)
 
-    p = sub.add_parser("reproduce", help="measure every published number again: Figs. 3-8 "
-                       "(PNG + CSV) and REPRODUCTION.md")  # fmt: skip
-    p.add_argument("--out", required=True, metavar="DIR",
-                   help="output directory (report, figures/, cache/, results.json)")
-    p.add_argument("--quick", action="store_true",
-                   help="small budgets (coarse sweeps, kc_stiff = 2000): a smoke test")
+    p = sub.add_parser(
+        "reproduce",
+        help="measure every published number again: Figs. 3-8 (PNG + CSV) and REPRODUCTION.md",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output directory (report, figures/, cache/, results.json)",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="small budgets (coarse sweeps, kc_stiff = 2000): a smoke test",
+    )
     p.add_argument("--force", action="store_true", help="recompute every stage (ignore cache)")
-    p.add_argument("--write-gaits", action="store_true",
-                   help="also write configs/gaits/default.yaml and literal-cycle.yaml")
-    p.add_argument("--docs", metavar="DIR",
-                   help="copy REPRODUCTION.md and the PNG figures to DIR (e.g. docs)")
-    p.add_argument("--quiet", "--no-progress", dest="quiet", action="store_true",
-                   help="no progress lines on stderr (alias: --no-progress)")
+    p.add_argument(
+        "--write-gaits",
+        action="store_true",
+        help="also write configs/gaits/default.yaml and literal-cycle.yaml",
+    )
+    p.add_argument(
+        "--docs", metavar="DIR", help="copy REPRODUCTION.md and the PNG figures to DIR (e.g. docs)"
+    )
+    p.add_argument(
+        "--quiet",
+        "--no-progress",
+        dest="quiet",
+        action="store_true",
+        help="no progress lines on stderr (alias: --no-progress)",
+    )
     add_json_arg(p)
     p.set_defaults(func=cmd_reproduce)
 
@@ -196,15 +235,22 @@ def cmd_fixed_point(args) -> int:
         res = paper_search(gait.params, z0)
     else:
         pins = _default_pins(args, z0, gait.params)
-        res = find_fixed_point(gait.params, z0, free=args.free, pin=pins or None,
-                               tol=args.tol, max_iter=args.max_iter,
-                               jacobian_method=args.jacobian)  # fmt: skip
+        res = find_fixed_point(
+            gait.params,
+            z0,
+            free=args.free,
+            pin=pins or None,
+            tol=args.tol,
+            max_iter=args.max_iter,
+            jacobian_method=args.jacobian,
+        )
     out = res.summary()
     out["gait"] = str(gait.path)
     if args.save:
         if not res.converged:
-            print(f"bound-env fixed-point: not saving, no fixed point ({res.reason})",
-                  file=sys.stderr)  # fmt: skip
+            print(
+                f"bound-env fixed-point: not saving, no fixed point ({res.reason})", file=sys.stderr
+            )
         else:
             out["saved"] = str(_save(args.save, gait, res, z0))
     if args.json:
@@ -215,19 +261,25 @@ def cmd_fixed_point(args) -> int:
 
 
 def _save(path, gait, res, z0) -> Path:
-    meta = {k: v for k, v in (gait.meta or {}).items()
-            if k not in ("z_star", "z_published", "fixed_point")}  # fmt: skip
+    meta = {
+        k: v
+        for k, v in (gait.meta or {}).items()
+        if k not in ("z_star", "z_published", "fixed_point")
+    }
     meta["fixed_point"] = {
         "found_by": f"bound-env fixed-point ({res.method}) from {gait.path}",
         "start_z": [float(v) for v in z_to_paper(z0)],
-        "residual": float(res.residual), "iterations": int(res.iterations),
+        "residual": float(res.residual),
+        "iterations": int(res.iterations),
         "free": {k: float(v) for k, v in res.free.items()},
         "eigenvalues": [[float(v.real), float(v.imag)] for v in res.eigenvalues]
-        if res.eigenvalues is not None else None,
+        if res.eigenvalues is not None
+        else None,
         "emax": float(res.emax) if math.isfinite(res.emax) else None,
-        "phases": list(res.phases), "durations": [float(d) for d in res.durations],
+        "phases": list(res.phases),
+        "durations": [float(d) for d in res.durations],
         "strides_to_converge": res.strides_to_converge,
-    }  # fmt: skip
+    }
     return save_gait(path, res.params, z_star=res.z, z_published=gait.z_published, **meta)
 
 
@@ -244,8 +296,12 @@ def _print_fixed_point(out, res):
     if res.eigenvalues is not None:
         print("eigenvalues: " + ", ".join(f"{v.real:.6f}{v.imag:+.6f}j" for v in res.eigenvalues))
         print(f"e_max = {res.emax:.6f}  ({'stable' if res.emax < 1 else 'unstable'})")
-    print("phases " + " -> ".join(out["phases"]) + "  durations " +
-          ", ".join(f"{d * 1e3:.2f} ms" for d in out["durations"]))  # fmt: skip
+    print(
+        "phases "
+        + " -> ".join(out["phases"])
+        + "  durations "
+        + ", ".join(f"{d * 1e3:.2f} ms" for d in out["durations"])
+    )
     print(f"strides to recover from +1 % on y_g: {out['strides_to_converge']}")
     if "saved" in out:
         print(f"saved {out['saved']}")
@@ -258,22 +314,41 @@ def cmd_continue(args) -> int:
     gait, z0 = _setup(args)
     pins = _default_pins(args, z0, gait.params)
     branch = continue_branch(
-        gait.params, z0, args.param, args.to, step=args.step, method=args.method,
-        free=args.free, pin=pins or None, max_points=args.max_points, out_dir=out,
+        gait.params,
+        z0,
+        args.param,
+        args.to,
+        step=args.step,
+        method=args.method,
+        free=args.free,
+        pin=pins or None,
+        max_points=args.max_points,
+        out_dir=out,
         progress=not args.quiet,
-    )  # fmt: skip
+    )
     if branch.points:
         plot_branch(branch, out / "branch.png")
     flags = [(p.value, n) for p in branch.points for n in ("fold", "pd", "ns") if getattr(p, n)]
-    say(args, f"{len(branch.points)} points, {branch.reason}; wrote {out / 'branch.csv'}"
-        + (f" and {out / 'branch.png'}" if branch.points else ""))  # fmt: skip
+    say(
+        args,
+        f"{len(branch.points)} points, {branch.reason}; wrote {out / 'branch.csv'}"
+        + (f" and {out / 'branch.png'}" if branch.points else ""),
+    )
     for v, n in flags:
         say(args, f"  {n} between the previous point and {args.param} = {v:.6g}")
     if args.json:
-        print(strict_json({"param": args.param, "points": len(branch.points),
-                           "reason": branch.reason, "reached": bool(branch.reached),
-                           "flags": [{"kind": n, "value": v} for v, n in flags],
-                           "csv": str(out / "branch.csv")}))
+        print(
+            strict_json(
+                {
+                    "param": args.param,
+                    "points": len(branch.points),
+                    "reason": branch.reason,
+                    "reached": bool(branch.reached),
+                    "flags": [{"kind": n, "value": v} for v, n in flags],
+                    "csv": str(out / "branch.csv"),
+                }
+            )
+        )
     # a fold or any other end of the branch is a result (reported above), not an error;
     # only a branch that could not start is one
     return 0 if branch.points else 1
@@ -292,9 +367,15 @@ def cmd_sweep(args) -> int:
         raise ValueError(f"--from/--to/--step ask for {n_points} points; at most 100000")
     values = np.round(np.arange(args.lo, args.hi + 0.5 * args.step, args.step), 12)
     with open_pool(args.scheduler, args.workers) as pool:
-        res = sweep(gait.params, z0, args.param, values, refine=args.refine,
-                    progress=not args.quiet,
-                    executor=pool.executor if pool.kind != "serial" else None)  # fmt: skip
+        res = sweep(
+            gait.params,
+            z0,
+            args.param,
+            values,
+            refine=args.refine,
+            progress=not args.quiet,
+            executor=pool.executor if pool.kind != "serial" else None,
+        )
     write_sweep_csv(res, out / "sweep.csv")
     plot_sweep(res, out / "sweep.png")
     windows = {}
@@ -302,23 +383,43 @@ def cmd_sweep(args) -> int:
         w = res.window(kind)
         windows[kind] = [float(w[0]), float(w[1])] if w else None
         label = "100-stride convergence" if kind == "converged" else "e_max < 1"
-        say(args, f"{label} window in {args.param}: " +
-            (f"{w[0]:.6g} .. {w[1]:.6g}" if w else "none"))  # fmt: skip
+        say(
+            args,
+            f"{label} window in {args.param}: " + (f"{w[0]:.6g} .. {w[1]:.6g}" if w else "none"),
+        )
     say(args, f"wrote {out / 'sweep.csv'} and {out / 'sweep.png'}")
     if args.json:
-        print(strict_json({"param": args.param, "points": len(values), "windows": windows,
-                           "csv": str(out / "sweep.csv"), "png": str(out / "sweep.png")}))
+        print(
+            strict_json(
+                {
+                    "param": args.param,
+                    "points": len(values),
+                    "windows": windows,
+                    "csv": str(out / "sweep.csv"),
+                    "png": str(out / "sweep.png"),
+                }
+            )
+        )
     return 0
 
 
 def cmd_reproduce(args) -> int:
     from .reproduce import run
 
-    res = run(args.out, quick=args.quick, force=args.force, progress=not args.quiet,
-              write_gaits=args.write_gaits, docs_dir=args.docs)  # fmt: skip
+    res = run(
+        args.out,
+        quick=args.quick,
+        force=args.force,
+        progress=not args.quiet,
+        write_gaits=args.write_gaits,
+        docs_dir=args.docs,
+    )
     hits = ", ".join(res["cache"]["hits"]) or "none"
-    say(args, f"wrote {res['report']} ({len(res['figures'])} figure files) in "
-        f"{res['wall_seconds']:.1f} s; cached stages: {hits}")
+    say(
+        args,
+        f"wrote {res['report']} ({len(res['figures'])} figure files) in "
+        f"{res['wall_seconds']:.1f} s; cached stages: {hits}",
+    )
     if args.json:
         print(strict_json(res))
     return 0

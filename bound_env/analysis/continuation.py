@@ -102,8 +102,9 @@ def _params_at(base: Params, param: str, value: float, free_vals: dict) -> Param
     return base.with_values(**{param: value}, **free_vals)
 
 
-def analyse_point(base: Params, param: str, value: float, u, free, sim_kw, dz=DZ,
-                  jacobian_method="fd") -> BranchPoint:  # fmt: skip
+def analyse_point(
+    base: Params, param: str, value: float, u, free, sim_kw, dz=DZ, jacobian_method="fd"
+) -> BranchPoint:
     """A corrected point: eigenvalues, e_max, phases, period."""
     free_vals = dict(zip(free, (float(x) for x in u[6:]), strict=True))
     p = _params_at(base, param, value, free_vals)
@@ -115,9 +116,16 @@ def analyse_point(base: Params, param: str, value: float, u, free, sim_kw, dz=DZ
         lam, emax = st.eigenvalues, st.emax
     except Exception:  # noqa: BLE001 - a failed differentiation leaves the point unanalysed
         lam, emax = None, math.nan
-    return BranchPoint(value=float(value), z=z.copy(), residual=r, eigenvalues=lam, emax=emax,
-                       phases=list(res.phases), period=float(res.t_end),
-                       free=free_vals)  # fmt: skip
+    return BranchPoint(
+        value=float(value),
+        z=z.copy(),
+        residual=r,
+        eigenvalues=lam,
+        emax=emax,
+        phases=list(res.phases),
+        period=float(res.t_end),
+        free=free_vals,
+    )
 
 
 def mark_bifurcations(prev: BranchPoint, cur: BranchPoint, tangent_sign_changed=False):
@@ -147,13 +155,26 @@ def csv_header(param: str, free) -> list[str]:
 
 def point_row(i: int, pt: BranchPoint, free) -> list:
     lam = pt.eigenvalues if pt.eigenvalues is not None else np.full(6, np.nan + 0j)
-    row = [i, repr(pt.value), *(repr(float(v)) for v in z_to_paper(pt.z)), repr(pt.residual),
-           repr(pt.emax)]  # fmt: skip
+    row = [
+        i,
+        repr(pt.value),
+        *(repr(float(v)) for v in z_to_paper(pt.z)),
+        repr(pt.residual),
+        repr(pt.emax),
+    ]
     row += [repr(float(abs(v))) for v in lam]
     row += [repr(float(x)) for v in lam for x in (v.real, v.imag)]
     row += [repr(pt.free[k]) for k in free]
-    return row + [int(pt.has_ds), "-".join(pt.phases), repr(pt.period), pt.iterations,
-                  repr(pt.step), int(pt.fold), int(pt.pd), int(pt.ns)]  # fmt: skip
+    return row + [
+        int(pt.has_ds),
+        "-".join(pt.phases),
+        repr(pt.period),
+        pt.iterations,
+        repr(pt.step),
+        int(pt.fold),
+        int(pt.pd),
+        int(pt.ns),
+    ]
 
 
 def csv_line(row) -> str:
@@ -168,16 +189,26 @@ def read_branch_csv(path, param: str, free=()) -> list[BranchPoint]:
     kill is skipped with a warning)."""
     pts = []
     for r in csv.DictReader(read_lines(path)):
-        lam = np.array([float(r[f"lambda{i}_re"]) + 1j * float(r[f"lambda{i}_im"])
-                        for i in range(1, 7)])  # fmt: skip
-        pts.append(BranchPoint(
-            value=float(r[param]), z=z_to_si([float(r[c]) for c in Z_COLUMNS]),
-            residual=float(r["residual"]), eigenvalues=None if np.isnan(lam).any() else lam,
-            emax=float(r["emax"]), phases=r["phases"].split("-"),
-            period=float(r["period_s"]), free={k: float(r[k]) for k in free},
-            iterations=int(r["iterations"]), step=float(r["step"]),
-            fold=r["fold"] == "1", pd=r["pd"] == "1", ns=r["ns"] == "1",
-        ))  # fmt: skip
+        lam = np.array(
+            [float(r[f"lambda{i}_re"]) + 1j * float(r[f"lambda{i}_im"]) for i in range(1, 7)]
+        )
+        pts.append(
+            BranchPoint(
+                value=float(r[param]),
+                z=z_to_si([float(r[c]) for c in Z_COLUMNS]),
+                residual=float(r["residual"]),
+                eigenvalues=None if np.isnan(lam).any() else lam,
+                emax=float(r["emax"]),
+                phases=r["phases"].split("-"),
+                period=float(r["period_s"]),
+                free={k: float(r[k]) for k in free},
+                iterations=int(r["iterations"]),
+                step=float(r["step"]),
+                fold=r["fold"] == "1",
+                pd=r["pd"] == "1",
+                ns=r["ns"] == "1",
+            )
+        )
     return pts
 
 
@@ -205,8 +236,13 @@ class _Writer:
     def status(self, status, reason=None, reached=None):
         if self.dir is None:
             return
-        data = {"config": self.config, "status": status, "reason": reason, "reached": reached,
-                "state": self.state}  # fmt: skip
+        data = {
+            "config": self.config,
+            "status": status,
+            "reason": reason,
+            "reached": reached,
+            "state": self.state,
+        }
         atomic_write(self.dir / "branch.json", json.dumps(data, indent=1))
 
 
@@ -274,8 +310,13 @@ class FixedPointPath:
             self.params_of(s)
         except ValueError as e:
             return NewtonOutcome(np.asarray(u_pred, dtype=float), None, False, str(e), 0)
-        return newton(self.residual_at(s), np.asarray(u_pred, dtype=float), self.steps_of(u_pred),
-                      tol=self.tol, max_iter=max_iter)  # fmt: skip
+        return newton(
+            self.residual_at(s),
+            np.asarray(u_pred, dtype=float),
+            self.steps_of(u_pred),
+            tol=self.tol,
+            max_iter=max_iter,
+        )
 
 
 @dataclass(frozen=True)
@@ -312,9 +353,16 @@ def _secant(hist, s_new):
     return u2 + (u2 - u1) * (s_new - s2) / (s2 - s1)
 
 
-def natural(path: FixedPointPath, pts: list, s_to: float, control: StepControl,
-            max_points: int = MAX_POINTS, on_point=None, on_stall=None,
-            on_reject=None) -> Stop:  # fmt: skip
+def natural(
+    path: FixedPointPath,
+    pts: list,
+    s_to: float,
+    control: StepControl,
+    max_points: int = MAX_POINTS,
+    on_point=None,
+    on_stall=None,
+    on_reject=None,
+) -> Stop:
     """Natural continuation from the points ``pts`` [(s, u)] (at least one, corrected) to
     s_to; new points are appended to ``pts``. Secant predictor through the last two points,
     Newton corrector at the new s (`FixedPointPath.correct`), a correction moving z more than
@@ -342,8 +390,7 @@ def natural(path: FixedPointPath, pts: list, s_to: float, control: StepControl,
         if u_pred is None:  # no secant yet: trust the corrector (or guard with the floor)
             u_pred, jump_max = u_last, JUMP_FLOOR if control.guard_first_step else math.inf
         else:  # a correction much larger than the predicted change has left the branch
-            jump_max = max(JUMP_FACTOR * float(np.max(np.abs(u_pred[:6] - u_last[:6]))),
-                           JUMP_FLOOR)  # fmt: skip
+            jump_max = max(JUMP_FACTOR * float(np.max(np.abs(u_pred[:6] - u_last[:6]))), JUMP_FLOOR)
         out = path.correct(s_new, u_pred)
         ok, info = out.converged, out.reason
         if ok and np.max(np.abs(out.u[:6] - u_pred[:6])) > jump_max:
@@ -371,10 +418,21 @@ def natural(path: FixedPointPath, pts: list, s_to: float, control: StepControl,
     return Stop("max_points", pts[-1][0])
 
 
-def arclength(path: FixedPointPath, pts: list, s_to: float, ds: float, ds_max: float,
-              ds_min: float, steps, max_points: int = MAX_POINTS, origin: float = 0.0,
-              scale: float = 1.0, stop_past_start: int | None = 0, on_point=None,
-              on_reject=None) -> Stop:  # fmt: skip
+def arclength(
+    path: FixedPointPath,
+    pts: list,
+    s_to: float,
+    ds: float,
+    ds_max: float,
+    ds_min: float,
+    steps,
+    max_points: int = MAX_POINTS,
+    origin: float = 0.0,
+    scale: float = 1.0,
+    stop_past_start: int | None = 0,
+    on_point=None,
+    on_reject=None,
+) -> Stop:
     """Pseudo-arclength continuation from the last two points of ``pts`` [(s, u)] (at least
     two, corrected) towards s_to; new points are appended to ``pts``.
 
@@ -435,8 +493,11 @@ def arclength(path: FixedPointPath, pts: list, s_to: float, ds: float, ds_max: f
         pts.append((s_new, v[:n_u].copy()))
         if on_point is not None:
             on_point(s_new, v[:n_u], out.iterations, ds, turned)
-        if (stop_past_start is not None and direction * (s_new - s0) < 0.0
-                and len(pts) > stop_past_start):  # fmt: skip
+        if (
+            stop_past_start is not None
+            and direction * (s_new - s0) < 0.0
+            and len(pts) > stop_past_start
+        ):
             return Stop("turned_back", s_new)
         if out.iterations <= EASY_ITER:
             ds = min(ds * GROW, ds_max)
@@ -479,8 +540,9 @@ class _Job:
         return np.concatenate([pt.z, [pt.free[k] for k in self.free]])
 
     def analyse(self, value, u) -> BranchPoint:
-        return analyse_point(self.params, self.param, value, u, self.free, self.sim_kw,
-                             self.dz, self.jacobian_method)  # fmt: skip
+        return analyse_point(
+            self.params, self.param, value, u, self.free, self.sim_kw, self.dz, self.jacobian_method
+        )
 
     def add(self, pts: list, pt: BranchPoint, prev: BranchPoint | None = None, turned=False):
         if prev is not None:
@@ -491,17 +553,35 @@ class _Job:
 
     def path(self) -> FixedPointPath:
         """The engine's view: s is the parameter's value (gait units)."""
-        return FixedPointPath(lambda value: self.params.with_values(**{self.param: value}),
-                              self.free, self.pins, self.sim_kw, self.tol, self.dz)  # fmt: skip
+        return FixedPointPath(
+            lambda value: self.params.with_values(**{self.param: value}),
+            self.free,
+            self.pins,
+            self.sim_kw,
+            self.tol,
+            self.dz,
+        )
 
 
 def continue_branch(
-    params: Params, z0, param: str, to: float, step: float | None = None,
-    method: str = "natural", free=(), pin=None, tol: float = NEWTON_TOL,
-    max_points: int = MAX_POINTS, min_step: float | None = None,
-    max_step: float | None = None, out_dir=None, progress: bool = False,
-    dz: float = DZ, jacobian_method: str = "fd", sim_kw: dict | None = None,
-) -> Branch:  # fmt: skip
+    params: Params,
+    z0,
+    param: str,
+    to: float,
+    step: float | None = None,
+    method: str = "natural",
+    free=(),
+    pin=None,
+    tol: float = NEWTON_TOL,
+    max_points: int = MAX_POINTS,
+    min_step: float | None = None,
+    max_step: float | None = None,
+    out_dir=None,
+    progress: bool = False,
+    dz: float = DZ,
+    jacobian_method: str = "fd",
+    sim_kw: dict | None = None,
+) -> Branch:
     """Follow the fixed point through z0 (SI) from the parameter's value in ``params`` to
     ``to`` (gait units). ``step`` defaults to 1/10 of the distance; ``free``/``pin`` as in
     `find_fixed_point` (e.g. free alpha_deg with the energy pinned: the paper's Fig. 4)."""
@@ -521,16 +601,31 @@ def continue_branch(
     if not step > 0:
         raise ValueError(f"step must be positive, got {step}")
     config = {
-        "params": params.to_gait_dict(), "z0": [float(v) for v in z_to_paper(z0)],
-        "param": param, "to": to, "step": step, "method": method, "free": list(free),
-        "pin": [list(p) for p in pins], "tol": tol, "max_points": max_points,
-        "dz": dz, "jacobian_method": jacobian_method, "sim_kw": dict(sim_kw),
-    }  # fmt: skip
+        "params": params.to_gait_dict(),
+        "z0": [float(v) for v in z_to_paper(z0)],
+        "param": param,
+        "to": to,
+        "step": step,
+        "method": method,
+        "free": list(free),
+        "pin": [list(p) for p in pins],
+        "tol": tol,
+        "max_points": max_points,
+        "dz": dz,
+        "jacobian_method": jacobian_method,
+        "sim_kw": dict(sim_kw),
+    }
     cached, pts = load_cached(out_dir, config)
     if cached is not None and cached.get("status") == "done":
         say(progress, f"reusing {len(pts)} points from {out_dir}")
-        return Branch(param, method, pts, cached.get("reason") or "cached",
-                      bool(cached.get("reached")), config)  # fmt: skip
+        return Branch(
+            param,
+            method,
+            pts,
+            cached.get("reason") or "cached",
+            bool(cached.get("reached")),
+            config,
+        )
     if cached is None:
         pts = []
     writer = _Writer(out_dir, config, param, free, len(pts))
@@ -538,12 +633,24 @@ def continue_branch(
         writer.state = cached.get("state") or {}
         say(progress, f"resuming from {len(pts)} points in {out_dir}")
     job = _Job(
-        params=params, z0=np.asarray(z0, dtype=float), param=param, p0=p0, to=to, step=step,
+        params=params,
+        z0=np.asarray(z0, dtype=float),
+        param=param,
+        p0=p0,
+        to=to,
+        step=step,
         min_step=abs(min_step) if min_step else step / 1024.0,
-        max_step=abs(max_step) if max_step else step, free=free, pins=pins, tol=tol,
-        max_points=max_points, writer=writer, progress=progress, dz=dz,
-        jacobian_method=jacobian_method, sim_kw=sim_kw,
-    )  # fmt: skip
+        max_step=abs(max_step) if max_step else step,
+        free=free,
+        pins=pins,
+        tol=tol,
+        max_points=max_points,
+        writer=writer,
+        progress=progress,
+        dz=dz,
+        jacobian_method=jacobian_method,
+        sim_kw=sim_kw,
+    )
     run = _natural if method == "natural" else _arclength
     reason, reached = run(job, pts)
     writer.status("done", reason, reached)
@@ -557,15 +664,25 @@ def say(progress, msg):
 
 def _report(progress, param, pt: BranchPoint):
     flags = "".join(f"  {n.upper()}" for n in ("fold", "pd", "ns") if getattr(pt, n))
-    say(progress, f"{param} = {pt.value:.6g}  emax = {pt.emax:.4f}  residual = "
+    say(
+        progress,
+        f"{param} = {pt.value:.6g}  emax = {pt.emax:.4f}  residual = "
         f"{pt.residual:.1e}  iterations = {pt.iterations}  phases = {'-'.join(pt.phases)}"
-        f"{flags}")  # fmt: skip
+        f"{flags}",
+    )
 
 
 def _first_point(job: _Job, pts: list) -> str | None:
     """Correct the start at p0; None on success, else why not."""
-    res = find_fixed_point(job.params, job.z0, free=job.free, pin=job.pins, tol=job.tol,
-                           analyse=False, sim_kw=job.sim_kw)  # fmt: skip
+    res = find_fixed_point(
+        job.params,
+        job.z0,
+        free=job.free,
+        pin=job.pins,
+        tol=job.tol,
+        analyse=False,
+        sim_kw=job.sim_kw,
+    )
     if not res.converged:
         return f"no fixed point at the start: {res.reason}"
     pt = job.analyse(job.p0, np.concatenate([res.z, [res.free[k] for k in job.free]]))
@@ -586,19 +703,28 @@ def _natural(job: _Job, pts: list, max_points: int | None = None) -> tuple[str, 
         job.add(pts, pt, prev=pts[-1])
 
     def on_reject(value, info, h):
-        say(job.progress, f"{job.param} = {value:.6g}: corrector failed ({info}); "
-            f"step -> {h:.3g}")  # fmt: skip
+        say(job.progress, f"{job.param} = {value:.6g}: corrector failed ({info}); step -> {h:.3g}")
 
-    control = StepControl(job.step, job.max_step, job.min_step,
-                          target_tol=TARGET_TOL * max(1.0, abs(job.to)))  # fmt: skip
+    control = StepControl(
+        job.step, job.max_step, job.min_step, target_tol=TARGET_TOL * max(1.0, abs(job.to))
+    )
     trail = [(pt.value, job.u(pt)) for pt in pts[-2:]]  # the engine's points; pts gets analysed
-    stop = natural(job.path(), trail, job.to, control, max_points - len(pts) + len(trail),
-                   on_point=on_point, on_reject=on_reject)  # fmt: skip
+    stop = natural(
+        job.path(),
+        trail,
+        job.to,
+        control,
+        max_points - len(pts) + len(trail),
+        on_point=on_point,
+        on_reject=on_reject,
+    )
     if stop.kind == "reached":
         return "reached the target", True
     if stop.kind == "stalled":
-        return (f"step below {job.min_step:.3g} at {job.param} = {stop.s:.6g} "
-                f"(fold or end of the branch? try --method arclength): {stop.info}"), False
+        return (
+            f"step below {job.min_step:.3g} at {job.param} = {stop.s:.6g} "
+            f"(fold or end of the branch? try --method arclength): {stop.info}"
+        ), False
     return f"stopped after max_points = {max_points}", False
 
 
@@ -619,9 +745,13 @@ def _arclength(job: _Job, pts: list) -> tuple[str, bool]:
 
     ds = float(np.linalg.norm(v_of(pts[-1]) - v_of(pts[-2])))
     h_first = abs(pts[1].value - pts[0].value)
-    steps = np.concatenate([np.full(6, job.dz),
-                            [param_step(k, pts[-1].free[k], job.dz) for k in job.free],
-                            [param_step(job.param, job.p0, job.dz) / p_scale]])  # fmt: skip
+    steps = np.concatenate(
+        [
+            np.full(6, job.dz),
+            [param_step(k, pts[-1].free[k], job.dz) for k in job.free],
+            [param_step(job.param, job.p0, job.dz) / p_scale],
+        ]
+    )
 
     def on_point(value, u, iterations, step, turned):
         pt = job.analyse(value, u)
@@ -632,15 +762,25 @@ def _arclength(job: _Job, pts: list) -> tuple[str, bool]:
         say(job.progress, f"arclength corrector failed ({info}); ds -> {ds_new:.3g}")
 
     trail = [(pt.value, job.u(pt)) for pt in pts]
-    stop = arclength(job.path(), trail, job.to, ds, max(ds, job.max_step / h_first * ds),
-                     ds * job.min_step / job.step, steps, job.max_points, origin=job.p0,
-                     scale=p_scale, stop_past_start=3, on_point=on_point,
-                     on_reject=on_reject)  # fmt: skip
+    stop = arclength(
+        job.path(),
+        trail,
+        job.to,
+        ds,
+        max(ds, job.max_step / h_first * ds),
+        ds * job.min_step / job.step,
+        steps,
+        job.max_points,
+        origin=job.p0,
+        scale=p_scale,
+        stop_past_start=3,
+        on_point=on_point,
+        on_reject=on_reject,
+    )
     if stop.kind == "reached":
         return "reached the target", True
     if stop.kind == "stalled":
-        return (f"arclength step below minimum at {job.param} = {stop.s:.6g}: "
-                f"{stop.info}"), False
+        return (f"arclength step below minimum at {job.param} = {stop.s:.6g}: {stop.info}"), False
     if stop.kind == "turned_back":
         return f"the branch turned back past the start ({job.param} = {stop.s:.6g})", False
     return f"stopped after max_points = {job.max_points}", False
@@ -675,10 +815,18 @@ def plot_branch(branch: Branch, path) -> Path:
     flag = np.array([p.fold or p.pd or p.ns for p in pts], dtype=bool)
     for ax, (label, y) in zip(axes.flat, series, strict=False):
         ax.plot(x, y, "-", color="0.7", lw=0.8, zorder=1)
-        ax.scatter(x[~ds], y[~ds], marker="o", facecolors="white", edgecolors="C0",
-                   label="without ds", zorder=2)  # fmt: skip
-        ax.scatter(x[ds], y[ds], marker="s", facecolors="white", edgecolors="C2",
-                   label="with ds", zorder=2)  # fmt: skip
+        ax.scatter(
+            x[~ds],
+            y[~ds],
+            marker="o",
+            facecolors="white",
+            edgecolors="C0",
+            label="without ds",
+            zorder=2,
+        )
+        ax.scatter(
+            x[ds], y[ds], marker="s", facecolors="white", edgecolors="C2", label="with ds", zorder=2
+        )
         if flag.any():
             ax.scatter(x[flag], y[flag], marker="x", color="red", label="bifurcation", zorder=3)
         if label == r"$e_{max}$":
@@ -689,8 +837,9 @@ def plot_branch(branch: Branch, path) -> Path:
     for ax in list(axes.flat)[len(series) :]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=7)
-    fig.suptitle(f"fixed points against {branch.param} ({branch.method}): {branch.reason}",
-                 fontsize=9)  # fmt: skip
+    fig.suptitle(
+        f"fixed points against {branch.param} ({branch.method}): {branch.reason}", fontsize=9
+    )
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=110)

@@ -163,10 +163,18 @@ def make_residual(params: Params, free, pins, sim_kw):
 
 
 def find_fixed_point(
-    params: Params, z0, free=(), pin=None, tol: float = NEWTON_TOL,
-    max_iter: int = NEWTON_MAX_ITER, dz: float = DZ, jacobian_method: str = "fd",
-    recover: bool = True, analyse: bool = True, sim_kw: dict | None = None,
-) -> FixedPointResult:  # fmt: skip
+    params: Params,
+    z0,
+    free=(),
+    pin=None,
+    tol: float = NEWTON_TOL,
+    max_iter: int = NEWTON_MAX_ITER,
+    dz: float = DZ,
+    jacobian_method: str = "fd",
+    recover: bool = True,
+    analyse: bool = True,
+    sim_kw: dict | None = None,
+) -> FixedPointResult:
     """Newton-Raphson for z* = P(z*) from z0 (SI), optionally freeing parameters.
 
     ``free`` names gait keys to solve for; ``pin`` gives as many conditions (or one more for
@@ -178,8 +186,10 @@ def find_fixed_point(
     free = check_free(free)
     pins = normalize_pins(pin)
     if len(pins) not in (len(free), len(free) + 1):
-        raise ValueError(f"{len(free)} freed parameter(s) need {len(free)} pin(s) "
-                         f"(or one more for zero damping), got {len(pins)}")  # fmt: skip
+        raise ValueError(
+            f"{len(free)} freed parameter(s) need {len(free)} pin(s) "
+            f"(or one more for zero damping), got {len(pins)}"
+        )
     gd = params.to_gait_dict()
     u0 = np.concatenate([np.asarray(z0, dtype=float).reshape(6), [gd[k] for k in free]])
     steps = np.concatenate([np.full(6, dz), [param_step(k, gd[k], dz) for k in free]])
@@ -195,19 +205,25 @@ def find_fixed_point(
     except ValueError:
         p_out = params
     result = FixedPointResult(
-        z=out.u[:6].copy(), params=p_out,
+        z=out.u[:6].copy(),
+        params=p_out,
         residual=inf_norm(None if out.residual is None else out.residual[:6]),
-        converged=out.converged, reason=reason, iterations=out.iterations, free=free_vals,
+        converged=out.converged,
+        reason=reason,
+        iterations=out.iterations,
+        free=free_vals,
         history=out.history,
-    )  # fmt: skip
+    )
     if analyse:
-        analyse_fixed_point(result, jacobian_method=jacobian_method, dz=dz, recover=recover,
-                            sim_kw=sim_kw)  # fmt: skip
+        analyse_fixed_point(
+            result, jacobian_method=jacobian_method, dz=dz, recover=recover, sim_kw=sim_kw
+        )
     return result
 
 
-def analyse_fixed_point(result: FixedPointResult, jacobian_method="fd", dz=DZ, recover=True,
-                        sim_kw=None) -> FixedPointResult:  # fmt: skip
+def analyse_fixed_point(
+    result: FixedPointResult, jacobian_method="fd", dz=DZ, recover=True, sim_kw=None
+) -> FixedPointResult:
     """Fill in phases, durations and (when converged) eigenvalues, e_max and recovery."""
     sim_kw = dict(sim_kw or {})
     res = stride(result.z, result.params, **sim_kw)
@@ -263,10 +279,16 @@ def energy_error(run: IterationResult, reference: str) -> float | None:
 
 
 def slope_secant(
-    params: Params, z0, alpha1_deg: float | None = None, d_alpha_deg: float = 0.01,
-    n_strides: int = PAPER_STRIDES, reference: str = "start", tol_energy: float = 1e-9,
-    max_iter: int = 30, sim_kw: dict | None = None,
-) -> SecantResult:  # fmt: skip
+    params: Params,
+    z0,
+    alpha1_deg: float | None = None,
+    d_alpha_deg: float = 0.01,
+    n_strides: int = PAPER_STRIDES,
+    reference: str = "start",
+    tol_energy: float = 1e-9,
+    max_iter: int = 30,
+    sim_kw: dict | None = None,
+) -> SecantResult:
     """The slope angle that balances the energy (III.D.5, eq. 27).
 
     From alpha_0 (``params``) and alpha_1 (``alpha1_deg``, default alpha_0 + d_alpha_deg),
@@ -310,16 +332,18 @@ def slope_secant(
     for a in (a0, a1):
         de = evaluate(a)
         if de is None:
-            return SecantResult(a, False, f"the run at alpha = {a:.6g} deg falls",
-                                len(hist), hist, runs.get(a))  # fmt: skip
+            return SecantResult(
+                a, False, f"the run at alpha = {a:.6g} deg falls", len(hist), hist, runs.get(a)
+            )
         pts.append((a, de))
         if abs(de) <= tol_energy:
             return SecantResult(a, True, "energy balanced", len(hist), hist, runs[a])
     for _ in range(max_iter):
         (a_2, e_2), (a_1, e_1) = pts[-2], pts[-1]
         if e_1 == e_2:
-            return SecantResult(a_1, False, "secant degenerate: equal energy errors",
-                                len(hist), hist, runs[a_1])  # fmt: skip
+            return SecantResult(
+                a_1, False, "secant degenerate: equal energy errors", len(hist), hist, runs[a_1]
+            )
         a = a_2 - e_2 * (a_1 - a_2) / (e_1 - e_2)  # eq. (27)
         de = evaluate(a)
         for _ in range(20):  # a run that falls: retreat towards the last good alpha
@@ -328,17 +352,29 @@ def slope_secant(
             a = 0.5 * (a + a_1)
             de = evaluate(a)
         if de is None:
-            return SecantResult(a_1, False, "runs fall near the secant's next alpha",
-                                len(hist), hist, runs[a_1])  # fmt: skip
+            return SecantResult(
+                a_1, False, "runs fall near the secant's next alpha", len(hist), hist, runs[a_1]
+            )
         pts.append((a, de))
         if abs(de) <= tol_energy or abs(a - a_1) < 1e-13:
             ok = abs(de) <= tol_energy
-            return SecantResult(a, ok, "energy balanced" if ok else
-                                f"alpha stalled with dE = {de:.3e} J", len(hist), hist,
-                                runs[a])  # fmt: skip
+            return SecantResult(
+                a,
+                ok,
+                "energy balanced" if ok else f"alpha stalled with dE = {de:.3e} J",
+                len(hist),
+                hist,
+                runs[a],
+            )
     a, de = pts[-1]
-    return SecantResult(a, False, f"no balance in {max_iter} secant steps (dE = {de:.3e} J)",
-                        len(hist), hist, runs[a])  # fmt: skip
+    return SecantResult(
+        a,
+        False,
+        f"no balance in {max_iter} secant steps (dE = {de:.3e} J)",
+        len(hist),
+        hist,
+        runs[a],
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -346,8 +382,9 @@ def slope_secant(
 # --------------------------------------------------------------------------------------------
 
 
-def ladder(params: Params, gamma_step_deg=0.5, gamma_max_deg=4.0, k_step=100.0,
-           k_max_steps=3) -> list[dict]:  # fmt: skip
+def ladder(
+    params: Params, gamma_step_deg=0.5, gamma_max_deg=4.0, k_step=100.0, k_max_steps=3
+) -> list[dict]:
     """Parameter changes tried in order (steps E-F): none; gamma_b then gamma_f by
     +-0.5 deg up to +-4 deg; then (kb, kf) together by +-100 N/m up to k_max_steps times."""
     gd = params.to_gait_dict()
@@ -364,11 +401,19 @@ def ladder(params: Params, gamma_step_deg=0.5, gamma_max_deg=4.0, k_step=100.0,
 
 
 def paper_search(
-    params: Params, z0, max_newton: int = 100, gamma_step_deg: float = 0.5,
-    gamma_max_deg: float = 4.0, k_step: float = 100.0, k_max_steps: int = 3,
-    reference: str = "start", polish: bool = True, max_candidates: int | None = None,
-    sim_kw: dict | None = None, log=None,
-) -> FixedPointResult:  # fmt: skip
+    params: Params,
+    z0,
+    max_newton: int = 100,
+    gamma_step_deg: float = 0.5,
+    gamma_max_deg: float = 4.0,
+    k_step: float = 100.0,
+    k_max_steps: int = 3,
+    reference: str = "start",
+    polish: bool = True,
+    max_candidates: int | None = None,
+    sim_kw: dict | None = None,
+    log=None,
+) -> FixedPointResult:
     """The paper's search for a fixed point near z0 (III.D.4 steps C-F), bounded.
 
     For each candidate parameter set of `ladder` (unchanged first): step C, `slope_secant`
@@ -393,26 +438,34 @@ def paper_search(
             sec = slope_secant(p, z, reference=reference, sim_kw=sim_kw)  # step C
             p_a = p.with_values(alpha_deg=sec.alpha_deg)
             if log:
-                log(f"paper_search {changes or 'initial'}: update {k}, alpha "
+                log(
+                    f"paper_search {changes or 'initial'}: update {k}, alpha "
                     f"{sec.alpha_deg:.6f} deg, {sec.reason}, 100-stride error "
-                    f"{sec.run.error if sec.run else math.nan:.2e}")  # fmt: skip
+                    f"{sec.run.error if sec.run else math.nan:.2e}"
+                )
             if sec.fixed_point_found:
                 free = {"alpha_deg": sec.alpha_deg, **changes}
                 tried.append({"changes": changes, "outcome": "found", "newton_updates": k})
                 return _paper_result(p_a, sec.run.z_last, free, k, tried, polish, sim_kw)
             if k == max_newton:
                 break
-            step = newton(make_residual(p_a, (), [], sim_kw), z, np.full(6, DZ), tol=0.0,
-                          max_iter=1)  # step D: one damped Newton update  # fmt: skip
+            step = newton(
+                make_residual(p_a, (), [], sim_kw), z, np.full(6, DZ), tol=0.0, max_iter=1
+            )  # step D: one damped Newton update
             if not (step.converged or step.reason.startswith("no convergence")):
                 outcome = f"Newton update failed: {step.reason}"
                 break
             z = step.u[:6]
         tried.append({"changes": changes, "outcome": outcome})
-    res = FixedPointResult(z=np.asarray(z0, dtype=float), params=params, residual=math.inf,
-                           converged=False, reason=f"paper search: no fixed point after "
-                           f"{len(tried)} parameter set(s)", method="paper",
-                           history=tried)  # fmt: skip
+    res = FixedPointResult(
+        z=np.asarray(z0, dtype=float),
+        params=params,
+        residual=math.inf,
+        converged=False,
+        reason=f"paper search: no fixed point after {len(tried)} parameter set(s)",
+        method="paper",
+        history=tried,
+    )
     return analyse_fixed_point(res, sim_kw=sim_kw)
 
 

@@ -122,8 +122,15 @@ class NewtonOutcome:
     history: list = field(default_factory=list)  # per iteration: |F|, step length lambda
 
 
-def newton(residual, u0, steps, tol=NEWTON_TOL, max_iter=NEWTON_MAX_ITER,
-           max_halvings=MAX_HALVINGS, jacobian=None) -> NewtonOutcome:  # fmt: skip
+def newton(
+    residual,
+    u0,
+    steps,
+    tol=NEWTON_TOL,
+    max_iter=NEWTON_MAX_ITER,
+    max_halvings=MAX_HALVINGS,
+    jacobian=None,
+) -> NewtonOutcome:
     """Solve F(u) = 0 (square, or overdetermined and consistent) by damped Newton.
 
     ``residual(u)`` returns F or None where it fails; ``steps`` are the central difference
@@ -147,15 +154,24 @@ def newton(residual, u0, steps, tol=NEWTON_TOL, max_iter=NEWTON_MAX_ITER,
         try:
             jac = jacobian(u) if jacobian is not None else fd_jacobian(residual, u, steps)
         except MapFailure as e:
-            return NewtonOutcome(u, r, False, f"stride failed while differentiating: "
-                                 f"{e.reason}", it, jac, hist)  # fmt: skip
+            return NewtonOutcome(
+                u, r, False, f"stride failed while differentiating: {e.reason}", it, jac, hist
+            )
         if not np.all(np.isfinite(jac)):
             return NewtonOutcome(u, r, False, "non-finite Jacobian", it, jac, hist)
         rcond = scaled_rcond(jac)
         if jac.shape[0] == jac.shape[1] and rcond < SINGULAR_RCOND:
-            return NewtonOutcome(u, r, False, f"singular Jacobian (scaled rcond {rcond:.1e}): "
-                                 "the solution is not isolated or the pins are redundant; "
-                                 "free fewer parameters or add a pin", it, jac, hist)  # fmt: skip
+            return NewtonOutcome(
+                u,
+                r,
+                False,
+                f"singular Jacobian (scaled rcond {rcond:.1e}): "
+                "the solution is not isolated or the pins are redundant; "
+                "free fewer parameters or add a pin",
+                it,
+                jac,
+                hist,
+            )
         du = np.linalg.lstsq(jac, -r, rcond=None)[0]
         lam, n2 = 1.0, float(np.linalg.norm(r))
         for _ in range(max_halvings + 1):
@@ -164,13 +180,28 @@ def newton(residual, u0, steps, tol=NEWTON_TOL, max_iter=NEWTON_MAX_ITER,
                 break
             lam *= 0.5
         else:
-            return NewtonOutcome(u, r, False, f"line search failed: no decrease of |F| = "
-                                 f"{norm:.3e} along the Newton step after {max_halvings} "
-                                 "halvings", it, jac, hist)  # fmt: skip
+            return NewtonOutcome(
+                u,
+                r,
+                False,
+                f"line search failed: no decrease of |F| = "
+                f"{norm:.3e} along the Newton step after {max_halvings} "
+                "halvings",
+                it,
+                jac,
+                hist,
+            )
         hist[-1]["lambda"] = lam
         u, r = u + lam * du, r_new
-    return NewtonOutcome(u, r, False, f"no convergence in {max_iter} iterations "
-                         f"(|F| = {inf_norm(r):.3e})", max_iter, jac, hist)  # fmt: skip
+    return NewtonOutcome(
+        u,
+        r,
+        False,
+        f"no convergence in {max_iter} iterations (|F| = {inf_norm(r):.3e})",
+        max_iter,
+        jac,
+        hist,
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -191,8 +222,14 @@ class MapFixedPoint:
         return iter((self.z, self.residual, self.jacobian))
 
 
-def map_fixed_point(f, z0, steps, settle: int = MAP_SETTLE, newton_iters: int = MAP_NEWTON_ITERS,
-                    tol: float = MAP_TOL) -> MapFixedPoint:  # fmt: skip
+def map_fixed_point(
+    f,
+    z0,
+    steps,
+    settle: int = MAP_SETTLE,
+    newton_iters: int = MAP_NEWTON_ITERS,
+    tol: float = MAP_TOL,
+) -> MapFixedPoint:
     """Fixed point of the map f: iterate ``settle`` times (stopping early when converged or
     when the residual grows MAP_DIVERGED-fold), keep the best point, then Newton steps
     z <- z - (J - I)^-1 (f(z) - z) with J by central differences (no one-sided fallback),
@@ -243,8 +280,15 @@ def map_fixed_point(f, z0, steps, settle: int = MAP_SETTLE, newton_iters: int = 
 # --------------------------------------------------------------------------------------------
 
 
-def bisect_threshold(ok, lo: float, hi: float, iters: int, log: bool = True,
-                     grow: bool = False, cap: float = math.inf):
+def bisect_threshold(
+    ok,
+    lo: float,
+    hi: float,
+    iters: int,
+    log: bool = True,
+    grow: bool = False,
+    cap: float = math.inf,
+):
     """Largest s in [lo, hi] with ``ok(s)``, assuming ok holds below a threshold and fails
     above. Returns (s, capped): (hi, True) if ok(hi); (0.0, False) if not ok(lo); else the
     last ``ok`` point after ``iters`` bisection steps (on log s if ``log``, else linear).

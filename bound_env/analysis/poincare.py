@@ -86,9 +86,14 @@ class IterationResult:
 
 
 def iterate(
-    z, params: Params, n: int, *, tol: float = PAPER_CONV_TOL, energies: bool = False,
+    z,
+    params: Params,
+    n: int,
+    *,
+    tol: float = PAPER_CONV_TOL,
+    energies: bool = False,
     **sim_kw,
-) -> IterationResult:  # fmt: skip
+) -> IterationResult:
     """Apply P n times from z. ``converged`` follows the paper: all n strides completed and
     max |z_{n-1} - z_n| < tol (III.D.4 step C with n = 100, tol = 1e-5)."""
     if n < 1:
@@ -107,9 +112,14 @@ def iterate(
     e = np.array([apex_energy(zz, params) for zz in h]) if energies else np.empty(0)
     de = float(e[-1] - e[-2]) if energies and k >= 1 else math.nan
     return IterationResult(
-        history=h, strides=k, failure=failure, error=err,
-        converged=failure is None and k == n and err < tol, energy_error=de, energies=e,
-    )  # fmt: skip
+        history=h,
+        strides=k,
+        failure=failure,
+        error=err,
+        converged=failure is None and k == n and err < tol,
+        energy_error=de,
+        energies=e,
+    )
 
 
 def paper_convergence(z, params: Params, **kw) -> IterationResult:

@@ -110,10 +110,15 @@ class Recovery:
 
 
 def recovery(
-    z_star, params: Params, component: int = 0, rel: float = RECOVERY_REL,
-    tol: float = RECOVERY_TOL, tol_loose: float = RECOVERY_TOL_LOOSE,
-    max_strides: int = RECOVERY_MAX_STRIDES, **sim_kw,
-) -> Recovery:  # fmt: skip
+    z_star,
+    params: Params,
+    component: int = 0,
+    rel: float = RECOVERY_REL,
+    tol: float = RECOVERY_TOL,
+    tol_loose: float = RECOVERY_TOL_LOOSE,
+    max_strides: int = RECOVERY_MAX_STRIDES,
+    **sim_kw,
+) -> Recovery:
     """Perturb z*_i by a factor (1 + rel) and iterate P until back within ``tol`` (Fig. 6).
 
     A zero component is perturbed by ``rel`` in absolute SI units instead.
@@ -139,9 +144,14 @@ def recovery(
             n_tight = n
             break
     return Recovery(
-        component=component, rel=rel, strides=n_tight, strides_loose=n_loose,
-        failure=failure, deviation=np.array(dev), history=np.array(hist),
-    )  # fmt: skip
+        component=component,
+        rel=rel,
+        strides=n_tight,
+        strides_loose=n_loose,
+        failure=failure,
+        deviation=np.array(dev),
+        history=np.array(hist),
+    )
 
 
 def recovery_all(z_star, params: Params, rel: float = RECOVERY_REL, **kw) -> list[Recovery]:
@@ -167,9 +177,12 @@ class SpineOscillations:
 
 
 def spine_oscillations(
-    z, params: Params, record_dt: float = 1e-4, min_swing: float = math.radians(0.05),
+    z,
+    params: Params,
+    record_dt: float = 1e-4,
+    min_swing: float = math.radians(0.05),
     **sim_kw,
-) -> SpineOscillations:  # fmt: skip
+) -> SpineOscillations:
     """Count the spine oscillations in the stride from z (Fig. 5).
 
     Definition: the extrema of theta2 are the sign changes of theta2dot on a trajectory
@@ -193,6 +206,10 @@ def spine_oscillations(
         kept.append(i)
     kind = [1 if w2[i - 1] > 0 else -1 for i in kept]  # rising before: a maximum
     return SpineOscillations(
-        count=len(kept) / 2.0, extrema_t=tr.t[kept], extrema_theta2=th2[kept],
-        extrema_phase=[tr.phase[i] for i in kept], minima=kind.count(-1), maxima=kind.count(1),
-    )  # fmt: skip
+        count=len(kept) / 2.0,
+        extrema_t=tr.t[kept],
+        extrema_theta2=th2[kept],
+        extrema_phase=[tr.phase[i] for i in kept],
+        minima=kind.count(-1),
+        maxima=kind.count(1),
+    )

@@ -99,8 +99,9 @@ class SweepResult:
         return self.window("stable")
 
 
-def evaluate(params: Params, z_start, n_strides=PAPER_STRIDES, tol=PAPER_CONV_TOL,
-             polish=True, sim_kw=None) -> SweepPoint:  # fmt: skip
+def evaluate(
+    params: Params, z_start, n_strides=PAPER_STRIDES, tol=PAPER_CONV_TOL, polish=True, sim_kw=None
+) -> SweepPoint:
     """One sweep value: 100 strides from z_start, the convergence verdict, e_max."""
     sim_kw = dict(sim_kw or {})
     value = math.nan
@@ -122,16 +123,33 @@ def evaluate(params: Params, z_start, n_strides=PAPER_STRIDES, tol=PAPER_CONV_TO
         st = stability(z, params, **sim_kw)
         found, emax, lam = True, st.emax, st.eigenvalues
         phases = stride(z, params, **sim_kw).phases
-    return SweepPoint(value=value, converged=run.converged, error=err, failure=run.failure,
-                      z=z, found=found, emax=emax, eigenvalues=lam,
-                      phases=list(phases))  # fmt: skip
+    return SweepPoint(
+        value=value,
+        converged=run.converged,
+        error=err,
+        failure=run.failure,
+        z=z,
+        found=found,
+        emax=emax,
+        eigenvalues=lam,
+        phases=list(phases),
+    )
 
 
 def sweep(
-    params: Params, z_star, param: str, values, n_strides: int = PAPER_STRIDES,
-    tol: float = PAPER_CONV_TOL, polish: bool = True, stop_after: int = STOP_AFTER,
-    refine: int = 0, progress: bool = False, sim_kw: dict | None = None, executor=None,
-) -> SweepResult:  # fmt: skip
+    params: Params,
+    z_star,
+    param: str,
+    values,
+    n_strides: int = PAPER_STRIDES,
+    tol: float = PAPER_CONV_TOL,
+    polish: bool = True,
+    stop_after: int = STOP_AFTER,
+    refine: int = 0,
+    progress: bool = False,
+    sim_kw: dict | None = None,
+    executor=None,
+) -> SweepResult:
     """e_max against ``param`` (gait key, gait units) over ``values``, the paper's way.
 
     The base value is the parameter's value in ``params`` (z_star its fixed point, SI).
@@ -163,8 +181,9 @@ def sweep(
     return res
 
 
-def _chain(params, param, n_strides, tol, polish, sim_kw, stop_after, progress, chain, z,
-           misses) -> list:  # fmt: skip
+def _chain(
+    params, param, n_strides, tol, polish, sim_kw, stop_after, progress, chain, z, misses
+) -> list:
     """Evaluate ``chain`` in order, each value from the previous one's fixed point; stop
     after ``stop_after`` consecutive values outside both windows (``misses`` so far)."""
     pts = []
@@ -186,15 +205,15 @@ def _evaluate_at(params, param, v, z, n_strides, tol, polish, sim_kw) -> SweepPo
     try:
         p = params.with_values(**{param: float(v)})
     except ValueError as e:
-        return SweepPoint(float(v), False, math.inf, f"invalid: {e}", None, False, math.nan,
-                          None)  # fmt: skip
+        return SweepPoint(float(v), False, math.inf, f"invalid: {e}", None, False, math.nan, None)
     pt = evaluate(p, z, n_strides, tol, polish, sim_kw)
     pt.value = float(v)
     return pt
 
 
-def _refine(res: SweepResult, params, param, kind, n_bisect, n_strides, tol, polish, sim_kw,
-            progress):  # fmt: skip
+def _refine(
+    res: SweepResult, params, param, kind, n_bisect, n_strides, tol, polish, sim_kw, progress
+):
     """Bisect both edges of a window, adding the evaluated points to ``res``."""
     w = res.window(kind)
     if w is None:
@@ -225,10 +244,13 @@ def _refine(res: SweepResult, params, param, kind, n_bisect, n_strides, tol, pol
 
 def _say(progress, param, pt: SweepPoint):
     if progress:
-        print(f"[sweep] {param} = {pt.value:.6g}  converged = {pt.converged}  error = "
-              f"{pt.error:.1e}  emax = {pt.emax:.4f}  phases = {'-'.join(pt.phases)}"
-              + (f"  fell: {pt.failure}" if pt.failure else ""), file=sys.stderr,
-              flush=True)  # fmt: skip
+        print(
+            f"[sweep] {param} = {pt.value:.6g}  converged = {pt.converged}  error = "
+            f"{pt.error:.1e}  emax = {pt.emax:.4f}  phases = {'-'.join(pt.phases)}"
+            + (f"  fell: {pt.failure}" if pt.failure else ""),
+            file=sys.stderr,
+            flush=True,
+        )
 
 
 def write_sweep_csv(res: SweepResult, path) -> Path:
@@ -237,16 +259,37 @@ def write_sweep_csv(res: SweepResult, path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow([res.param, "converged", "error", "failure", "found", "emax",
-                    *(f"abs_lambda{i}" for i in range(1, 7)), *Z_COLUMNS, "has_ds",
-                    "phases"])  # fmt: skip
+        w.writerow(
+            [
+                res.param,
+                "converged",
+                "error",
+                "failure",
+                "found",
+                "emax",
+                *(f"abs_lambda{i}" for i in range(1, 7)),
+                *Z_COLUMNS,
+                "has_ds",
+                "phases",
+            ]
+        )
         for p in res.points:
             lam = np.abs(p.eigenvalues) if p.eigenvalues is not None else np.full(6, np.nan)
             z = z_to_paper(p.z) if p.z is not None else np.full(6, np.nan)
-            w.writerow([repr(p.value), int(p.converged), repr(p.error), p.failure or "",
-                        int(p.found), repr(p.emax), *(repr(float(x)) for x in lam),
-                        *(repr(float(x)) for x in z), int(p.has_ds),
-                        "-".join(p.phases)])  # fmt: skip
+            w.writerow(
+                [
+                    repr(p.value),
+                    int(p.converged),
+                    repr(p.error),
+                    p.failure or "",
+                    int(p.found),
+                    repr(p.emax),
+                    *(repr(float(x)) for x in lam),
+                    *(repr(float(x)) for x in z),
+                    int(p.has_ds),
+                    "-".join(p.phases),
+                ]
+            )
     return path
 
 
@@ -261,13 +304,21 @@ def plot_sweep(res: SweepResult, path) -> Path:
     x, e = res.values(), res.emax()
     conv, ds = res.converged(), res.has_ds()
     fig, ax = plt.subplots(figsize=(6, 4))
-    for mask_ds, marker, color, label in ((~ds, "o", "C0", "without ds"),
-                                          (ds, "s", "C2", "with ds")):  # fmt: skip
+    for mask_ds, marker, color, label in (
+        (~ds, "o", "C0", "without ds"),
+        (ds, "s", "C2", "with ds"),
+    ):
         m = mask_ds & conv
         ax.scatter(x[m], e[m], marker=marker, color=color, label=f"{label}, converged")
         m = mask_ds & ~conv
-        ax.scatter(x[m], e[m], marker=marker, facecolors="none", edgecolors=color,
-                   label=f"{label}, not converged in 100 strides")  # fmt: skip
+        ax.scatter(
+            x[m],
+            e[m],
+            marker=marker,
+            facecolors="none",
+            edgecolors=color,
+            label=f"{label}, not converged in 100 strides",
+        )
     ax.axhline(1.0, color="k", lw=0.6, ls="--")
     ax.axvline(res.base, color="0.6", lw=0.6, ls=":")
     for kind, color in (("converged", "C0"), ("stable", "C3")):

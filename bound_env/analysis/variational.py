@@ -184,10 +184,17 @@ def _event_saltation(name, w, aux, use_saltation):
 
 
 def jacobian_variational(
-    z, params: Params, tau: float = 0.0, rtol: float = 1e-12, atol: float = 1e-12, *,
-    strict: bool = False, backend: str = "fast", saltation: bool = True,
+    z,
+    params: Params,
+    tau: float = 0.0,
+    rtol: float = 1e-12,
+    atol: float = 1e-12,
+    *,
+    strict: bool = False,
+    backend: str = "fast",
+    saltation: bool = True,
     toe_columns: bool = True,
-) -> tuple[np.ndarray, dict]:  # fmt: skip
+) -> tuple[np.ndarray, dict]:
     """dP/dz (6x6, SI) at the apex state z from the variational equations of one stride.
 
     ``saltation`` and ``toe_columns`` exist for diagnostics: switching either off gives the
@@ -198,8 +205,7 @@ def jacobian_variational(
     before the apex) and ``max_event_time_error`` (re-located vs replayed event times) [s].
     """
     z = np.asarray(z, dtype=float).reshape(6)
-    ref = simulate_stride(z, params, backend=backend, tau=tau, strict=strict,
-                          rtol=rtol, atol=atol)  # fmt: skip
+    ref = simulate_stride(z, params, backend=backend, tau=tau, strict=strict, rtol=rtol, atol=atol)
     if not ref.ok:
         raise ValueError(f"the stride from z fails ({ref.failure}); P has no derivative there")
     groups: list[list] = []  # events at one instant, in apply_events order
@@ -227,8 +233,9 @@ def jacobian_variational(
     for grp in groups:
         evs = [_event_function(e.name, w[8:].copy(), aux) for e in grp]
         v0 = np.concatenate([w[:8], psi.ravel()])
-        sol = solve_ivp(fun, (t, grp[0].t + 0.05), v0, method="DOP853", rtol=rtol, atol=atol,
-                        events=evs)  # fmt: skip
+        sol = solve_ivp(
+            fun, (t, grp[0].t + 0.05), v0, method="DOP853", rtol=rtol, atol=atol, events=evs
+        )
         if sol.status != 1:
             raise RuntimeError(f"event {grp[0].name} near t={grp[0].t:.6f} s not re-located")
         t = float(sol.t[-1])
@@ -246,10 +253,13 @@ def jacobian_variational(
                 dp = (proj @ psi)[Z_ROWS]
                 eig = np.linalg.eigvals(dp)
                 info = {
-                    "z1": w[Z_ROWS].copy(), "period": t, "events": events,
+                    "z1": w[Z_ROWS].copy(),
+                    "period": t,
+                    "events": events,
                     "eigenvalues": eig[np.argsort(-np.abs(eig))],
-                    "saltations": jumps, "max_event_time_error": dt_max,
-                }  # fmt: skip
+                    "saltations": jumps,
+                    "max_event_time_error": dt_max,
+                }
                 return dp, info
             S, w, aux = _event_saltation(e.name, w, aux, saltation)
             jumps.append(S)

@@ -25,10 +25,21 @@ from .design import Linearization, deadbeat_gain, linearize, lqr_gain, spectral_
 from .spec import CONTROLLERS_DIR, ControllerSpec, load_spec, read_gain, weights
 
 __all__ = [
-    "CONTROLLERS_DIR", "ControllerSpec", "DampingFeedback", "Linearization", "StrideFeedback",
-    "controller_names", "deadbeat_gain", "is_controller", "linearize", "load_controller",
-    "load_spec", "lqr_gain", "notify_apex", "spectral_radius",
-]  # fmt: skip
+    "CONTROLLERS_DIR",
+    "ControllerSpec",
+    "DampingFeedback",
+    "Linearization",
+    "StrideFeedback",
+    "controller_names",
+    "deadbeat_gain",
+    "is_controller",
+    "linearize",
+    "load_controller",
+    "load_spec",
+    "lqr_gain",
+    "notify_apex",
+    "spectral_radius",
+]
 
 
 def controller_names() -> list[str]:
@@ -51,14 +62,17 @@ def load_controller(spec, gait: str | None = None):
     gait = str(gait) if gait is not None else s.gait
     if s.controller == "damping":
         return DampingFeedback(s.name, s.c, s.max_torque, s.dt, gait)
-    task = StrideTask(gait=gait, basis=s.basis, K=s.K, max_torque=s.max_torque,
-                      rtol=1e-12)
+    task = StrideTask(gait=gait, basis=s.basis, K=s.K, max_torque=s.max_torque, rtol=1e-12)
     K = task.K
     lin = linearize(task.sim, task.z_ref, s.jacobian)
     A_n, B_n = lin.normalized(task.apex_scales)
     G = read_gain(s, K, s.basis)
-    design = {"A": lin.A.tolist(), "B": lin.B.tolist(), "jacobian": s.jacobian,
-              "rho_open": spectral_radius(lin.A)}
+    design = {
+        "A": lin.A.tolist(),
+        "B": lin.B.tolist(),
+        "jacobian": s.jacobian,
+        "rho_open": spectral_radius(lin.A),
+    }
     if G is None:
         if s.controller == "lqr":
             Q, R = weights(s.path, "Q", s.Q, 6), weights(s.path, "R", s.R, K)
@@ -71,6 +85,14 @@ def load_controller(spec, gait: str | None = None):
     else:
         design["source"] = "gain"
     design["rho_closed"] = spectral_radius(lin.A - lin.B @ G)
-    return StrideFeedback(name=s.name, kind=s.controller, gain=G, z_ref=task.z_ref,
-                          basis=task.basis, max_torque=s.max_torque, dt=s.dt, gait=gait,
-                          design=design)
+    return StrideFeedback(
+        name=s.name,
+        kind=s.controller,
+        gain=G,
+        z_ref=task.z_ref,
+        basis=task.basis,
+        max_torque=s.max_torque,
+        dt=s.dt,
+        gait=gait,
+        design=design,
+    )

@@ -32,8 +32,9 @@ from ..task import OBS_NAMES
 # indices in the default (x_g excluded) PassiveBound-v0 observation
 OBS_TIME = OBS_NAMES[1:].index("time_since_apex")
 OBS_TH2DOT = OBS_NAMES[1:].index("theta2dot")
-OBS_Z = tuple(OBS_NAMES[1:].index(n) for n in ("y_g", "theta1", "theta2", "xdot_g",
-                                                "theta1dot", "theta2dot"))
+OBS_Z = tuple(
+    OBS_NAMES[1:].index(n) for n in ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
+)
 
 
 def notify_apex(controller, obs, info) -> None:
@@ -72,8 +73,12 @@ class StrideFeedback:
     @property
     def stride_env_kwargs(self) -> dict:
         """Keyword arguments of PassiveBoundStride-v0 with the same basis and saturation."""
-        return {"gait": self.gait, "basis": self.basis.name, "K": self.basis.K,
-                "max_torque": self.max_torque}
+        return {
+            "gait": self.gait,
+            "basis": self.basis.name,
+            "K": self.basis.K,
+            "max_torque": self.max_torque,
+        }
 
     def coefficients(self, z) -> np.ndarray:
         """u = clip(-G (z - z*), -1, 1)."""
@@ -126,5 +131,6 @@ class DampingFeedback:
         return float(np.clip(-self.c * float(obs[OBS_TH2DOT]) / self.max_torque, -1.0, 1.0))
 
     def fingerprint(self) -> str:
-        return hashlib.sha256(repr(("damping", self.c, self.max_torque, self.dt,
-                                    self.gait)).encode()).hexdigest()[:16]
+        return hashlib.sha256(
+            repr(("damping", self.c, self.max_torque, self.dt, self.gait)).encode()
+        ).hexdigest()[:16]

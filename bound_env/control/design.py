@@ -50,8 +50,9 @@ def central_jacobian(f, x0, steps) -> np.ndarray:
     try:
         return fd_jacobian(f, x0, steps, one_sided=False)
     except MapFailure as e:
-        raise ValueError(f"the stride map fails near the linearization point ({e}): no "
-                         "linearization there") from None
+        raise ValueError(
+            f"the stride map fails near the linearization point ({e}): no linearization there"
+        ) from None
 
 
 def linearize(sim, z_ref, jacobian: str = "fd") -> Linearization:
@@ -87,16 +88,22 @@ def lqr_gain(A_n, B_n, Q, R) -> np.ndarray:
     try:
         P = solve_discrete_are(A_n, B_n, Q, R)
     except (np.linalg.LinAlgError, ValueError) as e:
-        raise ValueError(f"the discrete Riccati equation has no stabilizing solution for "
-                         f"these Q, R and basis ({e})") from None
+        raise ValueError(
+            f"the discrete Riccati equation has no stabilizing solution for "
+            f"these Q, R and basis ({e})"
+        ) from None
     if not np.all(np.isfinite(P)):
-        raise ValueError("the discrete Riccati equation has no stabilizing solution for these "
-                         "Q, R and basis (non-finite solution)")
+        raise ValueError(
+            "the discrete Riccati equation has no stabilizing solution for these "
+            "Q, R and basis (non-finite solution)"
+        )
     G = np.linalg.solve(R + B_n.T @ P @ B_n, B_n.T @ P @ A_n)
     rho = spectral_radius(A_n - B_n @ G)
     if not rho < 1.0:
-        raise ValueError(f"the discrete Riccati equation has no stabilizing solution for these "
-                         f"Q, R and basis (closed-loop spectral radius {rho:.4g} >= 1)")
+        raise ValueError(
+            f"the discrete Riccati equation has no stabilizing solution for these "
+            f"Q, R and basis (closed-loop spectral radius {rho:.4g} >= 1)"
+        )
     return G
 
 
@@ -107,7 +114,9 @@ def deadbeat_gain(A_n, B_n, rank_tol: float = 1e-8) -> np.ndarray:
     sv = np.linalg.svd(B_n, compute_uv=False)
     rank = int(np.sum(sv > rank_tol * sv[0])) if sv.size else 0
     if rank < A_n.shape[0]:
-        raise ValueError(f"deadbeat needs B of rank {A_n.shape[0]} (K >= {A_n.shape[0]} "
-                         f"independent basis functions); this basis has K={B_n.shape[1]} and "
-                         f"rank {rank}: use more windows, or lqr")
+        raise ValueError(
+            f"deadbeat needs B of rank {A_n.shape[0]} (K >= {A_n.shape[0]} "
+            f"independent basis functions); this basis has K={B_n.shape[1]} and "
+            f"rank {rank}: use more windows, or lqr"
+        )
     return np.linalg.pinv(B_n) @ A_n

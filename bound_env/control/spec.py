@@ -66,8 +66,9 @@ def resolve_spec_path(spec: str | Path) -> Path:
     cand = CONTROLLERS_DIR / f"{spec}.yaml"
     if not cand.is_file():
         known = sorted(q.stem for q in CONTROLLERS_DIR.glob("*.yaml"))
-        raise FileNotFoundError(f"no controller spec {str(spec)!r}: give a .yaml file or one "
-                                f"of {known}")
+        raise FileNotFoundError(
+            f"no controller spec {str(spec)!r}: give a .yaml file or one of {known}"
+        )
     return cand
 
 
@@ -96,8 +97,10 @@ def load_spec(spec: str | Path) -> ControllerSpec:
     allowed = SPEC_KEYS[kind]
     for key in data:
         if key not in allowed:
-            raise ValueError(f"{path}: unknown key {key!r} for a {kind} controller "
-                             f"(allowed: {', '.join(allowed)})")
+            raise ValueError(
+                f"{path}: unknown key {key!r} for a {kind} controller "
+                f"(allowed: {', '.join(allowed)})"
+            )
     out = ControllerSpec(controller=kind, path=path)
     for key, value in data.items():
         setattr(out, key, value)
@@ -111,8 +114,11 @@ def load_spec(spec: str | Path) -> ControllerSpec:
             raise ValueError(f"{path}: c must be a number, got {out.c!r}") from None
         if not np.isfinite(out.c) or out.c < 0:
             raise ValueError(f"{path}: c must be finite and >= 0, got {out.c!r}")
-    if "K" in data and data["K"] is not None and (
-            isinstance(data["K"], bool) or not isinstance(data["K"], int)):
+    if (
+        "K" in data
+        and data["K"] is not None
+        and (isinstance(data["K"], bool) or not isinstance(data["K"], int))
+    ):
         raise ValueError(f"{path}: K must be an integer, got {data['K']!r}")
     if out.jacobian not in ("fd", "variational"):
         raise ValueError(f"{path}: jacobian must be 'fd' or 'variational', got {out.jacobian!r}")
@@ -124,15 +130,15 @@ def weights(path, key: str, value, n: int) -> np.ndarray:
     try:
         w = np.array(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
-        raise ValueError(f"{path}: {key} must be a number or {n} numbers, got {value!r}") \
-            from None
+        raise ValueError(f"{path}: {key} must be a number or {n} numbers, got {value!r}") from None
     if w.size == 1:
         w = np.full(n, w[0])
     if w.size != n:
         raise ValueError(f"{path}: {key} must be a number or {n} numbers, got {w.size}")
     if not np.all(np.isfinite(w)) or np.any(w < 0) or (key == "R" and np.any(w <= 0)):
-        raise ValueError(f"{path}: {key} must be finite and {'> 0' if key == 'R' else '>= 0'}, "
-                         f"got {value!r}")
+        raise ValueError(
+            f"{path}: {key} must be finite and {'> 0' if key == 'R' else '>= 0'}, got {value!r}"
+        )
     return np.diag(w)
 
 
@@ -161,8 +167,10 @@ def read_gain(spec: ControllerSpec, K: int, basis: str) -> np.ndarray | None:
     except (TypeError, ValueError):
         raise ValueError(f"{spec.path}: gain must be a K x 6 matrix of numbers") from None
     if G.shape != (K, 6):
-        raise ValueError(f"{spec.path}: gain has shape {G.shape}, but basis {basis!r} with "
-                         f"K={K} needs a ({K}, 6) gain (one row per basis function)")
+        raise ValueError(
+            f"{spec.path}: gain has shape {G.shape}, but basis {basis!r} with "
+            f"K={K} needs a ({K}, 6) gain (one row per basis function)"
+        )
     if not np.all(np.isfinite(G)):
         raise ValueError(f"{spec.path}: gain must be finite")
     return G

@@ -34,7 +34,6 @@ configuration: budget, gait files, inputs from earlier stages and `CACHE_VERSION
 Units: z in SI inside, paper units [m, deg, deg, m/s, deg/s, deg/s] in the cache and report.
 """
 
-
 from .claims import CLAIMS, literal_gait, published, reproducing_gait
 from .closest import closest_on_branch, stage_closest
 from .gaits import write_gait_files
@@ -51,10 +50,35 @@ from .windows import stage_sweeps
 ROUNDING = CLAIMS.param_half_digit  # its name when this was one module
 
 __all__ = [
-    "CACHE_VERSION", "CLAIMS", "FP_TOL", "FULL", "QUICK", "RELAXED_LEG_FRAC", "ROUNDING",
-    "Budget", "Cache", "PathResult", "arclength_path", "closest_on_branch", "config_hash",
-    "eig_list", "hip_margins", "jsonable", "literal_gait", "min_leg_fraction", "natural_path",
-    "point_summary", "published", "refine_emax_crossing", "rel_distance", "reproducing_gait",
-    "run", "stage_closest", "stage_literal", "stage_reproducing", "stage_stiff",
-    "stage_sweeps", "write_gait_files",
-]  # fmt: skip
+    "CACHE_VERSION",
+    "CLAIMS",
+    "FP_TOL",
+    "FULL",
+    "QUICK",
+    "RELAXED_LEG_FRAC",
+    "ROUNDING",
+    "Budget",
+    "Cache",
+    "PathResult",
+    "arclength_path",
+    "closest_on_branch",
+    "config_hash",
+    "eig_list",
+    "hip_margins",
+    "jsonable",
+    "literal_gait",
+    "min_leg_fraction",
+    "natural_path",
+    "point_summary",
+    "published",
+    "refine_emax_crossing",
+    "rel_distance",
+    "reproducing_gait",
+    "run",
+    "stage_closest",
+    "stage_literal",
+    "stage_reproducing",
+    "stage_stiff",
+    "stage_sweeps",
+    "write_gait_files",
+]

@@ -48,8 +48,14 @@ CLAIMS = Claims(
     alpha_text_deg=1.93,
     alpha_text_half_digit=0.005,
     z_half_digit=(0.00005, 0.00005, 0.0005, 0.0005, 0.05, 0.05),
-    param_half_digit={"alpha_deg": 0.00005, "kc": 0.5, "gamma_b_deg": 0.05,
-                      "gamma_f_deg": 0.05, "kb": 5.0, "kf": 5.0},  # fmt: skip
+    param_half_digit={
+        "alpha_deg": 0.00005,
+        "kc": 0.5,
+        "gamma_b_deg": 0.05,
+        "gamma_f_deg": 0.05,
+        "kb": 5.0,
+        "kf": 5.0,
+    },
 )
 
 
@@ -72,9 +78,10 @@ def published() -> Published:
     """The published gait from ``paper.yaml`` (z* exactly as written there)."""
     raw = yaml.safe_load(REPRODUCING_FILE.read_text())
     gd = reproducing_gait().params.to_gait_dict()
-    return Published(z=tuple(float(v) for v in raw["z_published"]),
-                     **{k: gd[k] for k in ("kc", "alpha_deg", "zeta", "gamma_b_deg",
-                                           "gamma_f_deg", "kb", "kf")})  # fmt: skip
+    return Published(
+        z=tuple(float(v) for v in raw["z_published"]),
+        **{k: gd[k] for k in ("kc", "alpha_deg", "zeta", "gamma_b_deg", "gamma_f_deg", "kb", "kf")},
+    )
 
 
 def reproducing_gait() -> Gait:
@@ -86,8 +93,11 @@ def literal_gait() -> Gait:
 
 
 def _gait_config(g) -> dict:
-    return {"params": g.params.to_gait_dict(), "min_leg_frac": g.params.min_leg_frac,
-            "z_published": z_to_paper(g.z_published)}  # fmt: skip
+    return {
+        "params": g.params.to_gait_dict(),
+        "min_leg_frac": g.params.min_leg_frac,
+        "z_published": z_to_paper(g.z_published),
+    }
 
 
 def published_z() -> np.ndarray:

@@ -24,6 +24,7 @@ PATH_STYLE = {
 }
 DPI = 100
 
+
 def _plt():
     import matplotlib
 
@@ -39,8 +40,9 @@ def _write_csv(path: Path, header, rows) -> Path:
         w = csv.writer(f)
         w.writerow(header)
         for r in rows:
-            w.writerow(["" if v is None else (repr(float(v)) if isinstance(v, float) else v)
-                        for v in r])  # fmt: skip
+            w.writerow(
+                ["" if v is None else (repr(float(v)) if isinstance(v, float) else v) for v in r]
+            )
     return path
 
 
@@ -71,28 +73,62 @@ def _path_rows(results):
     rows = []
     for name, path in (results["stiff"].get("paths") or {}).items():
         for q in path["points"]:
-            rows.append([name, q["kc"], q["alpha_deg"], q["gamma_b_deg"], q["gamma_f_deg"],
-                         q["kb"], q["kf"], *q["z"], q["emax"], int(q["has_ds"]),
-                         "-".join(q["phases"]), q["energy"]])  # fmt: skip
+            rows.append(
+                [
+                    name,
+                    q["kc"],
+                    q["alpha_deg"],
+                    q["gamma_b_deg"],
+                    q["gamma_f_deg"],
+                    q["kb"],
+                    q["kf"],
+                    *q["z"],
+                    q["emax"],
+                    int(q["has_ds"]),
+                    "-".join(q["phases"]),
+                    q["energy"],
+                ]
+            )
     return rows
 
 
 def _scatter_ds(ax, x, y, has_ds, color, label=None, filled=False, size=22):
     x, y, ds = np.asarray(x, float), np.asarray(y, float), np.asarray(has_ds, bool)
     face = color if filled else "white"
-    ax.scatter(x[~ds], y[~ds], marker="o", s=size, facecolors=face, edgecolors=color,
-               linewidths=0.9, label=label, zorder=3)  # fmt: skip
-    ax.scatter(x[ds], y[ds], marker="s", s=size, facecolors=face, edgecolors=color,
-               linewidths=0.9, zorder=3)  # fmt: skip
-
+    ax.scatter(
+        x[~ds],
+        y[~ds],
+        marker="o",
+        s=size,
+        facecolors=face,
+        edgecolors=color,
+        linewidths=0.9,
+        label=label,
+        zorder=3,
+    )
+    ax.scatter(
+        x[ds],
+        y[ds],
+        marker="s",
+        s=size,
+        facecolors=face,
+        edgecolors=color,
+        linewidths=0.9,
+        zorder=3,
+    )
 
 
 def _save_figure(fig, path: Path, title=None, *, fontsize=10, legend_from=None, ncol=5) -> Path:
     """Title, a shared legend along the bottom (from the axes ``legend_from``), layout, PNG."""
     rect = (0, 0, 1, 1)
     if legend_from is not None:
-        fig.legend(*legend_from.get_legend_handles_labels(), loc="lower center", ncol=ncol,
-                   fontsize=7, frameon=False)  # fmt: skip
+        fig.legend(
+            *legend_from.get_legend_handles_labels(),
+            loc="lower center",
+            ncol=ncol,
+            fontsize=7,
+            frameon=False,
+        )
         rect = (0, 0.05, 1, 1)
     if title is not None:
         fig.suptitle(title, fontsize=fontsize)
@@ -106,8 +142,20 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
     pub = published()
     plt = _plt()
     paths = results["stiff"].get("paths") or {}
-    header = ["path", "kc", "alpha_deg", "gamma_b_deg", "gamma_f_deg", "kb", "kf",
-              *Z_COLUMNS, "emax", "has_ds", "phases", "apex_energy_J"]  # fmt: skip
+    header = [
+        "path",
+        "kc",
+        "alpha_deg",
+        "gamma_b_deg",
+        "gamma_f_deg",
+        "kb",
+        "kf",
+        *Z_COLUMNS,
+        "emax",
+        "has_ds",
+        "phases",
+        "apex_energy_J",
+    ]
     rows = _path_rows(results)
     c3 = _write_csv(d / "fig3_fixed_points_vs_kc.csv", header, rows)
     c4 = _write_csv(d / "fig4_parameters_vs_kc.csv", header, rows)
@@ -125,10 +173,24 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
             ax.plot(kc, y, "-", color=color, lw=0.6, alpha=0.6)
             _scatter_ds(ax, kc, y, ds, color, label if i == 0 else None)
     for i, ax in enumerate(axes.flat):
-        ax.scatter([pub.kc], [pub.z[i]], marker="*", s=90, color="k", zorder=4,
-                   label="published z*" if i == 0 else None)  # fmt: skip
-        ax.scatter([pub.kc], [zstar[i]], marker="x", s=50, color="k", zorder=4,
-                   label="our z* at the published parameters" if i == 0 else None)  # fmt: skip
+        ax.scatter(
+            [pub.kc],
+            [pub.z[i]],
+            marker="*",
+            s=90,
+            color="k",
+            zorder=4,
+            label="published z*" if i == 0 else None,
+        )
+        ax.scatter(
+            [pub.kc],
+            [zstar[i]],
+            marker="x",
+            s=50,
+            color="k",
+            zorder=4,
+            label="our z* at the published parameters" if i == 0 else None,
+        )
         ax.set_xscale("log")
         ax.set_xlabel(r"$k_c$ [N m/rad]")
         ax.set_ylabel(Z_TEX[i])
@@ -165,11 +227,22 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
         ax.plot(kc, a, "-", color=color, lw=0.6, alpha=0.6)
         _scatter_ds(ax, kc, a, ds, color)
     axes[0, 0].axhline(1.0, color="k", lw=0.6, ls="--")
-    axes[0, 0].scatter([pub.kc], [CLAIMS.emax], marker="*", s=90, color="k", zorder=4,
-                       label=f"paper: ≈ {CLAIMS.emax:g} at the published gait")  # fmt: skip
+    axes[0, 0].scatter(
+        [pub.kc],
+        [CLAIMS.emax],
+        marker="*",
+        s=90,
+        color="k",
+        zorder=4,
+        label=f"paper: ≈ {CLAIMS.emax:g} at the published gait",
+    )
     axes[1, 1].scatter([pub.kc], [pub.alpha_deg], marker="*", s=90, color="k", zorder=4)
-    labels = (r"$e_{max}$", r"$\gamma_b^{td}$ (open), $\gamma_f^{td}$ (filled) [deg]",
-              r"$k_b$ (open), $k_f$ (filled) [N/m]", r"slope $\alpha$ [deg]")  # fmt: skip
+    labels = (
+        r"$e_{max}$",
+        r"$\gamma_b^{td}$ (open), $\gamma_f^{td}$ (filled) [deg]",
+        r"$k_b$ (open), $k_f$ (filled) [N/m]",
+        r"slope $\alpha$ [deg]",
+    )
     for ax, lab in zip(axes.flat, labels, strict=True):
         ax.set_xscale("log")
         ax.set_xlabel(r"$k_c$ [N m/rad]")
@@ -205,10 +278,24 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
     ours = list(zstar) + [results["reproducing"]["fixed_point"]["emax"], pub.alpha_deg]
     labels = list(Z_TEX) + [r"$e_{max}$", r"slope $\alpha$ [deg]"]
     for i, ax in enumerate(axes.flat):
-        ax.scatter([pub.kc], [marks[i]], marker="*", s=90, color="k", zorder=4,
-                   label="published" if i == 0 else None)  # fmt: skip
-        ax.scatter([pub.kc], [ours[i]], marker="x", s=50, color="k", zorder=4,
-                   label="our z* (published parameters)" if i == 0 else None)  # fmt: skip
+        ax.scatter(
+            [pub.kc],
+            [marks[i]],
+            marker="*",
+            s=90,
+            color="k",
+            zorder=4,
+            label="published" if i == 0 else None,
+        )
+        ax.scatter(
+            [pub.kc],
+            [ours[i]],
+            marker="x",
+            s=50,
+            color="k",
+            zorder=4,
+            label="our z* (published parameters)" if i == 0 else None,
+        )
         ax.set_xlim(lo, hi)
         ax.set_xlabel(r"$k_c$ [N m/rad]")
         ax.set_ylabel(labels[i])
@@ -217,8 +304,7 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
     pz = _save_figure(
         fig,
         d / "fig3b_near_published.png",
-        "Figs. 3-4 near the published gait (kc 285-345, linear axis; circles: no ds, "
-        "squares: ds)",
+        "Figs. 3-4 near the published gait (kc 285-345, linear axis; circles: no ds, squares: ds)",
         legend_from=axes.flat[0],
         ncol=5,
     )
@@ -231,13 +317,21 @@ def _fig5(results, d: Path) -> list[Path]:
     tr = results["reproducing"]["trajectory"]
     t = np.asarray(tr["t"])
     q, qd = np.asarray(tr["q"]), np.asarray(tr["qd"])
-    series = [("x_g [m]", q[:, 0]), ("y_g [m]", q[:, 1]), ("θ1 [deg]", np.degrees(q[:, 2])),
-              ("θ2 [deg]", np.degrees(q[:, 3])), ("ẋ_g [m/s]", qd[:, 0]),
-              ("ẏ_g [m/s]", qd[:, 1]), ("θ̇1 [deg/s]", np.degrees(qd[:, 2])),
-              ("θ̇2 [deg/s]", np.degrees(qd[:, 3]))]  # fmt: skip
-    csvp = _write_csv(d / "fig5_periodic_solution.csv", ["t_s", *[s[0] for s in series], "phase"],
-                      [[float(t[i]), *[float(s[1][i]) for s in series], tr["phase"][i]]
-                       for i in range(len(t))])  # fmt: skip
+    series = [
+        ("x_g [m]", q[:, 0]),
+        ("y_g [m]", q[:, 1]),
+        ("θ1 [deg]", np.degrees(q[:, 2])),
+        ("θ2 [deg]", np.degrees(q[:, 3])),
+        ("ẋ_g [m/s]", qd[:, 0]),
+        ("ẏ_g [m/s]", qd[:, 1]),
+        ("θ̇1 [deg/s]", np.degrees(qd[:, 2])),
+        ("θ̇2 [deg/s]", np.degrees(qd[:, 3])),
+    ]
+    csvp = _write_csv(
+        d / "fig5_periodic_solution.csv",
+        ["t_s", *[s[0] for s in series], "phase"],
+        [[float(t[i]), *[float(s[1][i]) for s in series], tr["phase"][i]] for i in range(len(t))],
+    )
     fig, axes = plt.subplots(4, 2, figsize=(10, 8.5), sharex=True)
     ev = [e for e in tr["events"]]
     for ax, (lab, y) in zip(axes.T.flat, series, strict=True):
@@ -249,10 +343,14 @@ def _fig5(results, d: Path) -> list[Path]:
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     names = ", ".join(f"{e['name']} {e['t'] * 1e3:.2f} ms" for e in ev)
-    p = _save_figure(fig, d / "fig5_periodic_solution.png",
-                     f"Fig. 5 analogue: one stride of the periodic gait, kc = {pub.kc:g}, "
-                     f"ζ = {pub.zeta:g} "
-                     "(dotted: transitions)\n" + names, fontsize=8.5)  # fmt: skip
+    p = _save_figure(
+        fig,
+        d / "fig5_periodic_solution.png",
+        f"Fig. 5 analogue: one stride of the periodic gait, kc = {pub.kc:g}, "
+        f"ζ = {pub.zeta:g} "
+        "(dotted: transitions)\n" + names,
+        fontsize=8.5,
+    )
     return [p, csvp]
 
 
@@ -276,40 +374,85 @@ def _fig6(results, d: Path) -> list[Path]:
     for ax in axes[-1]:
         ax.set_xlabel("stride")
     axes[0, 0].legend(fontsize=7)
-    p = _save_figure(fig, d / "fig6_convergence.png",
-                     f"Fig. 6 analogue: Δz = z_n − z* after ±1 % on y_g, α = {pub.alpha_deg:g}, "
-                     f"kc = {pub.kc:g}, ζ = {pub.zeta:g}")  # fmt: skip
-    c = _write_csv(d / "fig6_convergence.csv",
-                   ["perturbation", "stride", *[f"d_{s}" for s in Z_COLUMNS]], rows)
+    p = _save_figure(
+        fig,
+        d / "fig6_convergence.png",
+        f"Fig. 6 analogue: Δz = z_n − z* after ±1 % on y_g, α = {pub.alpha_deg:g}, "
+        f"kc = {pub.kc:g}, ζ = {pub.zeta:g}",
+    )
+    c = _write_csv(
+        d / "fig6_convergence.csv", ["perturbation", "stride", *[f"d_{s}" for s in Z_COLUMNS]], rows
+    )
     return [p, c]
 
 
 def _fig78(results, d: Path) -> list[Path]:
     plt = _plt()
     out = []
-    for key, num, xl, paper_w in (("alpha_deg", 7, r"slope $\alpha$ [deg]",
-                                   CLAIMS.alpha_window),
-                                  ("kc", 8, r"$k_c$ [N m/rad]", CLAIMS.kc_window)):  # fmt: skip
+    for key, num, xl, paper_w in (
+        ("alpha_deg", 7, r"slope $\alpha$ [deg]", CLAIMS.alpha_window),
+        ("kc", 8, r"$k_c$ [N m/rad]", CLAIMS.kc_window),
+    ):
         sw = results["sweeps"][key]
         pts = [q for q in sw["points"] if q["found"]]
         name = f"fig{num}_emax_vs_{'alpha' if key == 'alpha_deg' else 'kc'}"
-        rows = [[q["value"], int(q["converged"]), q["error"], q["failure"] or "", int(q["found"]),
-                 q["emax"], int(q["has_ds"]), "-".join(q["phases"]),
-                 *(q["z"] if q["z"] is not None else [None] * 6)] for q in sw["points"]]
-        c = _write_csv(d / f"{name}.csv", [key, "converged_100_strides", "error_z99_z100",
-                                           "failure", "fixed_point_found", "emax", "has_ds",
-                                           "phases", *Z_COLUMNS], rows)  # fmt: skip
+        rows = [
+            [
+                q["value"],
+                int(q["converged"]),
+                q["error"],
+                q["failure"] or "",
+                int(q["found"]),
+                q["emax"],
+                int(q["has_ds"]),
+                "-".join(q["phases"]),
+                *(q["z"] if q["z"] is not None else [None] * 6),
+            ]
+            for q in sw["points"]
+        ]
+        c = _write_csv(
+            d / f"{name}.csv",
+            [
+                key,
+                "converged_100_strides",
+                "error_z99_z100",
+                "failure",
+                "fixed_point_found",
+                "emax",
+                "has_ds",
+                "phases",
+                *Z_COLUMNS,
+            ],
+            rows,
+        )
         fig, ax = plt.subplots(figsize=(6.4, 4.2))
         x = np.array([q["value"] for q in pts])
         e = np.array([q["emax"] for q in pts], float)
         ds = np.array([q["has_ds"] for q in pts], bool)
         conv = np.array([q["converged"] for q in pts], bool)
-        for m, marker, color, lab in ((~ds, "o", "tab:blue", "without ds"),
-                                      (ds, "s", "tab:green", "with ds")):  # fmt: skip
-            ax.scatter(x[m & conv], e[m & conv], marker=marker, color=color, s=24,
-                       label=f"{lab}, converged in 100 strides", zorder=3)  # fmt: skip
-            ax.scatter(x[m & ~conv], e[m & ~conv], marker=marker, facecolors="none",
-                       edgecolors=color, s=24, label=f"{lab}, not converged", zorder=3)  # fmt: skip
+        for m, marker, color, lab in (
+            (~ds, "o", "tab:blue", "without ds"),
+            (ds, "s", "tab:green", "with ds"),
+        ):
+            ax.scatter(
+                x[m & conv],
+                e[m & conv],
+                marker=marker,
+                color=color,
+                s=24,
+                label=f"{lab}, converged in 100 strides",
+                zorder=3,
+            )
+            ax.scatter(
+                x[m & ~conv],
+                e[m & ~conv],
+                marker=marker,
+                facecolors="none",
+                edgecolors=color,
+                s=24,
+                label=f"{lab}, not converged",
+                zorder=3,
+            )
         ax.axhline(1.0, color="k", lw=0.6, ls="--")
         ax.axvline(sw["base"], color="0.5", lw=0.6, ls=":")
         ax.axvspan(*paper_w, color="0.5", alpha=0.12, hatch="//", label="paper's window")
@@ -320,8 +463,10 @@ def _fig78(results, d: Path) -> list[Path]:
         ax.set_ylabel(r"$e_{max}$")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=6.5, loc="upper left")
-        ax.set_title(f"Fig. {num} analogue: e_max when {'α' if key == 'alpha_deg' else 'kc'} "
-                     "is changed", fontsize=10)  # fmt: skip
+        ax.set_title(
+            f"Fig. {num} analogue: e_max when {'α' if key == 'alpha_deg' else 'kc'} is changed",
+            fontsize=10,
+        )
         p = _save_figure(fig, d / f"{name}.png")
         out += [p, c]
     return out
@@ -334,10 +479,23 @@ def _fig_literal(results, d: Path) -> list[Path]:
         return []
     plt = _plt()
     pts = kp["points"]
-    rows = [[q["kc"], q["alpha_deg"], *q["z"], q["emax"], int(q["has_ds"]),
-             "-".join(q["phases"]), q["energy"]] for q in pts]
-    c = _write_csv(d / "figL_literal_kc_path.csv", ["kc", "alpha_deg", *Z_COLUMNS, "emax",
-                   "has_ds", "phases", "apex_energy_J"], rows)  # fmt: skip
+    rows = [
+        [
+            q["kc"],
+            q["alpha_deg"],
+            *q["z"],
+            q["emax"],
+            int(q["has_ds"]),
+            "-".join(q["phases"]),
+            q["energy"],
+        ]
+        for q in pts
+    ]
+    c = _write_csv(
+        d / "figL_literal_kc_path.csv",
+        ["kc", "alpha_deg", *Z_COLUMNS, "emax", "has_ds", "phases", "apex_energy_J"],
+        rows,
+    )
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
     kc = [q["kc"] for q in pts]
     ds = [q["has_ds"] for q in pts]
@@ -354,8 +512,11 @@ def _fig_literal(results, d: Path) -> list[Path]:
         ax.set_xscale("log")
         ax.set_xlabel(r"$k_c$ [N m/rad]")
         ax.grid(alpha=0.3, which="both")
-    p = _save_figure(fig, d / "figL_literal_kc_path.png",
-                     "Literal reading: the periodic gait at the published parameters followed to "
-                     "stiffer spines, α balancing the energy (circles: no ds, squares: ds)",
-                     fontsize=9)  # fmt: skip
+    p = _save_figure(
+        fig,
+        d / "figL_literal_kc_path.png",
+        "Literal reading: the periodic gait at the published parameters followed to "
+        "stiffer spines, α balancing the energy (circles: no ds, squares: ds)",
+        fontsize=9,
+    )
     return [p, c]

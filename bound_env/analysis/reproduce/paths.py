@@ -38,9 +38,19 @@ def _newton_at(params: Params, u0, free, pins, max_iter=CORRECTOR_MAX_ITER):
     return _fixed_path(lambda _s: params, free, pins).correct(0.0, u0, max_iter=max_iter)
 
 
-def natural_path(params: Params, u0, s_to: float, pins, free=("alpha_deg",), h0=0.1,
-                 h_max=0.25, h_min=1e-3, use_ladder=True, max_points=300,
-                 log=None) -> dict:  # fmt: skip
+def natural_path(
+    params: Params,
+    u0,
+    s_to: float,
+    pins,
+    free=("alpha_deg",),
+    h0=0.1,
+    h_max=0.25,
+    h_min=1e-3,
+    use_ladder=True,
+    max_points=300,
+    log=None,
+) -> dict:
     """The paper's process (III.D.4 A-F) in s = ln kc: step kc, solve z* and the freed alpha
     with the pins (eq. 27's energy balance is the energy pin), halve the step when Newton
     fails, and below ``h_min`` walk the fallback ladder (touchdown angles +-0.5 deg up to
@@ -88,8 +98,15 @@ def natural_path(params: Params, u0, s_to: float, pins, free=("alpha_deg",), h0=
         return s_try, o.u.copy()
 
     control = StepControl(h0, h_max, h_min, guard_first_step=True)
-    stop = natural(path, trail, s_to, control, max_points, on_point=on_point,
-                   on_stall=ladder_hook if use_ladder else None)  # fmt: skip
+    stop = natural(
+        path,
+        trail,
+        s_to,
+        control,
+        max_points,
+        on_point=on_point,
+        on_stall=ladder_hook if use_ladder else None,
+    )
     if stop.kind == "reached":
         reason = "reached the target"
     elif stop.kind == "stalled":
@@ -101,9 +118,20 @@ def natural_path(params: Params, u0, s_to: float, pins, free=("alpha_deg",), h0=
     return PathResult(pts, reason, stop.reached, ladder=changes)
 
 
-def arclength_path(params_of, s0: float, s1: float, u0, free=(), pins=(), ds=0.05,
-                   ds_max=0.2, ds_min=1e-5, max_points=300, stop_below_start=True,
-                   log=None) -> dict:  # fmt: skip
+def arclength_path(
+    params_of,
+    s0: float,
+    s1: float,
+    u0,
+    free=(),
+    pins=(),
+    ds=0.05,
+    ds_max=0.2,
+    ds_min=1e-5,
+    max_points=300,
+    stop_below_start=True,
+    log=None,
+) -> dict:
     """Pseudo-arclength continuation of [z, freed values] in a scalar s (ln kc, a homotopy
     parameter, alpha, ...) by `continuation.arclength`: ``params_of(s)`` gives the
     parameters at s (freed values are applied on top); the second point by a natural step
@@ -119,11 +147,16 @@ def arclength_path(params_of, s0: float, s1: float, u0, free=(), pins=(), ds=0.0
         return PathResult([], f"start: {first.reason}", False)
     trail = [(s0, first.u)]
     first_step: list = []
-    stop = natural(path, trail, s1, StepControl(ds, ds, ds_min), max_points=2,
-                   on_point=lambda s, u, iterations, step: first_step.append(abs(step)))
+    stop = natural(
+        path,
+        trail,
+        s1,
+        StepControl(ds, ds, ds_min),
+        max_points=2,
+        on_point=lambda s, u, iterations, step: first_step.append(abs(step)),
+    )
     if len(trail) < 2:
-        return PathResult([(float(s), u) for s, u in trail], f"no second point: {stop.info}",
-                          False)  # fmt: skip
+        return PathResult([(float(s), u) for s, u in trail], f"no second point: {stop.info}", False)
     folds: list = []
 
     def on_point(s, u, iterations, step, turned):
@@ -132,16 +165,27 @@ def arclength_path(params_of, s0: float, s1: float, u0, free=(), pins=(), ds=0.0
         if log:
             log(f"  s = {s:.6g}")
 
-    stop = arclength(path, trail, s1, first_step[0], ds_max, ds_min, np.append(steps_u, DZ),
-                     max_points, stop_past_start=0 if stop_below_start else None,
-                     on_point=on_point)  # fmt: skip
-    reason = {"reached": "reached the target",
-              "stalled": f"step below minimum at s = {stop.s:.6g}: {stop.info}",
-              "turned_back": f"the branch turned back past the start (s = {stop.s:.6g})",
-              "max_points": f"stopped after {max_points} points"}[stop.kind]  # fmt: skip
-    return PathResult([(float(s), np.array(u, copy=True)) for s, u in trail], reason,
-                      stop.reached, folds=folds)
-
+    stop = arclength(
+        path,
+        trail,
+        s1,
+        first_step[0],
+        ds_max,
+        ds_min,
+        np.append(steps_u, DZ),
+        max_points,
+        stop_past_start=0 if stop_below_start else None,
+        on_point=on_point,
+    )
+    reason = {
+        "reached": "reached the target",
+        "stalled": f"step below minimum at s = {stop.s:.6g}: {stop.info}",
+        "turned_back": f"the branch turned back past the start (s = {stop.s:.6g})",
+        "max_points": f"stopped after {max_points} points",
+    }[stop.kind]
+    return PathResult(
+        [(float(s), np.array(u, copy=True)) for s, u in trail], reason, stop.reached, folds=folds
+    )
 
 
 def refine_emax_crossing(base: Params, q0: dict, q1: dict, pins, n: int = 12) -> list:
@@ -156,8 +200,7 @@ def refine_emax_crossing(base: Params, q0: dict, q1: dict, pins, n: int = 12) ->
     b = (math.log(q1["kc"]), u_of(q1), q1["emax"] >= 1.0)
     for _ in range(n):
         sm = 0.5 * (a[0] + b[0])
-        o = _newton_at(base.with_values(kc=math.exp(sm)), 0.5 * (a[1] + b[1]), ("alpha_deg",),
-                       pins)  # fmt: skip
+        o = _newton_at(base.with_values(kc=math.exp(sm)), 0.5 * (a[1] + b[1]), ("alpha_deg",), pins)
         if not o.converged:
             break
         try:

@@ -24,8 +24,14 @@ from .store import Cache, _Log, jsonable
 from .windows import stage_sweeps
 
 
-def run(out_dir, quick: bool = False, force: bool = False, progress: bool = True,
-        write_gaits: bool = False, docs_dir=None) -> dict:  # fmt: skip
+def run(
+    out_dir,
+    quick: bool = False,
+    force: bool = False,
+    progress: bool = True,
+    write_gaits: bool = False,
+    docs_dir=None,
+) -> dict:
     """Run every stage (or read it from the cache), write figures, CSVs and REPRODUCTION.md."""
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
@@ -33,12 +39,14 @@ def run(out_dir, quick: bool = False, force: bool = False, progress: bool = True
     log = _Log(progress)
     b = QUICK if quick else FULL
     cache = Cache(out_dir, force, log)
-    base_cfg = {"version": CACHE_VERSION, "budget": asdict(b),
-                "paper": _gait_config(reproducing_gait()),
-                "literal": _gait_config(literal_gait())}  # fmt: skip
+    base_cfg = {
+        "version": CACHE_VERSION,
+        "budget": asdict(b),
+        "paper": _gait_config(reproducing_gait()),
+        "literal": _gait_config(literal_gait()),
+    }
     results: dict = {"budget": asdict(b)}
-    results["reproducing"] = cache.get("reproducing", base_cfg,
-                                       lambda: stage_reproducing(b, log))  # fmt: skip
+    results["reproducing"] = cache.get("reproducing", base_cfg, lambda: stage_reproducing(b, log))
     z_star = np.asarray(results["reproducing"]["fixed_point"]["z_si"], float)
     cfg = {**base_cfg, "z_star": z_star}
     results["closest"] = cache.get("closest", cfg, lambda: stage_closest(b, z_star, log))
@@ -46,16 +54,24 @@ def run(out_dir, quick: bool = False, force: bool = False, progress: bool = True
     results["stiff"] = cache.get("stiff", cfg, lambda: stage_stiff(b, z_star, log))
     results["literal"] = cache.get("literal", cfg, lambda: stage_literal(b, z_star, log))
     results["cache"] = {"hits": cache.hits, "misses": cache.misses}
-    results["compute_seconds"] = {k: results[k].get("seconds") for k in
-                                  ("reproducing", "closest", "sweeps", "stiff", "literal")}
+    results["compute_seconds"] = {
+        k: results[k].get("seconds")
+        for k in ("reproducing", "closest", "sweeps", "stiff", "literal")
+    }
     log("figures")
     figs = write_figures(results, out_dir / "figures")
     results["figures"] = [str(p.relative_to(out_dir)) for p in figs]
     results["wall_seconds"] = time.perf_counter() - t0
     report = write_report(results, out_dir / "REPRODUCTION.md")
-    atomic_write(out_dir / "results.json", json.dumps(jsonable(
-        {k: v for k, v in results.items() if k != "figures"} | {"figures": results["figures"]}
-    )))  # fmt: skip
+    atomic_write(
+        out_dir / "results.json",
+        json.dumps(
+            jsonable(
+                {k: v for k, v in results.items() if k != "figures"}
+                | {"figures": results["figures"]}
+            )
+        ),
+    )
     if write_gaits:
         for pth in write_gait_files(results):
             log(f"wrote {pth}")

@@ -27,9 +27,17 @@ def point_summary(params: Params, z, **extra) -> dict:
         lam, emax = None, math.nan
     gd = params.to_gait_dict()
     out = {k: gd[k] for k in ("kc", "alpha_deg", "gamma_b_deg", "gamma_f_deg", "kb", "kf")}
-    out.update(z=z_to_paper(z), residual=resid, emax=emax, eigenvalues=eig_list(lam),
-               phases=list(res.phases), durations=list(res.durations),
-               energy=apex_energy(z, params), has_ds="ds" in res.phases, **extra)  # fmt: skip
+    out.update(
+        z=z_to_paper(z),
+        residual=resid,
+        emax=emax,
+        eigenvalues=eig_list(lam),
+        phases=list(res.phases),
+        durations=list(res.durations),
+        energy=apex_energy(z, params),
+        has_ds="ds" in res.phases,
+        **extra,
+    )
     return out
 
 

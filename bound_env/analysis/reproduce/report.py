@@ -136,53 +136,89 @@ def derive(results: dict) -> Derived:
     end_sp = psp["points"][-1] if psp and psp["points"] else None
     lf = L.get("fixed_point")
     kp = L.get("kc_path") or {}
-    ms_ok = [q for q in L["multistart"].get("analysed", [])
-             if q.get("converged_default_leg_limit")]  # fmt: skip
+    ms_ok = [q for q in L["multistart"].get("analysed", []) if q.get("converged_default_leg_limit")]
     sens = C["sensitivity"]
     hm, hp = R["hip_margins"], R["hip_margins_published"]
     cs = results["compute_seconds"]
     y_start = RECOVERY_REL * z[0]
     return Derived(
-        R=R, C=C, S=S, T=T, L=L, quick=results["budget"]["name"] != "full",
-        refine=results["budget"]["refine"], fp=fp, z=z, zp=zp, diff=diff,
-        rel=[diff[i] / abs(zp[i]) for i in range(6)], emax=emax,
-        sp=R["stride_from_published"], ca=ca, ck=ck, gap_star=_gap(fp),
-        gap_pub=_gap(R["stride_from_published"]), gap_ca=_gap(ca),
-        rec_p=R["recovery"][0], rec_m=R["recovery"][1],
+        R=R,
+        C=C,
+        S=S,
+        T=T,
+        L=L,
+        quick=results["budget"]["name"] != "full",
+        refine=results["budget"]["refine"],
+        fp=fp,
+        z=z,
+        zp=zp,
+        diff=diff,
+        rel=[diff[i] / abs(zp[i]) for i in range(6)],
+        emax=emax,
+        sp=R["stride_from_published"],
+        ca=ca,
+        ck=ck,
+        gap_star=_gap(fp),
+        gap_pub=_gap(R["stride_from_published"]),
+        gap_ca=_gap(ca),
+        rec_p=R["recovery"][0],
+        rec_m=R["recovery"][1],
         vis=[_visual_strides(r, z) for r in R["recovery"]],
         n_pred=math.log(RECOVERY_TOL / y_start) / math.log(emax) if emax and emax < 1 else None,
         n_pred_paper=math.log(RECOVERY_TOL / y_start) / math.log(CLAIMS.emax),
         all_ok=all(r["strides"] is not None for r in all_rec),
         max_rec=max((r["strides"] for r in all_rec if r["strides"] is not None), default=None),
-        sa=sa, sk=sk, alpha_shift=_shift(sa["converged_window"], CLAIMS.alpha_window),
+        sa=sa,
+        sk=sk,
+        alpha_shift=_shift(sa["converged_window"], CLAIMS.alpha_window),
         kc_shift=_shift(sk["converged_window"], CLAIMS.kc_window),
-        d_alpha_closest=ca["value"] - pub.alpha_deg, d_kc_closest=ck["value"] - pub.kc,
+        d_alpha_closest=ca["value"] - pub.alpha_deg,
+        d_kc_closest=ck["value"] - pub.kc,
         ds_from_alpha=sa["ds_from"] and sa["ds_from"] - pub.alpha_deg,
         ds_from_kc=sk["ds_from"] and sk["ds_from"] - pub.kc,
         gap_star_diff=_gap(fp) and _gap(fp) - CLAIMS.gap_s,
-        spn=spn, th2min=th2min, th2max=th2max, th2_pp=th2max - th2min,
-        amp_half=0.5 * (th2max - th2min), amp_peak=max(abs(th2min), abs(th2max)),
+        spn=spn,
+        th2min=th2min,
+        th2max=th2max,
+        th2_pp=th2max - th2min,
+        amp_half=0.5 * (th2max - th2min),
+        amp_peak=max(abs(th2min), abs(th2max)),
         swings=[abs(b - a) for a, b in zip(ext, ext[1:], strict=False)],
-        a_text=a_text, d_text=_rel_dist(a_text["z"], zp), d_pub=C["distance_at_published"],
-        zdiff_text=_zdiff(a_text, fp), dmp=R["damping"], paths=paths, psp=psp, pen=pen,
-        pes=pes, end_sp=end_sp, end_en=pen["points"][-1] if pen and pen["points"] else None,
+        a_text=a_text,
+        d_text=_rel_dist(a_text["z"], zp),
+        d_pub=C["distance_at_published"],
+        zdiff_text=_zdiff(a_text, fp),
+        dmp=R["damping"],
+        paths=paths,
+        psp=psp,
+        pen=pen,
+        pes=pes,
+        end_sp=end_sp,
+        end_en=pen["points"][-1] if pen and pen["points"] else None,
         zdiff_speed_end=_zdiff(end_sp, fp) if end_sp else None,
         emx_speed=[q["emax"] for q in psp["points"] if q["emax"] is not None] if psp else [],
-        st0=T.get("start") or {}, fam_min=T.get("family_min_energy"), loss_kc=_loss(pes),
-        max_kc_pes=_max_kc(pes), lf=lf, kp=kp, ms_ok=ms_ok,
+        st0=T.get("start") or {},
+        fam_min=T.get("family_min_energy"),
+        loss_kc=_loss(pes),
+        max_kc_pes=_max_kc(pes),
+        lf=lf,
+        kp=kp,
+        ms_ok=ms_ok,
         ms_all_unstable=all(q["emax"] > 1 for q in ms_ok),
-        ds_stable=any(q["has_ds"] for q in kp.get("points", [])
-                      if q["emax"] is not None and q["emax"] < 1),  # fmt: skip
+        ds_stable=any(
+            q["has_ds"] for q in kp.get("points", []) if q["emax"] is not None and q["emax"] < 1
+        ),
         crossing_kc=0.5 * (kp["crossing"][0] + kp["crossing"][1]) if kp.get("crossing") else None,
         need_y=C["needed"][0],
         y_max_move=max(abs(s["dz_per_half_width"][0]) for s in sens.values()),
         energy_gap=R["energy_published_z"] - fp["energy"],
         hip_min=min((_min_margin(m) for m in (hm, hp) if m), default=math.nan),
         hip_liftoff_angles=_liftoff_angles(hm, R["params"]),
-        cs=cs, cs_total=sum(v for v in cs.values() if v),
+        cs=cs,
+        cs_total=sum(v for v in cs.values() if v),
         path_ends={name: _end_at(pth, pub.kc) for name, pth in paths.items()},
-        y_half_digits=abs(C["needed"][0]) / max(abs(s["dz_per_half_width"][0])
-                                                for s in sens.values()),  # fmt: skip
+        y_half_digits=abs(C["needed"][0])
+        / max(abs(s["dz_per_half_width"][0]) for s in sens.values()),
     )
 
 
@@ -243,8 +279,9 @@ def _liftoff_angles(hm, gd) -> dict:
         x = hm.get(leg)
         if x and x.get("liftoff") is not None and x["liftoff"] < 0:
             lbar, gtd = gd[f"l{leg[0]}_bar"], gd[f"gamma_{leg[0]}_deg"]
-            out[leg] = math.degrees(math.acos((lbar * math.cos(math.radians(gtd))
-                                               + x["liftoff"]) / lbar))  # fmt: skip
+            out[leg] = math.degrees(
+                math.acos((lbar * math.cos(math.radians(gtd)) + x["liftoff"]) / lbar)
+            )
     return out
 
 
@@ -257,8 +294,12 @@ def _window_edges(sw) -> dict:
     lo = [q for q in pts if q["value"] == cw[0]]
     hi = [q for q in pts if q["value"] == cw[1]]
     beyond = [q for q in pts if q["value"] > stw[1]]
-    return {"lo": lo[0] if lo else None, "hi": hi[0] if hi else None, "stable_lo": stw[0],
-            "next": beyond[0] if beyond else None}  # fmt: skip
+    return {
+        "lo": lo[0] if lo else None,
+        "hi": hi[0] if hi else None,
+        "stable_lo": stw[0],
+        "next": beyond[0] if beyond else None,
+    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -297,11 +338,13 @@ def _pt_z(q):
 
 def _margin_cell(m, leg):
     x = m.get(leg) or {}
-    return (f"start apex {_f(x.get('start_apex'), '{:+.4f}')} m, liftoff "
-            f"{_f(x.get('liftoff'), '{:+.4f}')} m (hip rising at "
-            f"{_f(x.get('liftoff_hip_vy'), '{:.3f}')} m/s), smallest in flight after liftoff "
-            f"{_f(x.get('min_in_flight_after_liftoff'), '{:+.4f}')} m, end apex "
-            f"{_f(x.get('end_apex'), '{:+.4f}')} m")
+    return (
+        f"start apex {_f(x.get('start_apex'), '{:+.4f}')} m, liftoff "
+        f"{_f(x.get('liftoff'), '{:+.4f}')} m (hip rising at "
+        f"{_f(x.get('liftoff_hip_vy'), '{:.3f}')} m/s), smallest in flight after liftoff "
+        f"{_f(x.get('min_in_flight_after_liftoff'), '{:+.4f}')} m, end apex "
+        f"{_f(x.get('end_apex'), '{:+.4f}')} m"
+    )
 
 
 def _ms(x, fmt="{:.2f}"):
@@ -328,8 +371,10 @@ def _crossing_text(d: Derived) -> str:
 def _ms_text(q) -> str:
     if not q.get("converged_default_leg_limit"):
         return f"{_pt_z(q)} (not a fixed point at the default leg limit: {q.get('reason')})"
-    return (f"{_pt_z(q)}, {'-'.join(q['phases'])}, e_max {q['emax']:.3f} (eigenvalues "
-            f"{_eig_text(q['eigenvalues'], 2)}, …)")
+    return (
+        f"{_pt_z(q)}, {'-'.join(q['phases'])}, e_max {q['emax']:.3f} (eigenvalues "
+        f"{_eig_text(q['eigenvalues'], 2)}, …)"
+    )
 
 
 def _stable_band_text(kp) -> str:
@@ -338,8 +383,14 @@ def _stable_band_text(kp) -> str:
         return "e_max never crosses 1 along the path"
     parts = [f"becomes {c['becomes']} at kc ≈ {c['kc']:.0f}" for c in cs]
     m = kp.get("min_emax")
-    tail = (f"; smallest e_max {m['emax']:.4f} (kc = {m['kc']:.0f}); at kc = "
-            f"{kp['points'][-1]['kc']:g}: {kp['points'][-1]['emax']:.4f}") if m else ""
+    tail = (
+        (
+            f"; smallest e_max {m['emax']:.4f} (kc = {m['kc']:.0f}); at kc = "
+            f"{kp['points'][-1]['kc']:g}: {kp['points'][-1]['emax']:.4f}"
+        )
+        if m
+        else ""
+    )
     return "along the path the gait " + ", then ".join(parts) + tail
 
 
@@ -347,10 +398,12 @@ def _coarse_text(S, key, unit) -> str:
     c = S.get(f"{key}_coarse")
     if not c:
         return ""
-    return (f" (with step {c['step']:g}{unit} the 100-stride window is "
-            f"{_window_text(c['converged_window'], '{:.4g}')}{unit}: each run starts at the "
-            "previous value's fixed point, so the criterion's edges depend on the step; the "
-            "e_max < 1 window does not)")
+    return (
+        f" (with step {c['step']:g}{unit} the 100-stride window is "
+        f"{_window_text(c['converged_window'], '{:.4g}')}{unit}: each run starts at the "
+        "previous value's fixed point, so the criterion's edges depend on the step; the "
+        "e_max < 1 window does not)"
+    )
 
 
 def _edges_text(sw, unit) -> str:
@@ -359,14 +412,20 @@ def _edges_text(sw, unit) -> str:
         return ""
     out = []
     if e["lo"] and e["lo"]["emax"] is not None:
-        out.append(f"At the lower edge e_max = {e['lo']['emax']:.3f} and the fixed point stays "
-                   f"stable down to {e['stable_lo']:.4g}{unit}: there the 100-stride criterion, "
-                   "not stability, ends the window (slow convergence).")
+        out.append(
+            f"At the lower edge e_max = {e['lo']['emax']:.3f} and the fixed point stays "
+            f"stable down to {e['stable_lo']:.4g}{unit}: there the 100-stride criterion, "
+            "not stability, ends the window (slow convergence)."
+        )
     if e["hi"] and e["hi"]["emax"] is not None:
         nxt = e["next"]
-        what = ("Newton finds no fixed point beyond it (the branch folds)" if nxt is not None
-                and not nxt["found"] else (f"beyond it e_max = {nxt['emax']:.3f}" if nxt
-                                           else "nothing was evaluated beyond it"))
+        what = (
+            "Newton finds no fixed point beyond it (the branch folds)"
+            if nxt is not None and not nxt["found"]
+            else (
+                f"beyond it e_max = {nxt['emax']:.3f}" if nxt else "nothing was evaluated beyond it"
+            )
+        )
         out.append(f"At the upper edge e_max = {e['hi']['emax']:.3f}; {what}.")
     return " ".join(out)
 
@@ -377,7 +436,7 @@ def _edges_text(sw, unit) -> str:
 
 
 def _header(d: Derived) -> list[str]:
-    quick = (" **in quick mode (coarse budgets; not the committed report)**" if d.quick else "")
+    quick = " **in quick mode (coarse budgets; not the committed report)**" if d.quick else ""
     units = ", ".join(Z_LABELS_UNITS)
     return [
         "# Reproduction of Yamasaki, Ambe, Aoi & Matsuno, *Quadrupedal Bounding with "
@@ -401,7 +460,7 @@ def _headline(d: Derived) -> list[str]:
         f"z* = {_pt_z(fp)} (residual {fp['residual']:.1e}), e_max = {d.emax:.3f} (paper "
         f"≈ {CLAIMS.emax:g}), no double stance, two spine bends per stride, θ2 swinging "
         f"{d.th2min:.2f}° … {d.th2max:.2f}° (half peak-to-peak {d.amp_half:.1f}°, paper "
-        f"\"about {CLAIMS.amplitude_deg:g} deg\")",
+        f'"about {CLAIMS.amplitude_deg:g} deg")',
         f"z* differs from the published one by {100 * d.d_pub:.1f} % (relative RMS): "
         f"ẋ_g, θ̇1 within 0.4 %, y_g {100 * d.diff[0] / zp[0]:+.2f} %, θ̇2 "
         f"{100 * d.diff[5] / abs(zp[5]):+.1f} %, and the small angles θ1, θ2 by "
@@ -422,7 +481,7 @@ def _headline(d: Derived) -> list[str]:
         f"{_f(sa['ds_from'], '{:.3f}')}° and kc ≥ {_f(sk['ds_from'], '{:.1f}')} as in the "
         f"paper, but inside the windows",
         f"recovery from ±1 % on y_g: {d.rec_p['strides']} / {d.rec_m['strides']} strides to "
-        f"1e-5 (paper \"about {CLAIMS.strides}\"); {d.vis[0]} / {d.vis[1]} strides until every "
+        f'1e-5 (paper "about {CLAIMS.strides}"); {d.vis[0]} / {d.vis[1]} strides until every '
         f"component is within 1 % of its peak deviation",
     ]
     if d.end_sp and d.end_en:
@@ -439,7 +498,8 @@ def _headline(d: Derived) -> list[str]:
             f"leg stiffness (≥ {_f(d.fam_min and d.fam_min['energy'], '{:.2f}')} J), and "
             f"followed upwards it folds back at kc ≈ {_f(d.max_kc_pes, '{:.1f}')}; from the "
             f"stiff start the energy-balanced path lands on another gait at kc = {pub.kc:g} "
-            f"(α = {d.end_en['alpha_deg']:.4f}°, e_max = {d.end_en['emax']:.3f})")
+            f"(α = {d.end_en['alpha_deg']:.4f}°, e_max = {d.end_en['emax']:.3f})"
+        )
     if d.lf:
         lf = d.lf
         ms_emax = ", ".join(f"{q['emax']:.3f}" for q in d.ms_ok)
@@ -454,7 +514,8 @@ def _headline(d: Derived) -> list[str]:
             f" (e_max {ms_emax}); "
             f"following it to stiffer spines with α balancing the energy "
             f"(the paper's process), {_stable_band_text(d.kp)}: stability only at much "
-            f"stiffer spines, confirming the issue")
+            f"stiffer spines, confirming the issue"
+        )
     return ["## Headline", "", *(f"- {s}." for s in items), ""]
 
 
@@ -467,8 +528,8 @@ def _table(d: Derived) -> list[str]:
         "Reproducing reading (Table II: 0.55 m hip to hip, 0.64 kg m² about the spine joint) at "
         f"the published parameters (kc = {pub.kc:g}, ζ = {pub.zeta:g}, α = {pub.alpha_deg:g}°, "
         f"γ_b = {pub.gamma_b_deg:g}°, γ_f = {pub.gamma_f_deg:g}°, k_b = k_f = {pub.kb:g}) "
-        "unless a row says otherwise. \"yes\": within the printed digits; \"close\": within 2 % "
-        "(or the paper's own \"about\"); \"partly\"/\"no\" otherwise.",
+        'unless a row says otherwise. "yes": within the printed digits; "close": within 2 % '
+        '(or the paper\'s own "about"); "partly"/"no" otherwise.',
         "",
         "| # | published number | paper | ours | difference | reproduces? | evidence; most likely "
         "cause of a miss |",
@@ -480,117 +541,165 @@ def _table(d: Derived) -> list[str]:
 
 def _z_rows(d: Derived) -> list[tuple]:
     fp, ca, ck = d.fp, d.ca, d.ck
-    cause = (f"Newton from the published z* (residual {fp['residual']:.0e}); one stride "
-             f"from the published z* returns with error P(z) − z = "
-             f"{_vec(d.sp.get('return_error_paper'))}, so the published z* is near but not "
-             f"on the cycle. Closest α = {ca['value']:.4f}° gives "
-             f"relative error {_rel_text(ca['rel_diff'])}; closest kc = {ck['value']:.2f} "
-             f"gives {_rel_text(ck['rel_diff'])}. Likely cause: the published z* belongs to a "
-             f"slightly different parameter set or model detail (see §Closest)")
-    return [(f"z*: {Z_LABELS[i]}", f"{d.zp[i]:g}", Z_FMT[i].format(d.z[i]),
-             f"{d.diff[i]:+.4g} ({100 * d.rel[i]:+.2f} %)",
-             _z_verdict(d.diff[i], d.rel[i], CLAIMS.z_half_digit[i]),
-             cause if i == 0 else "see row 1; sensitivities per printed digit in §Closest")
-            for i in range(6)]  # fmt: skip
+    cause = (
+        f"Newton from the published z* (residual {fp['residual']:.0e}); one stride "
+        f"from the published z* returns with error P(z) − z = "
+        f"{_vec(d.sp.get('return_error_paper'))}, so the published z* is near but not "
+        f"on the cycle. Closest α = {ca['value']:.4f}° gives "
+        f"relative error {_rel_text(ca['rel_diff'])}; closest kc = {ck['value']:.2f} "
+        f"gives {_rel_text(ck['rel_diff'])}. Likely cause: the published z* belongs to a "
+        f"slightly different parameter set or model detail (see §Closest)"
+    )
+    return [
+        (
+            f"z*: {Z_LABELS[i]}",
+            f"{d.zp[i]:g}",
+            Z_FMT[i].format(d.z[i]),
+            f"{d.diff[i]:+.4g} ({100 * d.rel[i]:+.2f} %)",
+            _z_verdict(d.diff[i], d.rel[i], CLAIMS.z_half_digit[i]),
+            cause if i == 0 else "see row 1; sensitivities per printed digit in §Closest",
+        )
+        for i in range(6)
+    ]
 
 
 def _stability_rows(d: Derived) -> list[tuple]:
     fp, emax, rp, rm, vis = d.fp, d.emax, d.rec_p, d.rec_m, d.vis
     by_eye = vis[0] is not None and abs(vis[0] - CLAIMS.strides) <= STRIDES_CLOSE
     return [
-        ("e_max at the published gait (Sec. IV.B.2, Fig. 4)",
-         f"≈ {CLAIMS.emax:g} (\"around {CLAIMS.emax:g}\")", f"{emax:.4f}",
-         f"{emax - CLAIMS.emax:+.3f}", "close" if abs(emax - CLAIMS.emax) < EMAX_CLOSE else "no",
-         f"eigenvalues {_eig_text(fp['eigenvalues'], 4)}, …; at the closest α e_max = "
-         f"{d.ca['emax']:.3f}"),
-        ("strides to converge after ±1 % on y_g (Fig. 6)", f"about {CLAIMS.strides}",
-         f"{rp['strides']} / {rm['strides']} (to 1e-5); {rp['strides_loose']} / "
-         f"{rm['strides_loose']} (to 1e-4); {vis[0]} / {vis[1]} (within 1 % of each "
-         f"component's peak)", f"{rp['strides'] - CLAIMS.strides:+d} (1e-5)",
-         "close by eye (1 % of the peak); no at 1e-5" if by_eye else "no",
-         f"linear decay e_max^n from 0.01·y_g* to 1e-5 needs {_f(d.n_pred, '{:.0f}')} strides "
-         f"at e_max = {emax:.3f} (at {CLAIMS.emax:g}: {d.n_pred_paper:.0f}); all 12 "
-         f"perturbations (each component ±1 %) "
-         f"{'recover' if d.all_ok else 'do NOT all recover'} (slowest {d.max_rec}). \"About "
-         f"{CLAIMS.strides}\" is read off a plot, where the deviation is invisible well before "
-         "1e-5"),
-    ]  # fmt: skip
+        (
+            "e_max at the published gait (Sec. IV.B.2, Fig. 4)",
+            f'≈ {CLAIMS.emax:g} ("around {CLAIMS.emax:g}")',
+            f"{emax:.4f}",
+            f"{emax - CLAIMS.emax:+.3f}",
+            "close" if abs(emax - CLAIMS.emax) < EMAX_CLOSE else "no",
+            f"eigenvalues {_eig_text(fp['eigenvalues'], 4)}, …; at the closest α e_max = "
+            f"{d.ca['emax']:.3f}",
+        ),
+        (
+            "strides to converge after ±1 % on y_g (Fig. 6)",
+            f"about {CLAIMS.strides}",
+            f"{rp['strides']} / {rm['strides']} (to 1e-5); {rp['strides_loose']} / "
+            f"{rm['strides_loose']} (to 1e-4); {vis[0]} / {vis[1]} (within 1 % of each "
+            f"component's peak)",
+            f"{rp['strides'] - CLAIMS.strides:+d} (1e-5)",
+            "close by eye (1 % of the peak); no at 1e-5" if by_eye else "no",
+            f"linear decay e_max^n from 0.01·y_g* to 1e-5 needs {_f(d.n_pred, '{:.0f}')} strides "
+            f"at e_max = {emax:.3f} (at {CLAIMS.emax:g}: {d.n_pred_paper:.0f}); all 12 "
+            f"perturbations (each component ±1 %) "
+            f'{"recover" if d.all_ok else "do NOT all recover"} (slowest {d.max_rec}). "About '
+            f'{CLAIMS.strides}" is read off a plot, where the deviation is invisible well before '
+            "1e-5",
+        ),
+    ]
 
 
 def _window_rows(d: Derived) -> list[tuple]:
     sa, sk, S = d.sa, d.sk, d.S
     aw, kw = CLAIMS.alpha_window, CLAIMS.kc_window
     return [
-        ("stable α window (Fig. 7)", f"{aw[0]:g}–{aw[1]:g}°",
-         f"{_window_text(sa['converged_window'], '{:.4f}')}° (100-stride criterion); "
-         f"e_max < 1: {_window_text(sa['stable_window'], '{:.4f}')}°",
-         _pair_text(d.alpha_shift, "{:+.3f}"), "partly",
-         f"sweep from z* the paper's way (100 strides per value, max|z99 − z100| < 1e-5), "
-         f"edges bisected {d.refine}×, step {sa.get('step', 0):g}°"
-         f"{_coarse_text(S, 'alpha_deg', '°')}. {_edges_text(sa, '°')} The shift "
-         f"has the sign and size of the closest α's (Δα = {d.d_alpha_closest:+.3f}°)"),
-        ("stable kc window (Fig. 8)", f"{kw[0]:g}–{kw[1]:g} N·m/rad",
-         f"{_window_text(sk['converged_window'], '{:.2f}')} (100-stride); e_max < 1: "
-         f"{_window_text(sk['stable_window'], '{:.2f}')}",
-         _pair_text(d.kc_shift, "{:+.1f}"), "partly",
-         f"as row above, step {sk.get('step', 0):g}{_coarse_text(S, 'kc', '')}. "
-         f"{_edges_text(sk, '')} The closest kc is {d.ck['value']:.2f} (Δ = "
-         f"{d.d_kc_closest:+.2f}), the same direction of shift"),
-    ]  # fmt: skip
+        (
+            "stable α window (Fig. 7)",
+            f"{aw[0]:g}–{aw[1]:g}°",
+            f"{_window_text(sa['converged_window'], '{:.4f}')}° (100-stride criterion); "
+            f"e_max < 1: {_window_text(sa['stable_window'], '{:.4f}')}°",
+            _pair_text(d.alpha_shift, "{:+.3f}"),
+            "partly",
+            f"sweep from z* the paper's way (100 strides per value, max|z99 − z100| < 1e-5), "
+            f"edges bisected {d.refine}×, step {sa.get('step', 0):g}°"
+            f"{_coarse_text(S, 'alpha_deg', '°')}. {_edges_text(sa, '°')} The shift "
+            f"has the sign and size of the closest α's (Δα = {d.d_alpha_closest:+.3f}°)",
+        ),
+        (
+            "stable kc window (Fig. 8)",
+            f"{kw[0]:g}–{kw[1]:g} N·m/rad",
+            f"{_window_text(sk['converged_window'], '{:.2f}')} (100-stride); e_max < 1: "
+            f"{_window_text(sk['stable_window'], '{:.2f}')}",
+            _pair_text(d.kc_shift, "{:+.1f}"),
+            "partly",
+            f"as row above, step {sk.get('step', 0):g}{_coarse_text(S, 'kc', '')}. "
+            f"{_edges_text(sk, '')} The closest kc is {d.ck['value']:.2f} (Δ = "
+            f"{d.d_kc_closest:+.2f}), the same direction of shift",
+        ),
+    ]
 
 
 def _gait_rows(d: Derived) -> list[tuple]:
     pub, dmp, spn, sa, sk, at = published(), d.dmp, d.spn, d.sa, d.sk, d.a_text
     rp, lt = dmp["reproducing"], dmp["literal"]
     a_text = f"{CLAIMS.alpha_text_deg:g}"
-    extrema = ", ".join(f"{t * 1e3:.0f} ms ({ph}, {v:+.2f}°)" for t, ph, v in
-                        zip(spn["extrema_t"], spn["extrema_phase"], spn["extrema_theta2_deg"],
-                            strict=False))  # fmt: skip
+    extrema = ", ".join(
+        f"{t * 1e3:.0f} ms ({ph}, {v:+.2f}°)"
+        for t, ph, v in zip(
+            spn["extrema_t"], spn["extrema_phase"], spn["extrema_theta2_deg"], strict=False
+        )
+    )
     return [
-        ("bs→df and df→fs interval (Fig. 5)", f"{CLAIMS.gap_s:g} s",
-         f"{_ms(d.gap_star)} ms at z*; {_ms(d.gap_pub)} ms on the stride from the published z*; "
-         f"{_ms(d.gap_ca)} ms at the closest α", f"{_ms(d.gap_star_diff, '{:+.2f}')} ms",
-         "partly",
-         f"the short flight shrinks as α or kc grows and closes where ds appears; "
-         f"{CLAIMS.gap_s * 1e3:g} ms fits the stride from the published z* and the closest α, "
-         f"not our z* at α = {pub.alpha_deg:g}°: the same shift as the windows"),
-        (f"damping constant from ζ = {pub.zeta:g} (eqs. 25-26)",
-         f"not printed (ζ = {pub.zeta:g})",
-         f"{rp['c_c']:.3f} N·m·s/rad (reproducing, I' = {rp['I_joint']:.4f}); "
-         f"{lt['c_c']:.3f} (literal, I' = {lt['I_joint']:.4f})", "–", "n/a",
-         f"c_c = 2ζ√(I1'I2'kc/(I1'+I2')); ω_n = {rp['omega_n']:.2f} rad/s "
-         f"(reproducing), {lt['omega_n']:.2f} rad/s (literal)"),
-        ("gait type at and beyond the windows (Figs. 7-8)",
-         f"no ds at α = {a_text}, kc = {pub.kc:g}; ds when α or kc is changed (exceeds a value)",
-         f"no ds at the published parameters; ds for α ≥ {_f(sa['ds_from'], '{:.4f}')}° and "
-         f"kc ≥ {_f(sk['ds_from'], '{:.2f}')}; no ds below the base values",
-         "–", "partly",
-         "same switch (the short df between back and front stance closes into a short ds, "
-         "'so short that the locomotion did not change remarkably'), but ours switches inside "
-         f"the windows, at {_f(d.ds_from_alpha, '{:+.4f}')}° and "
-         f"{_f(d.ds_from_kc, '{:+.2f}')} N·m/rad from the published "
-         "values, not only beyond the windows"),
-        ("spine bends per stride (Fig. 5)", "two (after back and after front touchdown)",
-         f"{spn['count']:g} oscillations; θ2 extrema at {extrema}",
-         "0", "yes" if spn["count"] == 2 else "no",
-         "each stance excites one spine oscillation (one maximum and one minimum of θ2)"),
-        ("body vibration amplitude (Sec. IV.B)", f"about {CLAIMS.amplitude_deg:g}°",
-         f"θ2 from {d.th2min:.2f}° to {d.th2max:.2f}°: peak-to-peak {d.th2_pp:.2f}°, "
-         f"half of it {d.amp_half:.2f}°; swings between successive extrema "
-         + ", ".join(f"{s:.2f}°" for s in d.swings),
-         f"{d.amp_half - CLAIMS.amplitude_deg:+.2f}° (half p-p)",
-         "close (amplitude = half peak-to-peak)",
-         "'amplitude' read as half the peak-to-peak range of θ2 over a stride; the peak |θ2| "
-         f"is {d.amp_peak:.2f}°"),
-        (f"α = {a_text} (text) vs {pub.alpha_deg:g} (Fig. 6 caption)",
-         f"{a_text} / {pub.alpha_deg:g}",
-         f"both periodic, no ds; α = {a_text}: e_max {at['emax']:.4f}, z* {_pt_z(at)}, "
-         f"{at['strides_to_converge']} strides; distance to the published z* "
-         f"{100 * d.d_text:.1f} % ({a_text}) vs {100 * d.d_pub:.1f} % ({pub.alpha_deg:g})",
-         f"max |Δz*| {d.zdiff_text:.3g} (paper units)", "consistent",
-         f"{pub.alpha_deg:g} rounds to {a_text}: the text quotes the rounded value; the gait "
-         f"files use {pub.alpha_deg:g}"),
-    ]  # fmt: skip
+        (
+            "bs→df and df→fs interval (Fig. 5)",
+            f"{CLAIMS.gap_s:g} s",
+            f"{_ms(d.gap_star)} ms at z*; {_ms(d.gap_pub)} ms on the stride from the published z*; "
+            f"{_ms(d.gap_ca)} ms at the closest α",
+            f"{_ms(d.gap_star_diff, '{:+.2f}')} ms",
+            "partly",
+            f"the short flight shrinks as α or kc grows and closes where ds appears; "
+            f"{CLAIMS.gap_s * 1e3:g} ms fits the stride from the published z* and the closest α, "
+            f"not our z* at α = {pub.alpha_deg:g}°: the same shift as the windows",
+        ),
+        (
+            f"damping constant from ζ = {pub.zeta:g} (eqs. 25-26)",
+            f"not printed (ζ = {pub.zeta:g})",
+            f"{rp['c_c']:.3f} N·m·s/rad (reproducing, I' = {rp['I_joint']:.4f}); "
+            f"{lt['c_c']:.3f} (literal, I' = {lt['I_joint']:.4f})",
+            "–",
+            "n/a",
+            f"c_c = 2ζ√(I1'I2'kc/(I1'+I2')); ω_n = {rp['omega_n']:.2f} rad/s "
+            f"(reproducing), {lt['omega_n']:.2f} rad/s (literal)",
+        ),
+        (
+            "gait type at and beyond the windows (Figs. 7-8)",
+            f"no ds at α = {a_text}, kc = {pub.kc:g}; ds when α or kc is changed (exceeds a value)",
+            f"no ds at the published parameters; ds for α ≥ {_f(sa['ds_from'], '{:.4f}')}° and "
+            f"kc ≥ {_f(sk['ds_from'], '{:.2f}')}; no ds below the base values",
+            "–",
+            "partly",
+            "same switch (the short df between back and front stance closes into a short ds, "
+            "'so short that the locomotion did not change remarkably'), but ours switches inside "
+            f"the windows, at {_f(d.ds_from_alpha, '{:+.4f}')}° and "
+            f"{_f(d.ds_from_kc, '{:+.2f}')} N·m/rad from the published "
+            "values, not only beyond the windows",
+        ),
+        (
+            "spine bends per stride (Fig. 5)",
+            "two (after back and after front touchdown)",
+            f"{spn['count']:g} oscillations; θ2 extrema at {extrema}",
+            "0",
+            "yes" if spn["count"] == 2 else "no",
+            "each stance excites one spine oscillation (one maximum and one minimum of θ2)",
+        ),
+        (
+            "body vibration amplitude (Sec. IV.B)",
+            f"about {CLAIMS.amplitude_deg:g}°",
+            f"θ2 from {d.th2min:.2f}° to {d.th2max:.2f}°: peak-to-peak {d.th2_pp:.2f}°, "
+            f"half of it {d.amp_half:.2f}°; swings between successive extrema "
+            + ", ".join(f"{s:.2f}°" for s in d.swings),
+            f"{d.amp_half - CLAIMS.amplitude_deg:+.2f}° (half p-p)",
+            "close (amplitude = half peak-to-peak)",
+            "'amplitude' read as half the peak-to-peak range of θ2 over a stride; the peak |θ2| "
+            f"is {d.amp_peak:.2f}°",
+        ),
+        (
+            f"α = {a_text} (text) vs {pub.alpha_deg:g} (Fig. 6 caption)",
+            f"{a_text} / {pub.alpha_deg:g}",
+            f"both periodic, no ds; α = {a_text}: e_max {at['emax']:.4f}, z* {_pt_z(at)}, "
+            f"{at['strides_to_converge']} strides; distance to the published z* "
+            f"{100 * d.d_text:.1f} % ({a_text}) vs {100 * d.d_pub:.1f} % ({pub.alpha_deg:g})",
+            f"max |Δz*| {d.zdiff_text:.3g} (paper units)",
+            "consistent",
+            f"{pub.alpha_deg:g} rounds to {a_text}: the text quotes the rounded value; the gait "
+            f"files use {pub.alpha_deg:g}",
+        ),
+    ]
 
 
 def _path_rows(d: Derived) -> list[tuple]:
@@ -598,41 +707,54 @@ def _path_rows(d: Derived) -> list[tuple]:
         return []
     pub, T, emx = published(), d.T, d.emx_speed
     return [
-        ("the stiff-spine branch reaches the published gait (Figs. 3-4)",
-         "yes (process III.D.4 from a one-body bound [9])",
-         f"α holding the speed: yes (α = {d.end_sp['alpha_deg']:.5f}° at kc = {pub.kc:g}); α "
-         f"balancing the energy: no (lands at α = {d.end_en['alpha_deg']:.4f}°, e_max "
-         f"{d.end_en['emax']:.3f})", "–", "partly",
-         f"the published energy level ({T['energy_star']:.2f} J) has no stiff-spine bound "
-         f"(stiff family ≥ {_f(d.fam_min and d.fam_min['energy'], '{:.2f}')} J at kc = "
-         f"{T['kc_stiff']:g}); followed upwards it loses stability at kc ≈ "
-         f"{_f(d.loss_kc, '{:.1f}')} and folds at kc ≈ {_f(d.max_kc_pes, '{:.1f}')}."
-         " The paper changed γ and k along the way (Fig. 4 plots them), which we cannot "
-         "recover from the text"),
-        (f"e_max close to 1 at large kc, ~{CLAIMS.emax:g} when kc decreases (Sec. IV.B.2)",
-         f"≈ 1 → ≈ {CLAIMS.emax:g}",
-         f"speed path: {emx[0]:.3f} at kc = {d.psp['points'][0]['kc']:g}, between "
-         f"{min(emx):.3f} and {max(emx):.3f} on the way, {emx[-1]:.3f} at {pub.kc:g}",
-         "–", "partly",
-         "near-conservative at large kc (α → 0, the spine barely moves, the damper barely "
-         "dissipates), so e_max → 1; but ours is not monotone and exceeds 1 on parts of "
-         "the path (see Fig. 4)"),
-    ]  # fmt: skip
+        (
+            "the stiff-spine branch reaches the published gait (Figs. 3-4)",
+            "yes (process III.D.4 from a one-body bound [9])",
+            f"α holding the speed: yes (α = {d.end_sp['alpha_deg']:.5f}° at kc = {pub.kc:g}); α "
+            f"balancing the energy: no (lands at α = {d.end_en['alpha_deg']:.4f}°, e_max "
+            f"{d.end_en['emax']:.3f})",
+            "–",
+            "partly",
+            f"the published energy level ({T['energy_star']:.2f} J) has no stiff-spine bound "
+            f"(stiff family ≥ {_f(d.fam_min and d.fam_min['energy'], '{:.2f}')} J at kc = "
+            f"{T['kc_stiff']:g}); followed upwards it loses stability at kc ≈ "
+            f"{_f(d.loss_kc, '{:.1f}')} and folds at kc ≈ {_f(d.max_kc_pes, '{:.1f}')}."
+            " The paper changed γ and k along the way (Fig. 4 plots them), which we cannot "
+            "recover from the text",
+        ),
+        (
+            f"e_max close to 1 at large kc, ~{CLAIMS.emax:g} when kc decreases (Sec. IV.B.2)",
+            f"≈ 1 → ≈ {CLAIMS.emax:g}",
+            f"speed path: {emx[0]:.3f} at kc = {d.psp['points'][0]['kc']:g}, between "
+            f"{min(emx):.3f} and {max(emx):.3f} on the way, {emx[-1]:.3f} at {pub.kc:g}",
+            "–",
+            "partly",
+            "near-conservative at large kc (α → 0, the spine barely moves, the damper barely "
+            "dissipates), so e_max → 1; but ours is not monotone and exceeds 1 on parts of "
+            "the path (see Fig. 4)",
+        ),
+    ]
 
 
 def _readings(d: Derived) -> list[str]:
     pub, fp, L, R, lf, dmp = published(), d.fp, d.L, d.R, d.lf, d.dmp
     rp, lt, rg, lg = dmp["reproducing"], dmp["literal"], R["params"], L["params"]
-    lsp, lc, ms, hom = L["stride_from_published"], L["leg_compression"], L["multistart"], \
-        L["homotopy"]  # fmt: skip
-    hom_txt = (f"geometry and inertia morphed from reproducing to literal (α freed, ẋ_g pinned "
-               f"at {d.z[3]:.4f} m/s): {hom['reason']}"
-               + (f" at α = {hom['points'][-1]['alpha_deg']:.3f}°" if hom["reached"] else ""))
+    lsp, lc, ms, hom = (
+        L["stride_from_published"],
+        L["leg_compression"],
+        L["multistart"],
+        L["homotopy"],
+    )
+    hom_txt = (
+        f"geometry and inertia morphed from reproducing to literal (α freed, ẋ_g pinned "
+        f"at {d.z[3]:.4f} m/s): {hom['reason']}"
+        + (f" at α = {hom['points'][-1]['alpha_deg']:.3f}°" if hom["reached"] else "")
+    )
     ac = L.get("alpha_continuation")
     if ac:
-        hom_txt += (f"; then α continued back to {pub.alpha_deg:g}°: {ac['reason']}"
-                    + (f" (folds at α = {', '.join(f'{f:.3f}' for f in ac['folds'])})"
-                       if ac["folds"] else ""))  # fmt: skip
+        hom_txt += f"; then α continued back to {pub.alpha_deg:g}°: {ac['reason']}" + (
+            f" (folds at α = {', '.join(f'{f:.3f}' for f in ac['folds'])})" if ac["folds"] else ""
+        )
     out = [
         "## The two readings of Table II side by side",
         "",
@@ -653,7 +775,8 @@ def _readings(d: Derived) -> list[str]:
         f"{L['newton_from_published']['reason']} |",
         f"| Newton from {ms['starts']} starts around it | – | {ms['converged']} converge, "
         f"{len(ms['distinct'])} distinct fixed point(s): "
-        + "; ".join(_ms_text(q) for q in ms.get("analysed", [])) + " |",
+        + "; ".join(_ms_text(q) for q in ms.get("analysed", []))
+        + " |",
         f"| continuation (homotopy) | – | {hom_txt} |",
     ]
     if lf:
@@ -716,10 +839,12 @@ def _closest(d: Derived) -> list[str]:
         + f" | {d.emax:.4f} | {'-'.join(fp['phases'])} |",
     ]
     for q, unit, shift in ((d.ca, "°", d.d_alpha_closest), (d.ck, " N·m/rad", d.d_kc_closest)):
-        out.append(f"| {q['key']} in [{q['bounds'][0]:g}, {q['bounds'][1]:g}] | "
-                   f"{q['value']:.5f}{unit} | {shift:+.5f} | {100 * q['distance']:.2f} % | "
-                   + " | ".join(f"{100 * v:+.2f} %" for v in q["rel_diff"])
-                   + f" | {q['emax']:.4f} | {'-'.join(q['phases'])} |")  # fmt: skip
+        out.append(
+            f"| {q['key']} in [{q['bounds'][0]:g}, {q['bounds'][1]:g}] | "
+            f"{q['value']:.5f}{unit} | {shift:+.5f} | {100 * q['distance']:.2f} % | "
+            + " | ".join(f"{100 * v:+.2f} %" for v in q["rel_diff"])
+            + f" | {q['emax']:.4f} | {'-'.join(q['phases'])} |"
+        )
     out += [
         "",
         "How far z* moves when one published parameter moves by half a unit of its last "
@@ -730,10 +855,16 @@ def _closest(d: Derived) -> list[str]:
         "| **published − ours** | " + " | ".join(f"**{v:+.4g}**" for v in need) + " |",
     ]
     for key, s in sens.items():
-        lab = (f"α as printed in the text, {CLAIMS.alpha_text_deg:g}" if key == "alpha_deg_text"
-               else key)  # fmt: skip
-        out.append(f"| {lab} (±{s['half_width']:g}) | "
-                   + " | ".join(f"{v:+.3g}" for v in s["dz_per_half_width"]) + " |")
+        lab = (
+            f"α as printed in the text, {CLAIMS.alpha_text_deg:g}"
+            if key == "alpha_deg_text"
+            else key
+        )
+        out.append(
+            f"| {lab} (±{s['half_width']:g}) | "
+            + " | ".join(f"{v:+.3g}" for v in s["dz_per_half_width"])
+            + " |"
+        )
     out += [
         "",
         f"Reading: θ1, θ2 and θ̇2 move by large fractions of their misfit within plausible "
@@ -748,8 +879,12 @@ def _closest(d: Derived) -> list[str]:
         "",
         f"The paper's own slope search (eq. 27, energy error E(z_100) − E(z_0), 100 strides "
         f"from the published z*): α = {sec['alpha_deg']:.4f}° ({sec['reason']}"
-        + (f"; a gait with phases {'-'.join(sec['phases'])}, e_max {sec['emax']:.3f}"
-           if "phases" in sec else "") + "). The published z* carries "
+        + (
+            f"; a gait with phases {'-'.join(sec['phases'])}, e_max {sec['emax']:.3f}"
+            if "phases" in sec
+            else ""
+        )
+        + "). The published z* carries "
         f"{d.energy_gap:+.3f} J more apex energy than our z*, so balancing it needs a steeper "
         "slope.",
         "",
@@ -777,13 +912,18 @@ def _stiff(d: Derived) -> list[str]:
     for name, pth in d.paths.items():
         e = d.path_ends[name]
         pins = ", ".join(f"{n} = {v:.4f}" for n, v in pth["pins"])
-        folds = (f" (folds at kc ≈ {', '.join(f'{k:.1f}' for k in pth['folds_kc'])})"
-                 if pth.get("folds_kc") else "")  # fmt: skip
-        out.append(f"| {PATH_STYLE[name][1]} | {pins} | {pth['reason']}{folds}"
-                   f" | {_f(e['alpha_deg'] if e else None, '{:.5f}')}"
-                   f" | {_pt_z(e) if e else '–'} | {_f(e['emax'] if e else None, '{:.4f}')}"
-                   f" | {'-'.join(e['phases']) if e else '–'} | "
-                   f"{len(pth['ladder']) or 'no'} |")  # fmt: skip
+        folds = (
+            f" (folds at kc ≈ {', '.join(f'{k:.1f}' for k in pth['folds_kc'])})"
+            if pth.get("folds_kc")
+            else ""
+        )
+        out.append(
+            f"| {PATH_STYLE[name][1]} | {pins} | {pth['reason']}{folds}"
+            f" | {_f(e['alpha_deg'] if e else None, '{:.5f}')}"
+            f" | {_pt_z(e) if e else '–'} | {_f(e['emax'] if e else None, '{:.4f}')}"
+            f" | {'-'.join(e['phases']) if e else '–'} | "
+            f"{len(pth['ladder']) or 'no'} |"
+        )
     out += [
         "",
         "- **α holding the forward speed** (natural continuation in ln kc with the "
@@ -808,7 +948,8 @@ def _stiff(d: Derived) -> list[str]:
             f"{_f(d.max_kc_pes, '{:.1f}')}, after losing stability at kc ≈ "
             f"{_f(d.loss_kc, '{:.1f}')} (e_max crosses 1). The paper's Fig. 4 "
             "shows the touchdown angles and leg stiffness changing along its search, so its "
-            "start was presumably at other γ, k; those values are not in the text.")
+            "start was presumably at other γ, k; those values are not in the text."
+        )
     return out + [
         "",
         "![Fig. 3 analogue](figures/fig3_fixed_points_vs_kc.png)",
@@ -837,7 +978,8 @@ def _literal(d: Derived) -> list[str]:
         f"m, 4°, 8°, 0.5 m/s, 100°/s, 150°/s); legs may compress to 5 % during the search, "
         f"every point found is then re-solved at the default limit): {ms['converged']} "
         f"converge, to {len(ms['distinct'])} distinct point(s): "
-        + "; ".join(_ms_text(q) for q in ms.get("analysed", [])) + ".",
+        + "; ".join(_ms_text(q) for q in ms.get("analysed", []))
+        + ".",
     ]
     if lf:
         out += [
@@ -876,42 +1018,52 @@ def _hips(d: Derived) -> list[str]:
     ]
     if lf:
         hl = lf["hip_margins"]
-        out.append(f"| literal periodic gait | {_margin_cell(hl, 'back')} | "
-                   f"{_margin_cell(hl, 'front')} |")  # fmt: skip
+        out.append(
+            f"| literal periodic gait | {_margin_cell(hl, 'back')} | {_margin_cell(hl, 'front')} |"
+        )
     return out + ["", _hip_text(d), ""]
 
 
 def _hip_text(d: Derived) -> str:
     hm, gd = d.R["hip_margins"], d.R["params"]
     if not d.hip_liftoff_angles:
-        return (f"Every margin is positive (smallest {d.hip_min * 1e3:.1f} mm): each leg lifts "
-                "off with its hip above its touchdown height, so the rule is never triggered "
-                "on the published cycle and cannot change any published number.")
+        return (
+            f"Every margin is positive (smallest {d.hip_min * 1e3:.1f} mm): each leg lifts "
+            "off with its hip above its touchdown height, so the rule is never triggered "
+            "on the published cycle and cannot change any published number."
+        )
     parts = []
     for leg, g_lo in d.hip_liftoff_angles.items():
         x, gtd = hm[leg], gd[f"gamma_{leg[0]}_deg"]
-        parts.append(f"the {leg} hip lifts off {-x['liftoff'] * 1e3:.1f} mm below its "
-                     f"touchdown height (the leg leaves the ground at {g_lo:.1f}° from the "
-                     f"normal, touched down at {gtd:.1f}°), rising at "
-                     f"{x['liftoff_hip_vy']:.2f} m/s, and passes above it "
-                     f"{_ms(x['below_after_liftoff_s'])} ms later")
-    return ("The rule **is** exercised on every stride of the published cycle: "
-            + "; ".join(parts) + ". The leg then swings until its hip falls through the "
-            "touchdown height again (its next touchdown). That is exactly what a touchdown "
-            "event firing only on a *falling* zero crossing of the paper's condition "
-            "(III.B.2, 3) does. An event firing on any crossing would touch down 2-3 ms after "
-            "liftoff with the hip rising, the leg at its rest length and lengthening, so it "
-            "would lift off again at once: the same trajectory. Either way the rule changes "
-            "no published number. Touching down at once when re-armed below is not possible "
-            "here: the toe would have to be placed below the ground.")
+        parts.append(
+            f"the {leg} hip lifts off {-x['liftoff'] * 1e3:.1f} mm below its "
+            f"touchdown height (the leg leaves the ground at {g_lo:.1f}° from the "
+            f"normal, touched down at {gtd:.1f}°), rising at "
+            f"{x['liftoff_hip_vy']:.2f} m/s, and passes above it "
+            f"{_ms(x['below_after_liftoff_s'])} ms later"
+        )
+    return (
+        "The rule **is** exercised on every stride of the published cycle: "
+        + "; ".join(parts)
+        + ". The leg then swings until its hip falls through the "
+        "touchdown height again (its next touchdown). That is exactly what a touchdown "
+        "event firing only on a *falling* zero crossing of the paper's condition "
+        "(III.B.2, 3) does. An event firing on any crossing would touch down 2-3 ms after "
+        "liftoff with the hip rising, the leg at its rest length and lengthening, so it "
+        "would lift off again at once: the same trajectory. Either way the rule changes "
+        "no published number. Touching down at once when re-armed below is not possible "
+        "here: the toe would have to be placed below the ground."
+    )
 
 
 def _figures(d: Derived) -> list[str]:
     out = ["## Figures", ""]
-    for caption, name in (("Fig. 5 analogue", "fig5_periodic_solution"),
-                          ("Fig. 6 analogue", "fig6_convergence"),
-                          ("Fig. 7 analogue", "fig7_emax_vs_alpha"),
-                          ("Fig. 8 analogue", "fig8_emax_vs_kc")):  # fmt: skip
+    for caption, name in (
+        ("Fig. 5 analogue", "fig5_periodic_solution"),
+        ("Fig. 6 analogue", "fig6_convergence"),
+        ("Fig. 7 analogue", "fig7_emax_vs_alpha"),
+        ("Fig. 8 analogue", "fig8_emax_vs_kc"),
+    ):
         out += [f"![{caption}](figures/{name}.png)", ""]
     return out
 
@@ -941,9 +1093,17 @@ def write_report(results: dict, path) -> Path:
     """REPRODUCTION.md: the derived numbers, then each section in turn."""
     path = Path(path)
     d = derive(results)
-    lines = [*_header(d), *_headline(d), *_table(d), *_readings(d), *_closest(d), *_stiff(d),
-             *_literal(d), *_hips(d), *_figures(d),
-             *_method(d, results["budget"]["name"], results["wall_seconds"],
-                      results["cache"]["hits"])]  # fmt: skip
+    lines = [
+        *_header(d),
+        *_headline(d),
+        *_table(d),
+        *_readings(d),
+        *_closest(d),
+        *_stiff(d),
+        *_literal(d),
+        *_hips(d),
+        *_figures(d),
+        *_method(d, results["budget"]["name"], results["wall_seconds"], results["cache"]["hits"]),
+    ]
     atomic_write(path, "\n".join(lines) + "\n")
     return path

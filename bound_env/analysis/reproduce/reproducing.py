@@ -90,46 +90,86 @@ def stage_reproducing(b: Budget, log) -> dict:
         "params": p.to_gait_dict(),
         "z_published": z_to_paper(zpub),
         "stride_from_published": {
-            "failure": s_pub.failure, "phases": s_pub.phases, "durations": s_pub.durations,
+            "failure": s_pub.failure,
+            "phases": s_pub.phases,
+            "durations": s_pub.durations,
             "z1": None if s_pub.z1 is None else z_to_paper(s_pub.z1),
-            "return_error_paper": None if s_pub.z1 is None
+            "return_error_paper": None
+            if s_pub.z1 is None
             else z_to_paper(s_pub.z1) - z_to_paper(zpub),
-            "energy0": s_pub.energy0, "energy1": s_pub.energy1,
+            "energy0": s_pub.energy0,
+            "energy1": s_pub.energy1,
         },
         "fixed_point": {
-            "converged": fp.converged, "reason": fp.reason, "iterations": fp.iterations,
-            **point_summary(p, fp.z), "z_si": fp.z,
-            "strides_to_converge": fp.strides_to_converge, "period": per.t_end,
+            "converged": fp.converged,
+            "reason": fp.reason,
+            "iterations": fp.iterations,
+            **point_summary(p, fp.z),
+            "z_si": fp.z,
+            "strides_to_converge": fp.strides_to_converge,
+            "period": per.t_end,
         },
-        "recovery": [{"rel": r.rel, "strides": r.strides, "strides_loose": r.strides_loose,
-                      "failure": r.failure, "history": z_to_paper_rows(r.history),
-                      "deviation": r.deviation} for r in rec],
-        "recovery_all": [{"component": r.component, "rel": r.rel, "strides": r.strides,
-                          "strides_loose": r.strides_loose, "failure": r.failure}
-                         for r in rec_all],
-        "spine": {"count": osc.count, "extrema_t": osc.extrema_t,
-                  "extrema_theta2_deg": np.degrees(osc.extrema_theta2),
-                  "extrema_phase": osc.extrema_phase, "minima": osc.minima,
-                  "maxima": osc.maxima, "theta2_min_deg": float(th2.min()),
-                  "theta2_max_deg": float(th2.max())},
-        "trajectory": {"t": tr.t, "q": tr.q, "qd": tr.qd, "phase": tr.phase,
-                       "events": [{"t": e.t, "name": e.name, "phase": e.phase}
-                                  for e in per.events]},
-        "trajectory_published": None if s_pub.trajectory is None else {
-            "t": s_pub.trajectory.t, "q": s_pub.trajectory.q},
+        "recovery": [
+            {
+                "rel": r.rel,
+                "strides": r.strides,
+                "strides_loose": r.strides_loose,
+                "failure": r.failure,
+                "history": z_to_paper_rows(r.history),
+                "deviation": r.deviation,
+            }
+            for r in rec
+        ],
+        "recovery_all": [
+            {
+                "component": r.component,
+                "rel": r.rel,
+                "strides": r.strides,
+                "strides_loose": r.strides_loose,
+                "failure": r.failure,
+            }
+            for r in rec_all
+        ],
+        "spine": {
+            "count": osc.count,
+            "extrema_t": osc.extrema_t,
+            "extrema_theta2_deg": np.degrees(osc.extrema_theta2),
+            "extrema_phase": osc.extrema_phase,
+            "minima": osc.minima,
+            "maxima": osc.maxima,
+            "theta2_min_deg": float(th2.min()),
+            "theta2_max_deg": float(th2.max()),
+        },
+        "trajectory": {
+            "t": tr.t,
+            "q": tr.q,
+            "qd": tr.qd,
+            "phase": tr.phase,
+            "events": [{"t": e.t, "name": e.name, "phase": e.phase} for e in per.events],
+        },
+        "trajectory_published": None
+        if s_pub.trajectory is None
+        else {"t": s_pub.trajectory.t, "q": s_pub.trajectory.q},
         "hip_margins": hip_margins(fp.z, p),
         "hip_margins_published": hip_margins(zpub, p),
-        "alpha_193": {"converged": fp_text.converged, **point_summary(fp_text.params, fp_text.z),
-                      "strides_to_converge": fp_text.strides_to_converge},
-        "mixed_reading": {"converged": fp_mixed.converged, "reason": fp_mixed.reason,
-                          "z": z_to_paper(fp_mixed.z), "phases": fp_mixed.phases,
-                          "stride_failure": stride(zpub, mixed).failure},
-        "damping": {"reproducing": {"c_c": p.c_c, "omega_n": p.omega_n,
-                                    "I_joint": p.I1_joint},
-                    "literal": {"c_c": lit.c_c, "omega_n": lit.omega_n,
-                                "I_joint": lit.I1_joint}},
+        "alpha_193": {
+            "converged": fp_text.converged,
+            **point_summary(fp_text.params, fp_text.z),
+            "strides_to_converge": fp_text.strides_to_converge,
+        },
+        "mixed_reading": {
+            "converged": fp_mixed.converged,
+            "reason": fp_mixed.reason,
+            "z": z_to_paper(fp_mixed.z),
+            "phases": fp_mixed.phases,
+            "stride_failure": stride(zpub, mixed).failure,
+        },
+        "damping": {
+            "reproducing": {"c_c": p.c_c, "omega_n": p.omega_n, "I_joint": p.I1_joint},
+            "literal": {"c_c": lit.c_c, "omega_n": lit.omega_n, "I_joint": lit.I1_joint},
+        },
         "energy_published_z": apex_energy(zpub, p),
-    }  # fmt: skip
+    }
 
 
 def z_to_paper_rows(hist) -> np.ndarray:

@@ -44,7 +44,20 @@ class Budget:
 
 
 FULL = Budget()
-QUICK = Budget(name="quick", alpha_sweep=(1.80, 2.10, 0.05), kc_sweep=(280.0, 320.0, 5.0),
-               refine=1, coarse_sweeps=False, search_xatol=1e-3, kc_stiff=2000.0, path_step=0.3,
-               path_step_max=0.5, arc_step=0.1, family_step=0.1, family_max=6,
-               literal_starts=6, literal_kc_max=2000.0, record_dt=2e-3)  # fmt: skip
+QUICK = Budget(
+    name="quick",
+    alpha_sweep=(1.80, 2.10, 0.05),
+    kc_sweep=(280.0, 320.0, 5.0),
+    refine=1,
+    coarse_sweeps=False,
+    search_xatol=1e-3,
+    kc_stiff=2000.0,
+    path_step=0.3,
+    path_step_max=0.5,
+    arc_step=0.1,
+    family_step=0.1,
+    family_max=6,
+    literal_starts=6,
+    literal_kc_max=2000.0,
+    record_dt=2e-3,
+)
