@@ -9,7 +9,7 @@ from pathlib import Path
 
 def register(sub) -> None:
     from bound_env.analysis.basin import DEFAULT_CHUNK, DEFAULT_GRID, DEFAULT_STRIDES
-    from bound_env.cli_args import add_progress_args
+    from bound_env.cli_args import POLICY_GAIT_HELP, add_gait_args, add_progress_args
     from bound_env.parallel import add_scheduler_args
 
     p = sub.add_parser(
@@ -36,9 +36,7 @@ def register(sub) -> None:
         help="ranges of the two axes in the paper's units [m, deg, deg, m/s, deg/s, "
         "deg/s] (default: z* plus or minus a fixed half-width per component)",
     )
-    p.add_argument(
-        "--gait", default=None, help="gait name or path (default: the policy's own, else 'default')"
-    )
+    add_gait_args(p, default=None, overrides=False, help=POLICY_GAIT_HELP)
     p.add_argument(
         "--strides",
         type=int,

@@ -8,7 +8,14 @@ import sys
 import time
 from pathlib import Path
 
-from bound_env.cli_args import add_json_arg, out_dir, say, strict_json
+from bound_env.cli_args import (
+    POLICY_GAIT_HELP,
+    add_gait_args,
+    add_json_arg,
+    out_dir,
+    say,
+    strict_json,
+)
 
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_HELP = (
@@ -114,9 +121,7 @@ def register(sub) -> None:
     p = sub.add_parser("margins", help="stability margins of the passive gait or a policy")
     p.add_argument("--policy", default="passive", help=POLICY_HELP)
     p.add_argument("--budget", choices=("test", "quick", "standard", "full"), default="quick")
-    p.add_argument(
-        "--gait", default=None, help="gait name or path (default: the policy's own, else 'default')"
-    )
+    add_gait_args(p, default=None, overrides=False, help=POLICY_GAIT_HELP)
     p.add_argument(
         "--force",
         action="store_true",
@@ -138,9 +143,7 @@ def register(sub) -> None:
 
     p = sub.add_parser("rollout", help="run a policy for N strides in its own environment")
     p.add_argument("--policy", default="default", help=POLICY_HELP + " (default: %(default)s)")
-    p.add_argument(
-        "--gait", default=None, help="gait name or path (default: the policy's own, else 'default')"
-    )
+    add_gait_args(p, default=None, overrides=False, help=POLICY_GAIT_HELP)
     p.add_argument(
         "--strides", type=number(int, 1, 100_000), default=50, help="strides to run (default: 50)"
     )

@@ -9,20 +9,25 @@ from __future__ import annotations
 
 import json
 
+# ``--gait`` help of the commands that run a policy: the policy's own gait unless told.
+POLICY_GAIT_HELP = "gait name or path (default: the policy's own, else 'default')"
 
-def add_gait_args(parser, default="paper"):
-    """Add ``--gait NAME|PATH`` (defaulting to ``default``) and repeatable ``--set KEY=VALUE``."""
+
+def add_gait_args(parser, default="paper", overrides=True, help=None):
+    """Add ``--gait NAME|PATH`` (defaulting to ``default``) and, if ``overrides``, repeatable
+    ``--set KEY=VALUE``. Every sub-command's ``--gait`` comes from here."""
     parser.add_argument(
         "--gait",
         default=default,
-        help="gait file path or name under configs/gaits/ (default: %(default)s)",
+        help=help or "gait file path or name under configs/gaits/ (default: %(default)s)",
     )
-    parser.add_argument(
-        "--set",
-        action="append",
-        metavar="KEY=VALUE",
-        help="override a gait key, e.g. --set kc=300 --set alpha_deg=2.0",
-    )
+    if overrides:
+        parser.add_argument(
+            "--set",
+            action="append",
+            metavar="KEY=VALUE",
+            help="override a gait key, e.g. --set kc=300 --set alpha_deg=2.0",
+        )
 
 
 def gait_overrides(args) -> dict:

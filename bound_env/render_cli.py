@@ -52,7 +52,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "demo", help="the main job: a zero-action episode of PassiveBound-v0 on the passive cycle"
     )
-    p.add_argument("--gait", default="default", help="gait file or name (default: %(default)s)")
+    add_gait_args(p, default="default", overrides=False)
     p.add_argument("--out", default="out/demo", help="folder for summary.json and bound.gif")
     p.add_argument(
         "--gif-strides",
