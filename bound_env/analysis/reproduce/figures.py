@@ -118,6 +118,23 @@ def _scatter_ds(ax, x, y, has_ds, color, label=None, filled=False, size=22):
     )
 
 
+def _mark_published(ax, kc, published, ours, legend, published_label, ours_label):
+    """The published value (star) and ours at the published parameters (cross) at k_c; the
+    labels only on the panel that feeds the legend."""
+    ax.scatter(
+        [kc],
+        [published],
+        marker="*",
+        s=90,
+        color="k",
+        zorder=4,
+        label=published_label if legend else None,
+    )
+    ax.scatter(
+        [kc], [ours], marker="x", s=50, color="k", zorder=4, label=ours_label if legend else None
+    )
+
+
 def _save_figure(fig, path: Path, title=None, *, fontsize=10, legend_from=None, ncol=5) -> Path:
     """Title, a shared legend along the bottom (from the axes ``legend_from``), layout, PNG."""
     rect = (0, 0, 1, 1)
@@ -173,23 +190,14 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
             ax.plot(kc, y, "-", color=color, lw=0.6, alpha=0.6)
             _scatter_ds(ax, kc, y, ds, color, label if i == 0 else None)
     for i, ax in enumerate(axes.flat):
-        ax.scatter(
-            [pub.kc],
-            [pub.z[i]],
-            marker="*",
-            s=90,
-            color="k",
-            zorder=4,
-            label="published z*" if i == 0 else None,
-        )
-        ax.scatter(
-            [pub.kc],
-            [zstar[i]],
-            marker="x",
-            s=50,
-            color="k",
-            zorder=4,
-            label="our z* at the published parameters" if i == 0 else None,
+        _mark_published(
+            ax,
+            pub.kc,
+            pub.z[i],
+            zstar[i],
+            i == 0,
+            "published z*",
+            "our z* at the published parameters",
         )
         ax.set_xscale("log")
         ax.set_xlabel(r"$k_c$ [N m/rad]")
@@ -278,23 +286,8 @@ def _fig3_fig4(results, d: Path) -> list[Path]:
     ours = list(zstar) + [results["reproducing"]["fixed_point"]["emax"], pub.alpha_deg]
     labels = list(Z_TEX) + [r"$e_{max}$", r"slope $\alpha$ [deg]"]
     for i, ax in enumerate(axes.flat):
-        ax.scatter(
-            [pub.kc],
-            [marks[i]],
-            marker="*",
-            s=90,
-            color="k",
-            zorder=4,
-            label="published" if i == 0 else None,
-        )
-        ax.scatter(
-            [pub.kc],
-            [ours[i]],
-            marker="x",
-            s=50,
-            color="k",
-            zorder=4,
-            label="our z* (published parameters)" if i == 0 else None,
+        _mark_published(
+            ax, pub.kc, marks[i], ours[i], i == 0, "published", "our z* (published parameters)"
         )
         ax.set_xlim(lo, hi)
         ax.set_xlabel(r"$k_c$ [N m/rad]")
