@@ -91,7 +91,8 @@ def z_labels(style: str = "text") -> tuple[str, ...]:
     """Labels of the six components of z, all made from the declarations above.
 
     ``"text"``: ``θ1 [deg]``; ``"tex"``: ``$\\theta_1^*$ [deg]`` (a fixed point's, for
-    plots); ``"column"``: ``theta1_deg`` (CSV headers); ``"inline"``: ``θ1 deg``.
+    plots); ``"column"``: ``theta1_deg`` (CSV headers); ``"si_column"``: ``theta1_rad`` (CSV
+    headers of SI values); ``"inline"``: ``θ1 deg``.
     """
     units = Z_PAPER_UNITS
     if style == "text":
@@ -100,9 +101,13 @@ def z_labels(style: str = "text") -> tuple[str, ...]:
         return tuple(f"${t}^*$ [{u}]" for t, u in zip(Z_TEX, units, strict=True))
     if style == "column":
         return tuple(f"{n}_{u.replace('/s', 'ps')}" for n, u in zip(Z_NAMES, units, strict=True))
+    if style == "si_column":
+        return tuple(
+            f"{n}_{u.replace('/s', 'ps')}" for n, u in zip(Z_NAMES, Z_SI_UNITS, strict=True)
+        )
     if style == "inline":
         return tuple(f"{s} {u}" for s, u in zip(Z_SYMBOLS, units, strict=True))
-    raise ValueError(f"z label style must be text, tex, column or inline, got {style!r}")
+    raise ValueError(f"z label style must be text, tex, column, si_column or inline, got {style!r}")
 
 
 _Z_ANGULAR = np.array([False, True, True, False, True, True])

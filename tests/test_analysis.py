@@ -352,6 +352,54 @@ def test_continuation_resumes_after_a_row_cut_short(gait, fixed, tmp_path):
     assert [p.value for p in read_branch_csv(csv_path, "kc")] == [295.0, 296.0, 297.0]
 
 
+def test_branch_csv_rows_read_back_bit_for_bit(tmp_path):
+    """Every float a resumed continuation reads back from branch.csv is the one computed,
+    including angles, whose deg -> rad round trip is not exact (~1 value in 7 moves)."""
+    from bound_env.analysis.continuation import (
+        BranchPoint,
+        csv_header,
+        csv_line,
+        point_row,
+    )
+    from bound_env.params import z_to_si
+
+    rng = np.random.default_rng(3)
+    zs = rng.normal(scale=[0.1, 0.05, 0.05, 1.0, 1.0, 1.0], size=(200, 6)) + [0.3, 0, 0, 1, 0, 0]
+    lossy = [z for z in zs if not np.array_equal(z_to_si(z_to_paper(z)), z)]
+    assert len(lossy) > 20  # the case this test is about occurs
+    lam = rng.normal(size=6) + 1j * rng.normal(size=6)
+    pts = [
+        BranchPoint(
+            value=float(k) / 3.0,
+            z=z,
+            residual=1e-13 / 7.0,
+            eigenvalues=lam,
+            emax=float(np.max(np.abs(lam))),
+            phases=["df", "bs"],
+            period=0.39 / 7.0,
+            free={"alpha_deg": 2.0 / 3.0},
+            iterations=3,
+            step=0.1 / 3.0,
+        )
+        for k, z in enumerate(lossy)
+    ]
+    path = tmp_path / "branch.csv"
+    text = csv_line(csv_header("kc", ["alpha_deg"]))
+    text += "".join(csv_line(point_row(i, p, ["alpha_deg"])) for i, p in enumerate(pts))
+    path.write_text(text, newline="")
+    back = read_branch_csv(path, "kc", ["alpha_deg"])
+    for a, b in zip(pts, back, strict=True):
+        assert np.array_equal(a.z, b.z)
+        assert (a.value, a.residual, a.period, a.step, a.free) == (
+            b.value,
+            b.residual,
+            b.period,
+            b.step,
+            b.free,
+        )
+        assert np.array_equal(a.eigenvalues, b.eigenvalues)
+
+
 def test_natural_engine_calls_on_stall_and_goes_on_from_its_point(gait, fixed):
     """The paper's fallback ladder plugs in as natural()'s on_stall hook: where every
     correction fails (here kc in (296, 297.2) is made invalid) the hook is called at the last

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cache import append_line, atomic_write, read_lines
-from ..params import GAIT_KEYS, Params, z_labels, z_to_paper, z_to_si
+from ..params import GAIT_KEYS, Z_SI_UNITS, Params, z_labels, z_to_paper, z_to_si
 from .fixed_point import (
     NEWTON_TOL,
     check_free,
@@ -49,6 +49,10 @@ from .poincare import stride
 from .stability import DZ, eigen_counts, stability
 
 Z_COLUMNS = z_labels("column")  # CSV columns of z in the paper's units
+# the angular components of z again, in SI: deg -> rad does not round-trip exactly (about one
+# value in seven changes in its last bit), so a resume reads z back from these columns
+_Z_SI_INDEX = tuple(i for i, u in enumerate(Z_SI_UNITS) if "rad" in u)
+Z_SI_COLUMNS = tuple(z_labels("si_column")[i] for i in _Z_SI_INDEX)  # theta1_rad, ...
 CORRECTOR_MAX_ITER = 12  # Newton iterations per corrector before the step is halved
 GROW = 1.5  # step growth after an easy corrector (<= EASY_ITER iterations)
 EASY_ITER = 3
@@ -150,7 +154,8 @@ def csv_header(param: str, free) -> list[str]:
     cols += [f"abs_lambda{i}" for i in range(1, 7)]
     cols += [f"lambda{i}_{c}" for i in range(1, 7) for c in ("re", "im")]
     cols += list(free)
-    return cols + ["has_ds", "phases", "period_s", "iterations", "step", "fold", "pd", "ns"]
+    cols += ["has_ds", "phases", "period_s", "iterations", "step", "fold", "pd", "ns"]
+    return cols + list(Z_SI_COLUMNS)
 
 
 def point_row(i: int, pt: BranchPoint, free) -> list:
@@ -174,6 +179,7 @@ def point_row(i: int, pt: BranchPoint, free) -> list:
         int(pt.fold),
         int(pt.pd),
         int(pt.ns),
+        *(repr(float(pt.z[i])) for i in _Z_SI_INDEX),
     ]
 
 
@@ -182,6 +188,15 @@ def csv_line(row) -> str:
     buf = io.StringIO()
     csv.writer(buf).writerow(row)
     return buf.getvalue()
+
+
+def _z_of_row(r: dict) -> np.ndarray:
+    """z (SI) of a branch.csv row: exactly as computed, from the SI columns (a file written
+    before they existed: converted from the paper's units, exact to about 1e-16)."""
+    z = z_to_si([float(r[c]) for c in Z_COLUMNS])
+    if all(r.get(c) not in (None, "") for c in Z_SI_COLUMNS):
+        z[list(_Z_SI_INDEX)] = [float(r[c]) for c in Z_SI_COLUMNS]
+    return z
 
 
 def read_branch_csv(path, param: str, free=()) -> list[BranchPoint]:
@@ -195,7 +210,7 @@ def read_branch_csv(path, param: str, free=()) -> list[BranchPoint]:
         pts.append(
             BranchPoint(
                 value=float(r[param]),
-                z=z_to_si([float(r[c]) for c in Z_COLUMNS]),
+                z=_z_of_row(r),
                 residual=float(r["residual"]),
                 eigenvalues=None if np.isnan(lam).any() else lam,
                 emax=float(r["emax"]),
