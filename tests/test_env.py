@@ -67,8 +67,8 @@ def test_zero_action_stays_on_the_passive_cycle():
             apexes.append(info["apex_z"])
             assert info["stride"] == len(apexes)
     assert len(apexes) >= 30
-    err = np.abs(np.array(apexes) - z_star).max()
-    assert err <= 1e-6, err
+    err = np.abs(np.array(apexes) - z_star).max(axis=1)
+    assert err[0] <= 1e-9 and err.max() <= 1e-9, err  # from the first stride on
     # the highest possible reward in every step (tracking only numerically above zero)
     np.testing.assert_allclose(rewards, 1.0, atol=1e-12)
     assert info["x_position"] > 30 * 1.0  # ~1.1 m per stride down the slope

@@ -55,13 +55,18 @@ def test_fifty_zero_action_strides_stay_on_the_cycle():
     env = make(reset_noise_scale=0.0)
     env.reset(seed=0)
     worst = 0.0
-    for _ in range(50):
+    for k in range(50):
         obs, reward, terminated, truncated, info = env.step(np.zeros(4, np.float32))
         assert not terminated and not truncated
-        worst = max(worst, float(np.max(np.abs(info["apex_z"] - Z_STAR))))
+        err = float(np.max(np.abs(info["apex_z"] - Z_STAR)))
+        assert err < 1e-9, (k, err)  # from the first stride on
+        worst = max(worst, err)
         assert reward == pytest.approx(1.0, abs=1e-12)
+        # the observation is the apex state rounded to float32, nothing else: its distance
+        # from z* (up to 1.3e-7 rad/s in theta1dot) is that rounding, not a drift
+        np.testing.assert_array_equal(obs, info["apex_z"].astype(np.float32))
     assert worst < 1e-9
-    np.testing.assert_allclose(obs, Z_STAR.astype(np.float32), rtol=1e-6)
+    np.testing.assert_array_equal(obs, Z_STAR.astype(np.float32))
 
 
 def reference_profile(z, edges, taus, params):
