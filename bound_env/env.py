@@ -228,7 +228,7 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
     | `ctrl_cost_weight` | **float** | `0.1` | weight of the control cost |
     | `apex_scales` | **6 floats** | see Rewards | unit of apex deviation per component (SI) |
     | `exclude_current_positions_from_observation` | **bool** | `True` | omit x_g |
-    | `rtol` | **float** | `1e-10` | integrator tolerance (relative and absolute); training configs use `1e-8` |
+    | `rtol` | **float** | `1e-10` | integrator tolerance (relative, absolute); training uses 1e-8 |
     | `render_mode` | **str** | `None` | `"rgb_array"` or `"human"` |
     | `width`, `height` | **int** | `640`, `360` | frame size [pixels] |
     | `slope_noise_deg` | **float** | `0.0` | rough terrain: sigma of the slope change [deg] |
