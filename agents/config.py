@@ -41,12 +41,38 @@ DEFAULT_ENV_ID = "PassiveBound-v0"
 _NON_ALGO_KEYS = ("n_envs", "n_timesteps", "normalize", "env_wrapper", "callback", "env_kwargs")
 
 
+def config_names() -> list[str]:
+    """Names of the shipped hyperparameter files (``configs/*.yaml``: ``ppo``, ``ppo-stride``)."""
+    return sorted(p.stem for p in CONFIG_DIR.glob("*.yaml"))
+
+
+def resolve_config_path(path: str | Path) -> Path:
+    """A config file's path, or the name of a shipped one (``ppo-stride`` or
+    ``ppo-stride.yaml``), read from the repository's ``configs/`` or the wheel's copy."""
+    p = Path(path)
+    if p.is_file():
+        return p
+    if p.parent == Path(".") and p.suffix in ("", ".yaml"):
+        cand = CONFIG_DIR / f"{p.stem}.yaml"
+        if cand.is_file():
+            return cand
+    if p.exists():
+        raise ValueError(f"config {str(path)!r} is not a file")
+    raise FileNotFoundError(
+        f"no config file {str(path)!r} (give a path or a shipped name: {', '.join(config_names())})"
+    )
+
+
 def read_config_file(path: str | Path) -> dict:
-    """The whole YAML file: {env_id: hyperparameters}."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no config file {path}")
-    data = yaml.safe_load(path.read_text())
+    """The whole YAML file: {env_id: hyperparameters}; ``path`` may be a shipped name."""
+    path = resolve_config_path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as e:
+        where = getattr(e, "problem_mark", None)
+        at = f" at line {where.line + 1}" if where is not None else ""
+        problem = getattr(e, "problem", None) or type(e).__name__
+        raise ValueError(f"config file {path}: not valid YAML{at} ({problem})") from None
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a mapping of environment ids to hyperparameters")
     return data

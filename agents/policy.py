@@ -26,6 +26,8 @@ import numba as nb
 import numpy as np
 import yaml
 
+from bound_env.resources import controllers_dir
+
 # Environment keyword arguments that shape the dynamics, the observation or the action; the
 # evaluation environment takes these from the policy's run config (reward weights and start
 # noise do not matter for evaluation).
@@ -184,20 +186,36 @@ def _classical(name: str, gait=None):
     return load_classical(name, gait=None if gait is None else str(gait))
 
 
-# the classical stride-level controllers, specs in configs/controllers/
-for _name, _what in (
-    ("lqr", "stride-to-stride LQR on the linearized stride map"),
-    ("deadbeat", "one-stride deadbeat on the linearized stride map"),
-    ("damping", "extra spine damping tau = -c theta2dot"),
+# the classical stride-level controllers: every spec in configs/controllers/ (the wheel's copy
+# when installed), by its file name
+_CLASSICAL_WHAT = {
+    "lqr": "stride-to-stride LQR on the linearized stride map",
+    "deadbeat": "one-stride deadbeat on the linearized stride map",
+    "damping": "extra spine damping tau = -c theta2dot",
+}
+for _name in list(_CLASSICAL_WHAT) + sorted(
+    p.stem for p in controllers_dir().glob("*.yaml") if p.stem not in _CLASSICAL_WHAT
 ):
-    register_controller(_name, partial(_classical, _name), _what)
+    register_controller(
+        _name, partial(_classical, _name), _CLASSICAL_WHAT.get(_name, f"controller spec {_name}")
+    )
 
 
 def shipped_policies() -> dict[str, Path]:
-    """{name: folder} of the policies shipped in ``agents/policies/``."""
+    """{name: folder} of the policies shipped in ``agents/policies/``: ``<name>/`` (e.g.
+    ``default``) and one level of groups, ``<group>/<name>/`` named ``group/name`` (e.g.
+    ``stride-residual/s0``, one folder per training seed)."""
     if not SHIPPED_DIR.is_dir():
         return {}
-    return {p.name: p for p in sorted(SHIPPED_DIR.iterdir()) if (p / "model.zip").is_file()}
+    out = {}
+    for p in sorted(SHIPPED_DIR.iterdir()):
+        if (p / "model.zip").is_file():
+            out[p.name] = p
+        elif p.is_dir():
+            for q in sorted(p.iterdir()):
+                if (q / "model.zip").is_file():
+                    out[f"{p.name}/{q.name}"] = q
+    return out
 
 
 def policy_names() -> list[str]:

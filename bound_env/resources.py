@@ -1,4 +1,5 @@
-"""Where the package's data lives: gait files, the PPO config, the compiled-code cache.
+"""Where the package's data lives: gait files, controller specs, the PPO configs, the
+compiled-code cache.
 
 The repository keeps ``configs/`` at its top level, where users look for it. An installed wheel
 carries the same folder as package data, ``bound_env/configs/`` (``pyproject.toml`` maps it with
@@ -47,6 +48,11 @@ def configs_dir() -> Path:
 def gaits_dir() -> Path:
     """The folder of the named gait files (``paper``, ``default``, ...)."""
     return configs_dir() / "gaits"
+
+
+def controllers_dir() -> Path:
+    """The folder of the named controller specs (``lqr``, ``deadbeat``, ``damping``, ...)."""
+    return configs_dir() / "controllers"
 
 
 def user_cache_dir() -> Path:

@@ -110,8 +110,15 @@ def test_wheel_and_sdist_hold_data_and_license(installed):
         "agents/policies/default/model.zip",
         "agents/policies/default/vecnormalize.pkl",
         "agents/policies/literal-cycle/config.yaml",
+        "bound_env/configs/ppo-stride.yaml",
+        "agents/policies/stride-residual/s0/model.zip",
+        "agents/policies/stride-residual/s0/base.json",
     ):
         assert want in names, want
+    # every controller spec, gait and config of the checkout is in the wheel
+    for f in (ROOT / "configs").rglob("*.yaml"):
+        assert f"bound_env/configs/{f.relative_to(ROOT / 'configs').as_posix()}" in names, f
+    assert (ROOT / "configs" / "controllers" / "lqr.yaml").is_file()
     assert any(n.endswith("licenses/LICENSE") for n in names)
     # every module of the checkout is in the wheel (a new subpackage cannot be left out)
     for pkg in ("bound_env", "agents"):
@@ -179,6 +186,65 @@ def test_installed_package_runs_outside_the_checkout(installed):
     assert r["strides"] == 50 and r["fell"] is False and r["failure"] is None
     assert r["max_torque"] == 80.0 and 0.0 < r["mean_abs_tau"] < 80.0
     assert (cwd / "out" / "rollout" / "default" / "summary.json").is_file()
+
+    # every built-in controller and shipped policy by name, from outside the checkout
+    names = json.loads(
+        _run(
+            [
+                py,
+                "-c",
+                "import json\nfrom agents.policy import policy_names\n"
+                "from bound_env.control import controller_names\n"
+                "from agents.config import resolve_config_path\n"
+                "print(json.dumps([policy_names(), controller_names(), "
+                "str(resolve_config_path('ppo-stride'))]))",
+            ],
+            cwd=cwd,
+            env=env,
+        )
+    )
+    want = {p.stem for p in (ROOT / "configs" / "controllers").glob("*.yaml")}
+    assert set(names[1]) == want and want <= set(names[0])
+    assert {"passive", "stride-residual/s0", "stride-residual/s2"} <= set(names[0])
+    assert Path(names[2]).resolve().is_relative_to(site.resolve())
+    for name in sorted(want) + ["stride-residual/s1"]:
+        r = json.loads(
+            _run(
+                [installed["exe"], "rollout", "--policy", name, "--strides", "2", "--json"],
+                cwd=cwd,
+                env=env,
+            )
+        )
+        assert r["strides"] == 2 and r["fell"] is False, name
+    for cmd in (
+        ["margins", "--policy", "deadbeat", "--budget", "test", "--workers", "1", "--json"],
+        [
+            "basin-map",
+            "--policy",
+            "lqr",
+            "--grid",
+            "3",
+            "--strides",
+            "5",
+            "--no-overlay",
+            "--workers",
+            "1",
+            "--out",
+            "out/basin-lqr",
+            "--json",
+        ],
+    ):
+        json.loads(_run([installed["exe"], *cmd], cwd=cwd, env=env))
+    page = json.loads(
+        _run(
+            [installed["exe"], "compare", "--budget", "test", "--workers", "1", "--json"],
+            cwd=cwd,
+            env=env,
+            timeout=1800,
+        )
+    )
+    assert {"passive", "lqr", "deadbeat", "damping"} <= set(page["entries"])
+    assert (cwd / "out" / "margins" / "MARGINS.md").is_file()
 
     # compiled code is cached under the user cache, never inside site-packages
     assert not list(site.rglob("*.nbi"))

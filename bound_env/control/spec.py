@@ -21,7 +21,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-CONTROLLERS_DIR = Path(__file__).resolve().parent.parent.parent / "configs" / "controllers"
+from ..resources import controllers_dir
+
+# the repository's configs/controllers, or the wheel's copy (package data, bound_env.resources)
+CONTROLLERS_DIR = controllers_dir()
 KINDS = ("lqr", "deadbeat", "damping")
 COMMON_KEYS = ("controller", "gait", "max_torque", "dt")
 SPEC_KEYS = {
