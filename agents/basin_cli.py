@@ -15,11 +15,9 @@ def register(sub) -> None:
     p = sub.add_parser(
         "basin-map", help="2-D basin map (basin.npz, basin.png) of the passive gait or a policy"
     )
-    p.add_argument(
-        "--policy",
-        default="passive",
-        help="'passive', a shipped policy's name or a policy: run/policy directory or model .zip",
-    )
+    from .cli import POLICY_HELP
+
+    p.add_argument("--policy", default="passive", help=POLICY_HELP + " (default: %(default)s)")
     p.add_argument(
         "--axes",
         default="xdot_g,y_g",
@@ -61,19 +59,24 @@ def register(sub) -> None:
         help="also write the figure to PATH (e.g. docs/basin_passive_xdot_y.png); "
         "nothing outside --out is written without it",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="map a policy on a gait or with files it was not trained for",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     add_progress_args(p)
     p.set_defaults(func=cmd_basin_map)
 
 
-def resolve(policy: str, gait: str | None):
+def resolve(policy: str, gait: str | None, force: bool = False):
     """(controller, or None for the compiled passive path; label; gait)."""
     if policy == "passive":
         return None, "passive", gait or "default"
     from .cli import _policy_label
     from .policy import load_controller
 
-    ctrl = load_controller(policy, gait=gait)
+    ctrl = load_controller(policy, gait=gait, force=force)
     if not callable(ctrl) or not hasattr(ctrl, "env_kwargs"):
         raise ValueError(
             f"--policy {policy}: basin-map needs 'passive' or a controller "
@@ -86,7 +89,7 @@ def cmd_basin_map(args) -> int:
     from bound_env.analysis.basin import basin_map, summary_text
     from bound_env.cli_args import strict_json
 
-    controller, label, gait = resolve(args.policy, args.gait)
+    controller, label, gait = resolve(args.policy, args.gait, args.force)
     s = basin_map(
         controller,
         label,

@@ -16,13 +16,18 @@ from bound_env.cli_args import (
     say,
     strict_json,
 )
+from bound_env.resources import controllers_dir
 
-# Files a shipped policy directory holds (copied from a run by ``train --export``).
+# the classical controllers by name: the specs in configs/controllers/ (a cheap glob: the help
+# is built on every start of bound-env)
+_CONTROLLER_NAMES = ", ".join(sorted(p.stem for p in controllers_dir().glob("*.yaml")))
 POLICY_HELP = (
-    "'passive', a shipped policy ('default', 'literal-cycle'), another built-in "
-    "controller ('lqr', 'deadbeat', 'damping': bound_env.control, or a controller "
-    "spec .yaml), or a path: a run/policy folder, a model .zip, an rl-zoo3 run folder"
+    "'passive', a shipped policy ('default', 'literal-cycle', 'ppo-v1', "
+    "'stride-residual/s0' .. 's2'), a classical controller (" + _CONTROLLER_NAMES + ": "
+    "bound_env.control, or a controller spec .yaml), or a path: a run/policy folder, a "
+    "model .zip, an rl-zoo3 run folder"
 )
+# Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv", "eval.png")
 
 

@@ -246,6 +246,10 @@ _INFERENCE_ONLY = {
     "clip_range": lambda _: 0.0,
 }  # replaces training-only pickled objects
 FINGERPRINT_FILE = "fingerprint.json"  # sha256 of the model and its statistics, as one unit
+# Files a fingerprint also covers when they are present: the run config (it sets max_torque, dt,
+# the gait, the observation filter) and a residual policy's base controller. A fingerprint
+# written before they were covered has no entry for them and is read as before.
+FINGERPRINTED_SETTINGS = ("config.yaml", "base.json")
 
 
 @dataclass
@@ -410,21 +414,21 @@ def file_sha256(path: Path) -> str:
 
 
 def write_fingerprint(folder: str | Path, **extra) -> Path:
-    """Bind ``model.zip`` and ``vecnormalize.pkl`` of ``folder`` together: their sha256 in
-    ``fingerprint.json`` (written atomically), checked by `check_policy_files`."""
+    """Bind the files of the policy in ``folder`` together: the sha256 of ``model.zip``,
+    ``vecnormalize.pkl`` and, when present, ``config.yaml`` and ``base.json``
+    (`FINGERPRINTED_SETTINGS`) in ``fingerprint.json`` (written atomically), checked by
+    `check_policy_files`."""
     import json
-    import os
+
+    from bound_env.cache import atomic_write
 
     folder = Path(folder)
     data = {"model.zip": file_sha256(folder / "model.zip")}
-    if (folder / "vecnormalize.pkl").is_file():
-        data["vecnormalize.pkl"] = file_sha256(folder / "vecnormalize.pkl")
+    for name in ("vecnormalize.pkl", *FINGERPRINTED_SETTINGS):
+        if (folder / name).is_file():
+            data[name] = file_sha256(folder / name)
     data.update(extra)
-    path = folder / FINGERPRINT_FILE
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
-    return path
+    return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
 
 
 def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -> list[str]:
@@ -434,7 +438,11 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
       unknown (``force`` evaluates it with the env's defaults);
     - trained with ``normalize`` but no ``vecnormalize.pkl`` beside the model;
     - a ``fingerprint.json`` (written at export and at the end of training) that does not match
-      the model or the statistics: they belong to different policies.
+      the model or the statistics: they belong to different policies;
+    - a ``config.yaml`` (or ``base.json``) that does not match the fingerprint: edited or cut
+      short since the policy was saved (a config cut before ``env_kwargs`` still parses, and
+      would evaluate the policy at the env's default max_torque); ``force`` evaluates it as it
+      is, with a warning.
     """
     warnings = []
     if files.config is None:
@@ -466,6 +474,16 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
                     f"{path or key} does not match {fp} (sha256): the model and "
                     "its normalization statistics belong to different policies"
                 )
+        for key in FINGERPRINTED_SETTINGS:
+            path = files.model.parent / key
+            if key in want and path.is_file() and file_sha256(path) != want[key]:
+                msg = (
+                    f"{path} does not match {fp} (sha256): it was changed or cut short "
+                    "after the policy was saved"
+                )
+                if not force:
+                    raise ValueError(msg + "; pass --force to evaluate the policy with it as it is")
+                warnings.append(msg)
     elif files.vecnormalize is not None and files.layout == "bound_env":
         warnings.append(
             f"{files.model.parent}: no {FINGERPRINT_FILE}, so it cannot be checked "
@@ -515,6 +533,9 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
 
         return load_stride_policy(path, gait=gait, force=force)
     model_path, vecnorm_path = files.model, files.vecnormalize
+    section, env_id, seed = read_policy_section(files)
+    for w in check_policy_files(files, section, force):  # before anything reads the files
+        print(f"warning: {w}", file=sys.stderr)
     from stable_baselines3 import PPO
 
     try:
@@ -522,12 +543,9 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
         model = PPO.load(str(model_path), device="cpu", custom_objects=_INFERENCE_ONLY)
     except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
         raise ValueError(f"cannot load {model_path} as an SB3 PPO model: {e}") from None
-    section, env_id, seed = read_policy_section(files)
     env_kwargs = section_env_kwargs(section, env_id)
     wrappers = section.get("env_wrapper") or []
     obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
-    for w in check_policy_files(files, section, force):
-        print(f"warning: {w}", file=sys.stderr)
     layers, activation = _extract_actor(model, model_path)
     ctrl = MLPController(
         name=str(path),

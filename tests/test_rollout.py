@@ -156,3 +156,40 @@ def test_rl_zoo3_run_folder_is_read(tmp_path):
     want = load_controller("default").fingerprint()
     for given in (run, params, run / "PassiveBound-v0.zip"):
         assert load_controller(given).fingerprint() == want
+
+
+def test_fingerprint_covers_the_config_and_old_fingerprints_still_load(policy_copy):
+    for name, folder in shipped_policies().items():
+        fp = json.loads((folder / "fingerprint.json").read_text())
+        assert "config.yaml" in fp, name
+        assert ("base.json" in fp) == (folder / "base.json").is_file(), name
+    # a fingerprint written before it covered the config (model and statistics only) loads
+    fp = json.loads((policy_copy / "fingerprint.json").read_text())
+    del fp["config.yaml"]
+    (policy_copy / "fingerprint.json").write_text(json.dumps(fp))
+    assert load_controller(policy_copy).env_kwargs["max_torque"] == 80.0
+
+
+def test_refuses_a_config_cut_short_unless_forced(policy_copy, capsys):
+    """A config.yaml cut at a line boundary before env_kwargs still parses and matches the
+    observation shape: without the fingerprint the policy would run at max_torque 40, not 80."""
+    cfg = policy_copy / "config.yaml"
+    lines = cfg.read_text().splitlines(keepends=True)
+    cut = next(i for i, line in enumerate(lines) if line.lstrip().startswith("env_kwargs"))
+    cfg.write_text("".join(lines[:cut]))
+    with pytest.raises(ValueError, match="config.yaml does not match.*--force"):
+        load_controller(policy_copy)
+    base = ["--policy", str(policy_copy), "--gait", "default"]
+    for argv in (
+        ["rollout", *base, "--strides", "1"],
+        ["margins", *base, "--budget", "test", "--out", str(policy_copy.parent / "m")],
+        ["basin-map", *base, "--grid", "2", "--out", str(policy_copy.parent / "b")],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert "config.yaml does not match" in err and "--force" in err, argv
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (policy_copy.parent / "b").exists()
+    ctrl = load_controller(policy_copy, force=True)  # on purpose: as the config now says
+    assert "max_torque" not in ctrl.env_kwargs
+    assert "does not match" in capsys.readouterr().err  # a warning
