@@ -8,8 +8,14 @@ from pathlib import Path
 
 
 def register(sub) -> None:
-    from bound_env.analysis.basin import DEFAULT_CHUNK, DEFAULT_GRID, DEFAULT_STRIDES
-    from bound_env.cli_args import POLICY_GAIT_HELP, add_gait_args, add_progress_args
+    from bound_env.analysis.basin import (
+        DEFAULT_CHUNK,
+        DEFAULT_GRID,
+        DEFAULT_STRIDES,
+        MAX_GRID,
+        MAX_STRIDES,
+    )
+    from bound_env.cli_args import POLICY_GAIT_HELP, add_gait_args, add_progress_args, number
     from bound_env.parallel import add_scheduler_args
 
     p = sub.add_parser(
@@ -25,7 +31,10 @@ def register(sub) -> None:
         "theta2dot (default: %(default)s)",
     )
     p.add_argument(
-        "--grid", type=int, default=DEFAULT_GRID, help="points per axis (default: %(default)s)"
+        "--grid",
+        type=number(int, 2, MAX_GRID),
+        default=DEFAULT_GRID,
+        help=f"points per axis, 2 to {MAX_GRID} (default: %(default)s)",
     )
     p.add_argument(
         "--range",
@@ -37,12 +46,15 @@ def register(sub) -> None:
     add_gait_args(p, default=None, overrides=False, help=POLICY_GAIT_HELP)
     p.add_argument(
         "--strides",
-        type=int,
+        type=number(int, 1, MAX_STRIDES),
         default=DEFAULT_STRIDES,
-        help="strides allowed to return (default: %(default)s)",
+        help=f"strides allowed to return, at most {MAX_STRIDES} (default: %(default)s)",
     )
     p.add_argument(
-        "--chunk", type=int, default=DEFAULT_CHUNK, help="starts per task (default: %(default)s)"
+        "--chunk",
+        type=number(int, 1, MAX_GRID**2),
+        default=DEFAULT_CHUNK,
+        help="starts per task (default: %(default)s)",
     )
     p.add_argument(
         "--no-overlay",

@@ -27,6 +27,7 @@ POLICY_HELP = (
     "bound_env.control, or a controller spec .yaml), or a path: a run/policy folder, a "
     "model .zip, an rl-zoo3 run folder"
 )
+SEED_MAX = 2**32 - 1  # NumPy's and Gymnasium's seeds are unsigned 32-bit integers
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv", "eval.png")
 
@@ -49,7 +50,9 @@ def register(sub) -> None:
         help="section of the config and Gymnasium id (default: %(default)s)",
     )
     p.add_argument("--name", help="run name: runs/<name>/ (default: <env-id>_s<seed>)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--seed", type=number(int, 0, SEED_MAX), default=0, help="training seed (default: 0)"
+    )
     p.add_argument("--n-timesteps", type=number(float, 1, 1e10), help="override n_timesteps")
     p.add_argument(
         "--set",
@@ -152,7 +155,12 @@ def register(sub) -> None:
     p.add_argument(
         "--strides", type=number(int, 1, 100_000), default=50, help="strides to run (default: 50)"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the start noise (default: 0)")
+    p.add_argument(
+        "--seed",
+        type=number(int, 0, SEED_MAX),
+        default=0,
+        help="seed of the start noise (default: 0)",
+    )
     p.add_argument(
         "--noise",
         type=number(float, 0, 10),
@@ -225,7 +233,7 @@ def cmd_rollout(args) -> int:
         print(strict_json(r))
     else:
         print(summary_text(r))
-        print(f"wrote {path}")
+    say(args, f"wrote {path}" + (f" and the video {r['video']}" if r.get("video") else ""))
     return 0
 
 

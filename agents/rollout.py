@@ -117,6 +117,8 @@ def rollout(
 
     if not (isinstance(strides, int) and 1 <= strides <= 100_000):
         raise ValueError(f"--strides must be an integer from 1 to 100000, got {strides!r}")
+    if isinstance(seed, bool) or not (isinstance(seed, int) and 0 <= seed < 2**32):
+        raise ValueError(f"--seed must be an integer from 0 to 2**32 - 1, got {seed!r}")
     if not (math.isfinite(noise) and 0.0 <= noise <= 10.0):
         raise ValueError(f"--noise must be a number from 0 to 10, got {noise!r}")
     if video is not None and Path(video).suffix.lower() not in (".gif", ".mp4"):

@@ -670,6 +670,34 @@ def check_algo_kwargs(algo_kwargs: dict, algo_class) -> None:
         )
 
 
+def check_env_spec(env_id: str, spec: TrainSpec) -> None:
+    """ValueError (one line) for ``env_kwargs``, ``env_wrapper`` or ``callback`` arguments that
+    `gymnasium.make` or the classes would refuse (a typo in the config or in ``--hp
+    env_kwargs.KEY=...`` would otherwise be a TypeError after the run folder was made): the
+    arguments are bound to the classes' signatures and one environment is made and closed."""
+    import inspect
+
+    import gymnasium as gym
+
+    for kind, entries in (("env_wrapper", spec.wrappers), ("callback", spec.callbacks)):
+        for cls, kwargs in entries:
+            try:
+                sig = inspect.signature(cls)
+                if kind == "env_wrapper":
+                    sig.bind(None, **kwargs)
+                else:
+                    sig.bind(**kwargs)
+            except TypeError as e:
+                raise ValueError(f"{kind} {cls.__name__} {kwargs}: {e}") from None
+    try:
+        env = make_env(env_id, spec.env_kwargs, spec)
+    except (TypeError, ValueError, gym.error.Error) as e:
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        msg = msg.split(" was raised from the environment creator")[0]  # gymnasium's wording
+        raise ValueError(f"cannot make {env_id} from its env_kwargs: {msg}") from None
+    env.close()
+
+
 def resolve_section(
     config: str | Path, env_id: str, sets: list[str] | None, n_timesteps: int | None
 ) -> dict:
@@ -733,6 +761,7 @@ def train(
     n_eval_episodes = schedule["n_eval_episodes"]
     spec = preprocess(hp)
     check_algo_kwargs(spec.algo_kwargs, PPO)
+    check_env_spec(env_id, spec)  # before the run folder exists: a bad key leaves nothing behind
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "monitor").mkdir(exist_ok=True)
     write_config(run_dir / "config.yaml", env_id, hp, seed, schedule)

@@ -57,6 +57,10 @@ RETURN_TOL = 1e-4  # "returned": max-abs apex error to the cycle below this (SI)
 EVAL_RTOL = 1e-10  # integrator tolerance, as agents.margins
 DEFAULT_STRIDES = 100  # strides allowed to return (margins' quick budget)
 DEFAULT_GRID = 64
+# Bounds of the command line (a grid of 10^5 per axis grew by 40 MB/s with no output, as sweep's
+# --step is bounded): at most 1000 x 1000 = 10^6 starts, 10^4 strides each.
+MAX_GRID = 1000
+MAX_STRIDES = 10_000
 DEFAULT_CHUNK = 128  # starts per task
 RETURNED, FELL, UNDECIDED = 0, 1, 2
 OUTCOMES = ("returned", "fell", "undecided")
@@ -496,10 +500,10 @@ def basin_map(
     from ..parallel import open_pool
 
     ax = parse_axes(axes)
-    if int(grid) < 2:
-        raise ValueError(f"--grid must be at least 2, got {grid}")
-    if int(max_strides) < 1:
-        raise ValueError(f"--strides must be at least 1, got {max_strides}")
+    if not 2 <= int(grid) <= MAX_GRID:
+        raise ValueError(f"--grid must be from 2 to {MAX_GRID}, got {grid}")
+    if not 1 <= int(max_strides) <= MAX_STRIDES:
+        raise ValueError(f"--strides must be from 1 to {MAX_STRIDES}, got {max_strides}")
     if int(chunk) < 1:
         raise ValueError(f"--chunk must be at least 1, got {chunk}")
     z_star = np.asarray(load_gait(gait).z0, dtype=float)
