@@ -325,9 +325,12 @@ def parse_z(text: str | None, flag: str = "--z") -> np.ndarray | None:
     if len(parts) != 6:
         raise ValueError(f"{flag} needs 6 comma-separated numbers, got {len(parts)}: {text!r}")
     try:
-        return z_to_si([float(p) for p in parts])
+        values = [float(p) for p in parts]
     except ValueError:
         raise ValueError(f"{flag} must be numbers, got {text!r}") from None
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{flag} must be finite numbers, got {text!r}")
+    return z_to_si(values)
 
 
 def read_gait_file(path: Path) -> dict:

@@ -83,7 +83,8 @@ def register(sub) -> None:
     p.add_argument(
         "--step",
         type=number(float, allow_zero=False),
-        help="parameter step (default: 1/10 of the range)",
+        help="size of the parameter step towards --to (default: 1/10 of the range); a "
+        "negative step that points away from --to is an error",
     )
     p.add_argument("--method", choices=("natural", "arclength"), default="natural")
     p.add_argument(
@@ -115,12 +116,33 @@ def register(sub) -> None:
         "sweep",
         help="e_max against alpha_deg or kc, the paper's way "
         "(Figs. 7-8), and the stability windows",
+        description="e_max against a gait parameter, the paper's way (Figs. 7-8). The sweep "
+        "starts at the gait's own value of --param (its fixed point, always evaluated, even "
+        "outside --from..--to) and steps outwards to --to and down to --from, each value "
+        "from the previous value's fixed point; a direction stops after 3 values outside "
+        "both windows. The windows (100-stride convergence, e_max < 1) are the contiguous "
+        "ranges around the gait's own value. Every value must be a valid gait parameter.",
     )
     _gait_args(p, z_and_pins=False)
-    p.add_argument("--param", required=True, choices=GAIT_KEYS, metavar="NAME")
-    p.add_argument("--from", dest="lo", type=number(float), required=True)
-    p.add_argument("--to", dest="hi", type=number(float), required=True)
-    p.add_argument("--step", type=number(float, 0, lo_open=True), required=True)
+    p.add_argument(
+        "--param",
+        required=True,
+        choices=GAIT_KEYS,
+        metavar="NAME",
+        help="the gait key to sweep, usually kc or alpha_deg (gait units: degrees for *_deg)",
+    )
+    p.add_argument(
+        "--from", dest="lo", type=number(float), required=True, help="lowest value (gait units)"
+    )
+    p.add_argument(
+        "--to", dest="hi", type=number(float), required=True, help="highest value (gait units)"
+    )
+    p.add_argument(
+        "--step",
+        type=number(float, 0, lo_open=True),
+        required=True,
+        help="spacing of the values (> 0; at most 100000 values)",
+    )
     p.add_argument(
         "--refine", type=number(int, 0, 60), default=6, help="bisections of each window edge"
     )
@@ -310,8 +332,15 @@ def _print_fixed_point(out, res):
 def cmd_continue(args) -> int:
     from .continuation import continue_branch, plot_branch
 
-    out = out_dir(args.out)
     gait, z0 = _setup(args)
+    start = float(gait.params.to_gait_dict()[args.param])
+    # --step is a size (unsigned, as in the README); a negative one must point to --to
+    if args.step is not None and args.step < 0 and args.to > start:
+        raise ValueError(
+            f"--step {args.step:g} points away from --to {args.to:g} (the gait's "
+            f"{args.param} is {start:g}); give --step {-args.step:g}"
+        )
+    out = out_dir(args.out)
     pins = _default_pins(args, z0, gait.params)
     branch = continue_branch(
         gait.params,
@@ -358,7 +387,6 @@ def cmd_sweep(args) -> int:
     from ..parallel import open_pool
     from .sweeps import plot_sweep, sweep, write_sweep_csv
 
-    out = out_dir(args.out)
     gait, z0 = _setup(args)
     if args.hi < args.lo:
         raise ValueError(f"--to ({args.hi}) must not be below --from ({args.lo})")
@@ -366,6 +394,12 @@ def cmd_sweep(args) -> int:
     if n_points > 100_000:
         raise ValueError(f"--from/--to/--step ask for {n_points} points; at most 100000")
     values = np.round(np.arange(args.lo, args.hi + 0.5 * args.step, args.step), 12)
+    for v in values:  # a value the model refuses (kc < 0, m1 <= 0, ...) is the user's error
+        try:
+            gait.params.with_values(**{args.param: float(v)})
+        except ValueError as e:
+            raise ValueError(f"--from/--to: {args.param} = {v:g} is not valid ({e})") from None
+    out = out_dir(args.out)
     with open_pool(args.scheduler, args.workers) as pool:
         res = sweep(
             gait.params,
