@@ -42,7 +42,8 @@ def register(sub) -> None:
     p.add_argument(
         "--config",
         default=str(DEFAULT_CONFIG),
-        help="rl-zoo3-style hyperparameter file (default: %(default)s)",
+        help="rl-zoo3-style hyperparameter file, or a shipped one's name (ppo, ppo-stride, "
+        "...: configs/*.yaml) (default: %(default)s)",
     )
     p.add_argument(
         "--env-id",
@@ -55,16 +56,33 @@ def register(sub) -> None:
     )
     p.add_argument("--n-timesteps", type=number(float, 1, 1e10), help="override n_timesteps")
     p.add_argument(
+        "--hp",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a hyperparameter (YAML value; dotted keys descend, e.g. n_steps=128, "
+        "env_kwargs.max_torque=20)",
+    )
+    add_gait_args(
+        p, default=None, overrides=False, help="gait name or path (default: the config's)"
+    )
+    p.add_argument(
         "--set",
         action="append",
         metavar="KEY=VALUE",
-        help="override a hyperparameter (YAML value; dotted keys descend, e.g. "
-        "env_kwargs.max_torque=20)",
+        help="override a gait key, as in every command (e.g. kc=300: the env's "
+        "gait_overrides); a hyperparameter key is the old spelling of --hp (deprecated)",
     )
     p.add_argument(
         "--resume", action="store_true", help="continue runs/<name>/ from its last checkpoint"
     )
-    p.add_argument("--runs-dir", default="runs")
+    p.add_argument(
+        "--out",
+        "--runs-dir",
+        dest="runs_dir",
+        default="runs",
+        metavar="DIR",
+        help="folder of the runs: the run is DIR/<name>/ (default: %(default)s; alias: --runs-dir)",
+    )
     p.add_argument(
         "--vec-env",
         choices=("auto", "dummy", "subproc"),
@@ -90,9 +108,17 @@ def register(sub) -> None:
         help="timesteps between checkpoints (default: 200000; on --resume the run's)",
     )
     p.add_argument(
+        "--export-out",
         "--export",
+        dest="export",
         metavar="DIR",
-        help="afterwards copy the policy files to DIR (e.g. agents/policies/default)",
+        help="afterwards copy the policy files to DIR (e.g. agents/policies/NAME): a new or "
+        "empty folder unless --force (alias: --export)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="with --export-out: replace the files of a folder that has some",
     )
     p.add_argument(
         "--export-from",
@@ -262,13 +288,15 @@ def cmd_train(args) -> int:
     n = int(args.n_timesteps) if args.n_timesteps is not None else None
     if args.seeds is not None:
         return _train_seeds(args, n, t0)
+    if args.export:  # refused before training, not after it
+        check_export_dest(args.export, args.force)
     run = train(
         config=args.config,
         env_id=args.env_id,
         name=args.name,
         seed=args.seed,
         n_timesteps=n,
-        sets=args.set,
+        sets=train_sets(args),
         resume=args.resume,
         runs_dir=args.runs_dir,
         vec_env=args.vec_env,
@@ -280,12 +308,50 @@ def cmd_train(args) -> int:
     say(args, f"run {run}  ({time.perf_counter() - t0:.0f} s)")
     dest = None
     if args.export:
-        dest = export_policy(run, args.export, source=args.export_from)
+        dest = export_policy(run, args.export, source=args.export_from, force=args.force)
         say(args, f"exported to {dest}")
     if args.json:
         info = json.loads((Path(run) / "run.json").read_text())
         print(strict_json({"run": str(run), "export": str(dest) if dest else None, **info}))
     return 0
+
+
+def train_sets(args) -> list[str]:
+    """``train``'s overrides as hyperparameter settings: ``--hp`` as given, then each gait key
+    of ``--set`` as ``env_kwargs.gait_overrides.KEY`` and ``--gait`` as ``env_kwargs.gait``. A
+    ``--set`` of another key (``n_steps=``, ``env_kwargs.x=``) is the old spelling of ``--hp``:
+    it still works, with a deprecation notice on stderr."""
+    from bound_env.params import GAIT_KEYS, parse_override
+
+    sets = list(getattr(args, "hp", None) or [])
+    for text in args.set or []:
+        key = text.partition("=")[0].strip()
+        if key in GAIT_KEYS or key == "min_leg_frac":
+            k, v = parse_override(text)
+            sets.append(f"env_kwargs.gait_overrides.{k}={v!r}")
+        else:
+            print(
+                f"bound-env train: deprecated: --set {text} sets a hyperparameter; use --hp "
+                f"{text} (--set overrides a gait key, as in every command)",
+                file=sys.stderr,
+            )
+            sets.append(text)
+    if getattr(args, "gait", None) is not None:
+        sets.append(f"env_kwargs.gait={json.dumps(str(args.gait))}")
+    return sets
+
+
+def check_export_dest(dest, force: bool = False) -> None:
+    """ValueError unless ``dest`` is a new or empty folder (``force``: any folder): an export
+    into a shipped policy's folder would overwrite its tracked files."""
+    dest = Path(dest)
+    if dest.exists() and not dest.is_dir():
+        raise ValueError(f"--export-out {dest} exists and is not a folder")
+    if not force and dest.is_dir() and any(dest.iterdir()):
+        raise ValueError(
+            f"--export-out {dest} already holds files (a shipped policy's?); give a new "
+            "folder, or --force to replace them"
+        )
 
 
 def _default(value, default, resume: bool):
@@ -303,7 +369,7 @@ def _train_seeds(args, n, t0) -> int:
         config=args.config,
         env_id=args.env_id,
         n_timesteps=n,
-        sets=args.set,
+        sets=train_sets(args),
         resume=args.resume,
         vec_env="dummy" if args.vec_env == "auto" else args.vec_env,
         eval_freq=_default(args.eval_freq, 100_000, args.resume),
@@ -330,12 +396,14 @@ def _train_seeds(args, n, t0) -> int:
     return 0
 
 
-def export_policy(run_dir, dest, source: str = "final") -> Path:
+def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> Path:
     """Copy a run's policy files to ``dest``: the model and its VecNormalize statistics (with
     ``source="final"``, the default, the final ones: no selection; with ``"best"`` the
     best-validation ones from ``best/`` when the run kept them), and the config, run info,
-    evaluation and validation curves. ``exported.json`` says which."""
+    evaluation and validation curves. ``exported.json`` says which. ``dest`` must be a new or
+    empty folder unless ``force`` (`check_export_dest`)."""
     run_dir, dest = Path(run_dir), Path(dest)
+    check_export_dest(dest, force)
     if source not in ("final", "best"):
         raise ValueError(f"export source must be 'final' or 'best', got {source!r}")
     if not (run_dir / "model.zip").is_file():

@@ -1,4 +1,4 @@
-"""Classical (model-based) spine controllers on the stride map: LQR, deadbeat, damping.
+"""Classical (model-based) spine controllers on the stride map: LQR, deadbeat, damping, MPC.
 
 They live in `bound_env` rather than `agents` because they are part of the model's analysis:
 they need the simulator and its linearization (NumPy, SciPy), never torch or
@@ -74,7 +74,7 @@ def load_controller(spec, gait: str | None = None):
         "rho_open": spectral_radius(lin.A),
     }
     if G is None:
-        if s.controller == "lqr":
+        if s.controller in ("lqr", "mpc"):
             Q, R = weights(s.path, "Q", s.Q, 6), weights(s.path, "R", s.R, K)
             G_n = lqr_gain(A_n, B_n, Q, R)
             design.update(Q=np.diag(Q).tolist(), R=np.diag(R).tolist())
@@ -85,9 +85,9 @@ def load_controller(spec, gait: str | None = None):
     else:
         design["source"] = "gain"
     design["rho_closed"] = spectral_radius(lin.A - lin.B @ G)
-    return StrideFeedback(
+    fb = StrideFeedback(
         name=s.name,
-        kind=s.controller,
+        kind="lqr" if s.controller == "mpc" else s.controller,
         gain=G,
         z_ref=task.z_ref,
         basis=task.basis,
@@ -96,3 +96,9 @@ def load_controller(spec, gait: str | None = None):
         gait=gait,
         design=design,
     )
+    if s.controller != "mpc":
+        return fb
+    from .mpc import MPCController
+
+    x = dict(s.extra)
+    return MPCController(name=s.name, lqr=fb, params=task.params, rtol=x.pop("plan_rtol"), **x)

@@ -25,12 +25,28 @@ from ..resources import controllers_dir
 
 # the repository's configs/controllers, or the wheel's copy (package data, bound_env.resources)
 CONTROLLERS_DIR = controllers_dir()
-KINDS = ("lqr", "deadbeat", "damping")
+KINDS = ("lqr", "deadbeat", "damping", "mpc")
 COMMON_KEYS = ("controller", "gait", "max_torque", "dt")
+# the search settings of an mpc spec and their defaults (bound_env.control.mpc.MPCController)
+MPC_DEFAULTS = {
+    "safe": 0.05,
+    "horizon": 12,
+    "n_random": 24,
+    "n_noise": 24,
+    "noise": 0.5,
+    "cem_iters": 2,
+    "cem_samples": 24,
+    "cem_elites": 6,
+    "plan_rtol": 1e-8,
+    "seed": 0,
+}
+MPC_INTS = ("horizon", "n_random", "n_noise", "cem_iters", "cem_samples", "cem_elites", "seed")
 SPEC_KEYS = {
     "lqr": COMMON_KEYS + ("basis", "K", "Q", "R", "jacobian", "gain"),
     "deadbeat": COMMON_KEYS + ("basis", "K", "jacobian", "gain"),
     "damping": COMMON_KEYS + ("c",),
+    # the MPC's terminal controller is an LQR (its keys), plus the search (bound_env.control.mpc)
+    "mpc": COMMON_KEYS + ("basis", "K", "Q", "R", "jacobian", "gain") + tuple(MPC_DEFAULTS),
 }
 DEFAULT_MAX_TORQUE = 80.0  # [N m]: the saturation of the learned policies
 DEFAULT_DT = 0.01  # control interval of the step env [s]
@@ -123,6 +139,16 @@ def load_spec(spec: str | Path) -> ControllerSpec:
         and (isinstance(data["K"], bool) or not isinstance(data["K"], int))
     ):
         raise ValueError(f"{path}: K must be an integer, got {data['K']!r}")
+    if kind == "mpc":
+        out.extra = {k: data.get(k, v) for k, v in MPC_DEFAULTS.items()}
+        for k in MPC_INTS:
+            v = out.extra[k]
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"{path}: {k} must be an integer >= 0, got {v!r}")
+        if out.extra["horizon"] < 1 or out.extra["cem_elites"] < 1:
+            raise ValueError(f"{path}: horizon and cem_elites must be >= 1")
+        for k in ("safe", "noise", "plan_rtol"):
+            out.extra[k] = _positive(path, k, out.extra[k])
     if out.jacobian not in ("fd", "variational"):
         raise ValueError(f"{path}: jacobian must be 'fd' or 'variational', got {out.jacobian!r}")
     return out

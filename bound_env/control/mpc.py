@@ -1,0 +1,285 @@
+"""Model-predictive stride controller: shooting over the next stride's torque profile.
+
+At each apex z the controller chooses the coefficients u (in the LQR's basis, K windows of
+the nominal stride) of the coming stride:
+
+- **near the cycle** (normalized error max|(z - z*) / s| at most ``safe``) it is the LQR, so
+  the cycle keeps zero torque and the LQR's e_max;
+- **further out** it first tries the LQR's own plan; if the LQR then comes back within
+  ``horizon`` strides that plan is kept. Otherwise it searches: a library of profiles (the
+  LQR's plan, zero, +-max, every one-switch bang-bang profile, ``n_random`` random sign
+  vectors, ``n_noise`` LQR plans plus N(0, ``noise``)), then ``cem_iters`` rounds of
+  cross-entropy refinement around the best ``cem_elites``. Each candidate stride is followed
+  by the LQR for up to ``horizon`` strides.
+
+A candidate's score puts a **return** first (the normalized error falls to ``safe`` or below:
+sooner is better), then **survival** of the whole horizon (a smaller final error is better),
+then the **progress** of a fall (strides and the fraction of a stride survived).
+
+The model is the step env's own torque: PassiveBound-v0 holds the torque over each control
+interval [k dt, (k + 1) dt] from the apex, and a stride-level controller outputs the interval
+average of its profile there (`bound_env.control.controllers`). The candidates are simulated
+with exactly those interval torques (`bound_env.stride_task.run_profile`, event-accurate), so a
+plan holds in `margins`. Random candidates come from a generator seeded by the bytes of z:
+the controller is a deterministic function of the apex state. Every decision is timed
+(`decision_seconds`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..dynamics import jit, make_aux
+from ..events import APEX, N_FLAGS
+from ..fast import EVENT_CAPACITY, event_log, recorder
+from ..params import Z_IN_Y
+from ..stride_task import NO_APEX_TIME, run_profile
+from .controllers import OBS_TIME, OBS_Z, StrideFeedback
+
+_Z_IDX = np.array(Z_IN_Y, dtype=np.int64)
+RETURNED, SURVIVED, FELL = 2, 1, 0  # a candidate's outcome, best first
+
+
+def interval_weights(
+    edges: np.ndarray, phi: np.ndarray, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(W, t_edges): the interval averages of a basis over [k dt, (k + 1) dt] from the apex,
+    tau_k = max_torque * (W @ u)_k, for every interval that starts before the nominal period T;
+    the last window's value holds past T (as in the step env and the stride env)."""
+    T = float(edges[-1])
+    n = int(math.ceil(T / dt - 1e-12))
+    t_edges = dt * np.arange(n + 1, dtype=float)
+    W = np.zeros((n + 1, phi.shape[0]))  # on sub-windows, then mapped through phi
+    hi_win = np.append(edges[1:-1], math.inf)
+    for k in range(n):
+        lo, hi = t_edges[k], t_edges[k + 1]
+        W[k] = np.clip(np.minimum(hi_win, hi) - np.maximum(edges[:-1], lo), 0.0, None) / dt
+    W[n, -1] = 1.0  # from n dt on: the last sub-window's value, held until the apex
+    return W @ phi, np.append(t_edges, math.inf)  # (the last edge is never reached)
+
+
+@jit
+def _simulate(y0, aux0, edges, taus, rtol, t_max, log, rec):
+    """One stride from the full state y0 with interval torques ``taus`` on ``edges``."""
+    y = y0.copy()
+    aux = aux0.copy()
+    flags = np.zeros(N_FLAGS, dtype=np.bool_)
+    status, t, _ = run_profile(y, aux, flags, edges, taus, rtol, rtol, t_max, log, rec)
+    return status, t, y
+
+
+@jit
+def rollouts(
+    z0, cand, aux0, edges, W, G, z_ref, scales, max_torque, horizon, safe, period, rtol, t_max
+):
+    """Every candidate's first stride (interval torques ``cand[c]``) from the apex z0, then
+    the LQR u = clip(-G (z - z*), -1, 1) for up to ``horizon`` strides.
+
+    Returns (outcome, strides, error, progress) per candidate: `RETURNED` when the normalized
+    error max|(z - z*) / s| reached ``safe`` (``strides`` strides after z0), else `SURVIVED`
+    (``error``: the final normalized error) or `FELL` (``progress``: strides completed plus
+    the fraction of a nominal ``period`` survived in the last one)."""
+    n_c = cand.shape[0]
+    log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
+    rec = recorder(0, 0.0)
+    outcome = np.zeros(n_c, dtype=np.int64)
+    strides = np.zeros(n_c, dtype=np.int64)
+    error = np.full(n_c, np.inf)
+    progress = np.zeros(n_c)
+    for c in range(n_c):
+        y0 = np.zeros(8)
+        for i in range(6):
+            y0[_Z_IDX[i]] = z0[i]
+        taus = cand[c].copy()
+        for s in range(horizon + 1):
+            status, t, y = _simulate(y0, aux0, edges, taus, rtol, t_max, log, rec)
+            if status != APEX:
+                outcome[c] = FELL
+                progress[c] = s + min(t / period, 1.0)
+                break
+            strides[c] = s + 1
+            e = 0.0
+            dz = np.empty(6)
+            for i in range(6):
+                dz[i] = y[_Z_IDX[i]] - z_ref[i]
+                e = max(e, abs(dz[i]) / scales[i])
+            error[c] = e
+            if not np.isfinite(e):
+                outcome[c] = FELL
+                progress[c] = s + 1.0
+                break
+            if e <= safe:
+                outcome[c] = RETURNED
+                break
+            if s == horizon:
+                outcome[c] = SURVIVED
+                break
+            u = -(G @ dz)
+            for k in range(u.shape[0]):
+                u[k] = min(1.0, max(-1.0, u[k]))
+            taus = max_torque * (W @ u)
+            y0 = np.zeros(8)
+            for i in range(6):
+                y0[_Z_IDX[i]] = y[_Z_IDX[i]]
+    return outcome, strides, error, progress
+
+
+def scores(outcome, strides, error, progress, horizon: int) -> np.ndarray:
+    """One number per candidate, larger is better: a return (sooner first) over a survival
+    (smaller final error first) over a fall (more progress first)."""
+    s = np.where(outcome == FELL, progress, 0.0)
+    s = np.where(outcome == SURVIVED, horizon + 2.0 + 1.0 / (1.0 + error), s)
+    return np.where(outcome == RETURNED, 2.0 * horizon + 10.0 - strides, s)
+
+
+def library(K: int, u_lqr: np.ndarray, rng, n_random: int, n_noise: int, noise: float):
+    """The candidate coefficients (rows): LQR, zero, +-1, the 2 (K - 1) one-switch bang-bang
+    profiles, random sign vectors, LQR + N(0, noise) (clipped)."""
+    rows = [u_lqr, np.zeros(K), np.ones(K), -np.ones(K)]
+    for j in range(1, K):
+        step = np.where(np.arange(K) < j, 1.0, -1.0)
+        rows += [step, -step]
+    rows += list(rng.choice([-1.0, 1.0], size=(n_random, K)))
+    rows += list(np.clip(u_lqr + noise * rng.standard_normal((n_noise, K)), -1.0, 1.0))
+    return np.array(rows, dtype=float)
+
+
+@dataclass
+class MPCController:
+    """Shooting MPC on the stride map with the LQR as terminal controller (module docstring).
+
+    Same protocol as `StrideFeedback`: ``on_apex(z, t)`` plans the stride, ``__call__(obs)``
+    gives the interval average of the plan, ``stride_action(z)`` the plan's coefficients."""
+
+    name: str
+    lqr: StrideFeedback
+    params: object  # bound_env.params.Params of the gait (the planning model)
+    safe: float = 0.05  # normalized error at or below which the LQR acts alone
+    horizon: int = 12  # LQR strides after a candidate stride
+    n_random: int = 24
+    n_noise: int = 24
+    noise: float = 0.5
+    cem_iters: int = 2
+    cem_samples: int = 24
+    cem_elites: int = 6
+    rtol: float = 1e-8  # planning tolerance (the evaluation runs at 1e-10)
+    seed: int = 0
+    decision_seconds: list = field(default_factory=list, repr=False)
+    _u: np.ndarray | None = field(default=None, repr=False)
+    _t0: float = field(default=0.0, repr=False)  # time since the apex of the first interval
+
+    def __post_init__(self):
+        b = self.lqr.basis
+        W, edges = interval_weights(b.edges, b.phi, self.lqr.dt)
+        self._W, self._edges = W, edges
+        self._aux0 = make_aux(self.params.to_array())
+        from ..task import APEX_SCALES
+
+        self.scales = np.asarray(APEX_SCALES, dtype=float)
+        self.searches = 0  # decisions that searched beyond the LQR's own plan
+        self.evaluate(self.z_ref, np.zeros((1, self.basis.K)))  # compile (or load) it now
+
+    # -- the protocol of bound_env.control.controllers --------------------------------------
+    gait = property(lambda self: self.lqr.gait)
+    max_torque = property(lambda self: self.lqr.max_torque)
+    dt = property(lambda self: self.lqr.dt)
+    basis = property(lambda self: self.lqr.basis)
+    z_ref = property(lambda self: self.lqr.z_ref)
+    env_kwargs = property(lambda self: self.lqr.env_kwargs)
+    stride_env_kwargs = property(lambda self: self.lqr.stride_env_kwargs)
+
+    def interval_torques(self, U) -> np.ndarray:
+        """Rows of coefficients -> the step env's interval torques [N m]."""
+        return self.max_torque * (np.atleast_2d(U) @ self._W.T)
+
+    def evaluate(self, z, U):
+        """`rollouts` of the coefficient rows U from the apex z: (scores, outcome, strides)."""
+        out = rollouts(
+            np.asarray(z, dtype=float),
+            self.interval_torques(U),
+            self._aux0,
+            self._edges,
+            self._W,
+            self.lqr.gain,
+            self.z_ref,
+            self.scales,
+            self.max_torque,
+            self.horizon,
+            self.safe,
+            self.basis.period,
+            self.rtol,
+            NO_APEX_TIME,
+        )
+        return scores(*out, self.horizon), out[0], out[1]
+
+    def plan(self, z) -> np.ndarray:
+        """The coefficients of the stride from apex z (the decision, untimed)."""
+        z = np.asarray(z, dtype=float)
+        u_lqr = self.lqr.coefficients(z)
+        if np.max(np.abs(z - self.z_ref) / self.scales) <= self.safe:
+            return u_lqr
+        _, outcome, _ = self.evaluate(z, u_lqr[None])
+        if outcome[0] == RETURNED:
+            return u_lqr
+        self.searches += 1
+        rng = np.random.default_rng(
+            [self.seed, *np.frombuffer(z.tobytes(), dtype=np.uint32).tolist()]
+        )
+        K = self.basis.K
+        U = library(K, u_lqr, rng, self.n_random, self.n_noise, self.noise)
+        s, outcome, _ = self.evaluate(z, U)
+        best_u, best_s = U[int(np.argmax(s))], float(np.max(s))
+        for _ in range(self.cem_iters):
+            elite = U[np.argsort(-s)[: self.cem_elites]]
+            mu, sd = elite.mean(axis=0), elite.std(axis=0) + 0.05
+            U = np.clip(mu + sd * rng.standard_normal((self.cem_samples, K)), -1.0, 1.0)
+            s, _, _ = self.evaluate(z, U)
+            if float(np.max(s)) > best_s:
+                best_u, best_s = U[int(np.argmax(s))], float(np.max(s))
+        return best_u
+
+    def coefficients(self, z) -> np.ndarray:
+        t0 = time.perf_counter()
+        u = self.plan(z)
+        self.decision_seconds.append(time.perf_counter() - t0)
+        return u
+
+    def stride_action(self, z) -> np.ndarray:
+        return self.coefficients(z)
+
+    def on_apex(self, z, time_since_apex: float = 0.0) -> None:
+        self._u = self.coefficients(z)
+        self._t0 = float(time_since_apex)
+
+    def __call__(self, obs) -> float:
+        t = float(obs[OBS_TIME])
+        if self._u is None:
+            self.on_apex(np.asarray(obs, dtype=float)[list(OBS_Z)], t)
+        # the observation's time is float32: snap it to the interval grid t0 + k dt that
+        # started at the apex, so that the torque is exactly the planned one
+        t = self._t0 + self.dt * round((t - self._t0) / self.dt)
+        taus = self.basis.torques(self._u, self.max_torque)
+        tau = self.basis.average(taus, t, t + self.dt)
+        return float(np.clip(tau / self.max_torque, -1.0, 1.0))
+
+    def settings(self) -> dict:
+        keys = ("safe", "horizon", "n_random", "n_noise", "noise", "cem_iters", "cem_samples")
+        return {k: getattr(self, k) for k in (*keys, "cem_elites", "rtol", "seed")}
+
+    def fingerprint(self) -> str:
+        h = hashlib.sha256(b"mpc")
+        h.update(self.lqr.fingerprint().encode())
+        h.update(repr(sorted(self.settings().items())).encode())
+        h.update(np.ascontiguousarray(self.params.to_array(), dtype=float).tobytes())
+        return h.hexdigest()[:16]
+
+    def __getstate__(self):  # the plan and the timings are not part of the controller
+        state = dict(self.__dict__)
+        state["_u"] = None
+        state["decision_seconds"] = []
+        return state
