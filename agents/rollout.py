@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -182,28 +181,12 @@ def _jsonable(d: dict) -> dict:
 
 
 def write_video(frames, path, fps: int) -> Path:
-    """A GIF (Pillow, always available) or an MP4 (needs imageio-ffmpeg or moviepy)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    if path.suffix.lower() == ".gif":
-        from bound_env.render import save_gif
+    """A GIF (Pillow, always available; at most 50 frames per second) or an MP4 (needs
+    imageio-ffmpeg or moviepy), written atomically: `bound_env.render.write_video`."""
+    from bound_env.render import write_video as write
 
-        save_gif(frames, tmp, fps=min(fps, 50))
-    else:
-        try:
-            import imageio.v2 as imageio
-        except ModuleNotFoundError:
-            raise ValueError(
-                "--video F.mp4 needs imageio with ffmpeg (pip install "
-                "imageio-ffmpeg); --video F.gif works without it"
-            ) from None
-        try:
-            imageio.mimwrite(tmp, frames, fps=fps)
-        except Exception as e:  # noqa: BLE001 - no ffmpeg backend
-            raise ValueError(f"cannot write {path}: {e}; use --video F.gif") from None
-    os.replace(tmp, path)
-    return path
+    path = Path(path)
+    return write(frames, path, fps=min(fps, 50) if path.suffix.lower() == ".gif" else fps)
 
 
 def summary_text(r: dict) -> str:

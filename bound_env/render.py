@@ -266,3 +266,34 @@ def save_gif(frames, path, fps=30):
         path, save_all=True, append_images=images[1:], duration=max(10, round(1000 / fps)), loop=0
     )
     return path
+
+
+def write_video(frames, path, fps) -> Path:
+    """An animation file, written atomically (``name.tmp.ext``, then renamed): a GIF
+    (`save_gif`, Pillow) or an MP4 (needs imageio with ffmpeg: ``pip install imageio-ffmpeg``)."""
+    import os
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    try:
+        if path.suffix.lower() == ".gif":
+            save_gif(frames, tmp, fps=fps)
+        elif path.suffix.lower() == ".mp4":
+            try:
+                import imageio.v2 as imageio
+            except ModuleNotFoundError:
+                raise ValueError(
+                    f"{path}: an .mp4 needs imageio with ffmpeg (pip install imageio-ffmpeg); "
+                    "a .gif works without it"
+                ) from None
+            try:
+                imageio.mimwrite(tmp, frames, fps=fps)
+            except Exception as e:  # noqa: BLE001 - no ffmpeg backend
+                raise ValueError(f"cannot write {path}: {e}; write a .gif instead") from None
+        else:
+            raise ValueError(f"{path}: an animation must end in .gif or .mp4")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path

@@ -1,4 +1,5 @@
-"""``bound-env animate``: an animated GIF (and optionally one PNG frame) of the passive gait.
+"""``bound-env animate``: an animated GIF (and optionally one PNG frame) of the passive gait,
+``bound.gif`` in the ``--out`` folder (``out/animate``), or the .gif/.mp4 that ``--out`` names.
 
 The robot runs PassiveBound-v0 with zero action from the gait's apex state (no start noise),
 so the animation shows exactly the passive model; frames are taken from the environment's
@@ -24,7 +25,13 @@ def register(sub) -> None:
         default=3.0,
         help="length of the animation in passive strides (default: %(default)s)",
     )
-    p.add_argument("--out", default="bound.gif", help="GIF file to write (default: %(default)s)")
+    p.add_argument(
+        "--out",
+        default="out/animate",
+        metavar="DIR",
+        help="folder for bound.gif, as every command's --out (default: %(default)s); a path "
+        "ending in .gif or .mp4 names the file itself (the old spelling)",
+    )
     p.add_argument(
         "--fps",
         type=number(float, 0, 1000, lo_open=True),
@@ -105,24 +112,28 @@ def animation_frames(
 
 
 def cmd_animate(args) -> int:
-    from .render import save_gif
+    from .render import write_video
 
     if not args.strides > 0:
         raise ValueError("--strides must be positive")
     if not (args.fps > 0 and args.slowdown > 0):
         raise ValueError("--fps and --slowdown must be positive")
-    for flag, target in (("--out", args.out), ("--frame", args.frame)):
-        if target is not None:
-            if Path(target).is_dir():
-                raise ValueError(f"{flag} {target} is a folder; give a file name")
-            out_dir(Path(target).parent, flag)
+    target = Path(args.out)
+    if target.suffix.lower() in (".gif", ".mp4") and not target.is_dir():
+        out_dir(target.parent, "--out")  # the old spelling: the animation file itself
+    else:
+        target = out_dir(target, "--out") / "bound.gif"
+    if args.frame is not None:
+        if Path(args.frame).is_dir():
+            raise ValueError(f"--frame {args.frame} is a folder; give a file name")
+        out_dir(Path(args.frame).parent, "--frame")
     overrides = gait_overrides(args)
     frames, period, frame_dt = animation_frames(
         args.gait, overrides, args.strides, args.fps, args.slowdown, args.width, args.height
     )
     if not frames:
         raise ValueError(f"gait {args.gait!r} gives no frames to animate")
-    path = save_gif(frames, args.out, fps=args.slowdown / frame_dt)
+    path = write_video(frames, target, fps=args.slowdown / frame_dt)
     msg = f"wrote {path}: {len(frames)} frames, {args.strides:g} strides of {period:.4f} s"
     print(msg, file=sys.stderr if args.json else sys.stdout)
     if args.frame:

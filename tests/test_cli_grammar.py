@@ -149,3 +149,60 @@ def test_commands_in_a_checkout_change_no_tracked_file(tmp_path):
         ).stdout
         assert status == "", (cmd, status)
     assert (repo / "out" / "margins" / "MARGINS.md").is_file()  # compare wrote into --out
+
+
+def test_animate_out_is_a_folder_and_a_gif_path_still_works(tmp_path, monkeypatch, cli):
+    from PIL import Image
+
+    monkeypatch.chdir(tmp_path)
+    small = ["animate", "--strides", "0.3", "--width", "80", "--height", "45"]
+    assert cli(*small)[0] == 0  # default: out/animate/bound.gif, never at the top
+    assert (tmp_path / "out" / "animate" / "bound.gif").is_file()
+    assert not (tmp_path / "bound.gif").exists()
+    assert cli(*small, "--out", "figs")[0] == 0
+    with Image.open(tmp_path / "figs" / "bound.gif") as im:
+        assert im.size == (80, 45)
+    code, out, _ = cli(*small, "--out", "old/a.gif", "--json")  # the old spelling
+    assert code == 0 and json.loads(out)["gif"] == "old/a.gif"
+    assert (tmp_path / "old" / "a.gif").is_file() and not list(tmp_path.rglob("*.tmp.gif"))
+
+
+def test_train_grammar_hp_set_gait_out_and_old_spellings(capsys):
+    from agents.cli import train_sets
+    from agents.config import DEFAULT_CONFIG
+    from agents.train import resolve_section
+    from bound_env.cli import build_parser
+
+    parser = build_parser()
+    new = ["--hp", "n_steps=128", "--set", "kc=300", "--gait", "literal-cycle"]
+    args = parser.parse_args(["train", *new, "--out", "R", "--export-out", "E"])
+    assert (args.runs_dir, args.export) == ("R", "E")
+    old = parser.parse_args(["train", "--runs-dir", "R", "--export", "E", "--set", "n_epochs=3"])
+    assert (old.runs_dir, old.export) == ("R", "E")
+    hp = resolve_section(DEFAULT_CONFIG, "PassiveBound-v0", train_sets(args), None)
+    assert hp["n_steps"] == 128
+    assert hp["env_kwargs"]["gait_overrides"] == {"kc": 300.0}
+    assert hp["env_kwargs"]["gait"] == "literal-cycle"
+    assert "deprecated" not in capsys.readouterr().err
+    # the old use of --set (a hyperparameter key) still works, with a one-line notice
+    hp = resolve_section(DEFAULT_CONFIG, "PassiveBound-v0", train_sets(old), None)
+    assert hp["n_epochs"] == 3 and "gait_overrides" not in hp["env_kwargs"]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "deprecated" in err[0] and "--hp n_epochs=3" in err[0]
+
+
+def test_train_export_into_a_folder_with_files_is_refused_before_training(tmp_path, cli):
+    shipped = tmp_path / "policy"
+    shipped.mkdir()
+    (shipped / "model.zip").write_bytes(b"tracked")
+    runs = tmp_path / "runs"
+    for flag in ("--export", "--export-out"):
+        code, _, err = cli(
+            "train", "--name", "x", "--out", runs, "--n-timesteps", "64", flag, shipped
+        )
+        assert code == 2 and "--force" in err and len(err.strip().splitlines()) == 1
+    assert not runs.exists() and (shipped / "model.zip").read_bytes() == b"tracked"
+    from agents.cli import export_policy
+
+    with pytest.raises(ValueError, match="already holds files"):
+        export_policy(tmp_path, shipped)
