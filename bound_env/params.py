@@ -397,7 +397,8 @@ def load_gait(gait: str | Path, overrides: dict | None = None) -> Gait:
 
 
 def save_gait(path: str | Path, params: Params, z_star=None, z_published=None, **meta) -> Path:
-    """Write a gait file (z in paper units); extra keyword arguments are stored as metadata."""
+    """Write a gait file (z in paper units), atomically; extra keyword arguments are stored as
+    metadata."""
     path = Path(path)
     data = params.to_gait_dict()
     if params.min_leg_frac != Params.min_leg_frac:
@@ -407,6 +408,7 @@ def save_gait(path: str | Path, params: Params, z_star=None, z_published=None, *
     if z_star is not None:
         data["z_star"] = [float(v) for v in z_to_paper(z_star)]
     data.update(meta)
+    from .cache import atomic_write
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
-    return path
+    return atomic_write(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))

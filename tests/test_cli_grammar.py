@@ -206,3 +206,15 @@ def test_train_export_into_a_folder_with_files_is_refused_before_training(tmp_pa
 
     with pytest.raises(ValueError, match="already holds files"):
         export_policy(tmp_path, shipped)
+
+
+def test_fixed_point_out_folder_and_the_old_save(tmp_path, cli):
+    from bound_env.params import load_gait
+
+    code, out, _ = cli("fixed-point", "--out", tmp_path / "fp", "--json")
+    assert code == 0 and json.loads(out)["saved"] == str(tmp_path / "fp" / "gait.yaml")
+    new = load_gait(tmp_path / "fp" / "gait.yaml")
+    assert cli("fixed-point", "--save", tmp_path / "old.yaml")[0] == 0  # the old spelling
+    assert (load_gait(tmp_path / "old.yaml").z_star == new.z_star).all()
+    code, _, err = cli("fixed-point", "--save", tmp_path / "fp")
+    assert code == 2 and "--out" in err

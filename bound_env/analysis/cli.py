@@ -67,7 +67,16 @@ def register(sub) -> None:
     )
     p.add_argument("--max-iter", type=number(int, 1, 10_000), default=50, help="Newton iterations")
     p.add_argument("--json", action="store_true", help="print JSON")
-    p.add_argument("--save", metavar="PATH", help="write a gait file with the fixed point")
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        help="write the fixed point as a gait file, DIR/gait.yaml (use it as --gait DIR/gait.yaml)",
+    )
+    p.add_argument(
+        "--save",
+        metavar="PATH",
+        help="write the gait file to PATH itself (the old spelling of --out)",
+    )
     p.set_defaults(func=cmd_fixed_point)
 
     p = sub.add_parser("continue", help="continue a fixed point in kc or alpha_deg")
@@ -250,6 +259,13 @@ def _default_pins(args, z0, params):
 def cmd_fixed_point(args) -> int:
     from .fixed_point import find_fixed_point, paper_search
 
+    if args.out and args.save:
+        raise ValueError("give --out DIR or --save PATH (its old spelling), not both")
+    save = Path(args.save) if args.save else None
+    if args.out:
+        save = out_dir(args.out) / "gait.yaml"
+    elif save is not None and save.is_dir():
+        raise ValueError(f"--save {save} is a folder; give a file name, or --out {save}")
     gait, z0 = _setup(args)
     if args.method == "paper":
         if args.free or args.pin:
@@ -268,13 +284,13 @@ def cmd_fixed_point(args) -> int:
         )
     out = res.summary()
     out["gait"] = str(gait.path)
-    if args.save:
+    if save is not None:
         if not res.converged:
             print(
                 f"bound-env fixed-point: not saving, no fixed point ({res.reason})", file=sys.stderr
             )
         else:
-            out["saved"] = str(_save(args.save, gait, res, z0))
+            out["saved"] = str(_save(save, gait, res, z0))
     if args.json:
         print(strict_json(out))
     else:
