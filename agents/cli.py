@@ -28,6 +28,11 @@ POLICY_HELP = (
     "model .zip, an rl-zoo3 run folder"
 )
 SEED_MAX = 2**32 - 1  # NumPy's and Gymnasium's seeds are unsigned 32-bit integers
+BUDGET_HELP = (
+    "margins budget (agents.margins.BUDGETS): test (a smoke test), quick (32 random "
+    "directions, seconds), standard or full (256 directions, minutes to hours; full: the finest "
+    "curves)"
+)
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv", "eval.png")
 
@@ -154,7 +159,12 @@ def register(sub) -> None:
 
     p = sub.add_parser("margins", help="stability margins of the passive gait or a policy")
     p.add_argument("--policy", default="passive", help=POLICY_HELP)
-    p.add_argument("--budget", choices=("test", "quick", "standard", "full"), default="quick")
+    p.add_argument(
+        "--budget",
+        choices=("test", "quick", "standard", "full"),
+        default="quick",
+        help=BUDGET_HELP + " (default: %(default)s)",
+    )
     add_gait_args(p, default=None, overrides=False, help=POLICY_GAIT_HELP)
     p.add_argument(
         "--force",
@@ -216,7 +226,12 @@ def register(sub) -> None:
         "damping or a spec .yaml (a bare name is its own label); repeatable "
         "(default: the shipped policies and lqr, deadbeat, damping)",
     )
-    p.add_argument("--budget", choices=("test", "quick", "standard", "full"), default="full")
+    p.add_argument(
+        "--budget",
+        choices=("test", "quick", "standard", "full"),
+        default="full",
+        help=BUDGET_HELP + " (default: %(default)s)",
+    )
     p.add_argument("--workers", type=number(int, 1, 256), default=2)
     add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", default="out/margins", help="per-entry results and caches")

@@ -127,7 +127,10 @@ def _version() -> str:
 def main(argv=None) -> int:
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
+        if extra:  # named by the sub-command's parser: "bound-env margins: error: ..."
+            sub = parser._subparsers._group_actions[0].choices.get(args.command, parser)
+            sub.error(f"unrecognized arguments: {' '.join(extra)}")
     except SystemExit as e:  # usage errors (2), --help and --version (0), as a return code
         return e.code if isinstance(e.code, int) else 2
     from .parallel import TasksFailed

@@ -218,3 +218,18 @@ def test_fixed_point_out_folder_and_the_old_save(tmp_path, cli):
     assert (load_gait(tmp_path / "old.yaml").z_star == new.z_star).all()
     code, _, err = cli("fixed-point", "--save", tmp_path / "fp")
     assert code == 2 and "--out" in err
+
+
+def test_unknown_argument_names_the_sub_command_and_help_gives_defaults(cli, capsys):
+    code, _, err = cli("margins", "--set", "kc=1")
+    assert code == 2 and "bound-env margins: error: unrecognized arguments: --set kc=1" in err
+    for cmd, default in (("margins", "quick"), ("compare", "full")):
+        assert main([cmd, "--help"]) == 0
+        text = " ".join(capsys.readouterr().out.split())
+        assert f"(default: {default})" in text.split("--budget {test,quick,standard,full}")[-1]
+    assert main(["basin-map", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split()).replace("- ", "-")  # argparse's wrapping
+    assert all(name in text for name in ("lqr", "deadbeat", "damping", "stride-residual/s0"))
+    assert main(["sweep", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "gait's own value" in text and "spacing of the values" in text
