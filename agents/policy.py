@@ -482,7 +482,10 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
                     "after the policy was saved"
                 )
                 if not force:
-                    raise ValueError(msg + "; pass --force to evaluate the policy with it as it is")
+                    raise ValueError(
+                        msg + "; pass --force (margins, rollout, basin-map) to evaluate the "
+                        "policy with it as it is"
+                    )
                 warnings.append(msg)
     elif files.vecnormalize is not None and files.layout == "bound_env":
         warnings.append(

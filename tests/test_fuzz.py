@@ -7,6 +7,9 @@ Gymnasium API: a clear ``ValueError``, never another exception or a silent coerc
 
 from __future__ import annotations
 
+import shutil
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -38,6 +41,16 @@ def files(tmp_path):
     blocker.write_text("x")
     out["file"] = str(blocker)
     out["dir"] = str(tmp_path)
+    # a policy whose config.yaml was cut at a line boundary before env_kwargs: it parses and
+    # matches the observation shape, but would run at the env's default max_torque
+    from agents.policy import shipped_policies
+
+    cut = tmp_path / "cut-policy"
+    shutil.copytree(shipped_policies()["default"], cut)
+    lines = (cut / "config.yaml").read_text().splitlines(keepends=True)
+    end = next(i for i, line in enumerate(lines) if line.lstrip().startswith("env_kwargs"))
+    (cut / "config.yaml").write_text("".join(lines[:end]))
+    out["cut_policy"] = str(cut)
     return out
 
 
@@ -155,7 +168,8 @@ def _cases(f):
         (["animate", "--strides", "0"], "--strides"),
         (["animate", "--strides", "inf"], "--strides"),
         (["animate", "--fps", "0"], "--fps"),
-        (["animate", "--strides", "1", "--out", f["dir"]], "folder"),
+        (["animate", "--strides", "1", "--out", f["file"]], "not a folder"),
+        (["animate", "--strides", "1", "--out", f["file"] + "/a.gif"], "not a folder"),
         (["demo", "--gif-strides", "0"], "--gif-strides"),
         (["demo", "--out", f["file"]], "not a folder"),
         (["rollout", "--strides", "inf"], "--strides"),
@@ -188,8 +202,85 @@ def _cases(f):
         (["compare", "--workers", "0"], "--workers"),
         (["reproduce"], "--out"),
         (["nonsense-command"], None),
+        # red-team pass (issue 20): tracebacks
+        (["train", "--config", f["unparsable"], "--runs-dir", f["dir"] + "/r"], "not valid YAML"),
+        (_train(f, "--hp", "env_kwargs.bogus=1"), "bogus"),
+        (_train(f, "--set", "env_kwargs.bogus=1"), "bogus"),  # the old spelling of --hp
+        (_train(f, "--hp", "callback=[{agents.train.NoiseCurriculumCallback: {x: 1}}]"), "x"),
+        (_train(f, "--set", "kc=-1"), "kc"),
+        (_train(f, "--gait", f["list"]), "gait file"),
+        (["train", "--seed", "-1"], "--seed"),
+        (["rollout", "--seed", "-1"], "--seed"),
+        (["rollout", "--seed", "4294967296"], "--seed"),
+        # unbounded
+        (["basin-map", "--grid", "100000", "--out", f["dir"] + "/b"], "--grid"),
+        (["basin-map", "--grid", "1", "--out", f["dir"] + "/b"], "--grid"),
+        (["basin-map", "--strides", "0", "--out", f["dir"] + "/b"], "--strides"),
+        # accepted though wrong
+        (_sweep(f, "kc", "-10", "10", "1"), "kc = -10"),
+        (_sweep(f, "m1", "0", "1", "0.5"), "m1 = 0"),
+        (_sweep(f, "gamma_b_deg", "80", "95", "5"), "gamma_b_deg = 90"),
+        (_sweep(f, "zeta", "-1", "0", "0.5"), "zeta = -1"),
+        (["continue", "--param", "kc", "--step", "-1", "--to", "305", "--out", f["dir"]], "--step"),
+        (["stride", "--z=nan,0.5,-1,2.8,294,-147"], "--z"),
+        (["stride", "--z=0.25,inf,-1,2.8,294,-147"], "--z"),
+        (["fixed-point", "--z0=0.25,0.5,-1,2.8,nan,-147"], "--z0"),
+        # a config cut short (fingerprint.json holds its sha256)
+        (["rollout", "--policy", f["cut_policy"], "--strides", "1"], "config.yaml does not match"),
+        (
+            ["margins", "--policy", f["cut_policy"], "--budget", "test", "--out", f["dir"] + "/m"],
+            "config.yaml does not match",
+        ),
+        (
+            ["basin-map", "--policy", f["cut_policy"], "--grid", "2", "--out", f["dir"] + "/b"],
+            "config.yaml does not match",
+        ),
+        (
+            [
+                "compare",
+                "--entry",
+                "cut=" + f["cut_policy"],
+                "--budget",
+                "test",
+                "--workers",
+                "1",
+                "--out",
+                f["dir"] + "/cmp",
+            ],
+            "config.yaml does not match",
+        ),
+        # overwrites
+        (_train(f, "--export", f["cut_policy"]), "--force"),
+        (_train(f, "--export-out", f["cut_policy"]), "--force"),
+        (["fixed-point", "--save", f["dir"]], "--out"),
+        (["fixed-point", "--out", f["file"]], "not a folder"),
+        # messages
+        (["margins", "--set", "kc=1"], "bound-env margins: error: unrecognized arguments"),
+        (["rollout", "--policy", "nope"], "stride-residual/s0"),  # the names it knows
     ]
     return cases
+
+
+def _train(f, *extra):
+    """A train command that must fail before training (and before making its run folder)."""
+    return ["train", "--name", "x", "--out", f["dir"] + "/runs", "--n-timesteps", "64", *extra]
+
+
+def _sweep(f, param, lo, hi, step):
+    return [
+        "sweep",
+        "--param",
+        param,
+        "--from=" + lo,
+        "--to",
+        hi,
+        "--step",
+        step,
+        "--refine",
+        "0",
+        "--out",
+        f["dir"] + "/sweep-" + param,
+    ]
 
 
 @pytest.mark.slow  # ~15 s: train imports torch
@@ -211,6 +302,10 @@ def test_cli_fuzz(files, capsys):
         elif word is not None and word not in err:
             failures.append(f"{argv}: error does not name {word!r}: {err.strip()[-300:]}")
     assert not failures, "\n".join(failures)
+    # refused before anything was written: no run folder, no sweep rows, no basin map
+    left = [n for n in ("runs", "sweep-kc", "sweep-m1", "b") if (Path(files["dir"]) / n).exists()]
+    assert not left, left
+    assert (Path(files["cut_policy"]) / "model.zip").is_file()  # --export refused, nothing lost
 
 
 def test_gait_file_errors_name_the_file_and_the_key(files):
