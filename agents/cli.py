@@ -255,6 +255,10 @@ def register(sub) -> None:
 
     register_basin_map(sub)
 
+    from .distill import register as register_distill
+
+    register_distill(sub)
+
 
 def cmd_rollout(args) -> int:
     from .rollout import rollout, summary_text

@@ -169,6 +169,7 @@ class MPCController:
     cem_elites: int = 6
     rtol: float = 1e-8  # planning tolerance (the evaluation runs at 1e-10)
     seed: int = 0
+    library_seed: int = -1  # >= 0: the library's random rows are fixed (drawn from this seed)
     decision_seconds: list = field(default_factory=list, repr=False)
     _u: np.ndarray | None = field(default=None, repr=False)
     _t0: float = field(default=0.0, repr=False)  # time since the apex of the first interval
@@ -231,7 +232,8 @@ class MPCController:
             [self.seed, *np.frombuffer(z.tobytes(), dtype=np.uint32).tolist()]
         )
         K = self.basis.K
-        U = library(K, u_lqr, rng, self.n_random, self.n_noise, self.noise)
+        lib_rng = rng if self.library_seed < 0 else np.random.default_rng(self.library_seed)
+        U = library(K, u_lqr, lib_rng, self.n_random, self.n_noise, self.noise)
         s, outcome, _ = self.evaluate(z, U)
         best_u, best_s = U[int(np.argmax(s))], float(np.max(s))
         for _ in range(self.cem_iters):
@@ -269,7 +271,8 @@ class MPCController:
 
     def settings(self) -> dict:
         keys = ("safe", "horizon", "n_random", "n_noise", "noise", "cem_iters", "cem_samples")
-        return {k: getattr(self, k) for k in (*keys, "cem_elites", "rtol", "seed")}
+        keys += ("cem_elites", "rtol", "seed", "library_seed")
+        return {k: getattr(self, k) for k in keys}
 
     def fingerprint(self) -> str:
         h = hashlib.sha256(b"mpc")

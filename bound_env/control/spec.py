@@ -39,6 +39,7 @@ MPC_DEFAULTS = {
     "cem_elites": 6,
     "plan_rtol": 1e-8,
     "seed": 0,
+    "library_seed": -1,
 }
 MPC_INTS = ("horizon", "n_random", "n_noise", "cem_iters", "cem_samples", "cem_elites", "seed")
 SPEC_KEYS = {
@@ -145,6 +146,9 @@ def load_spec(spec: str | Path) -> ControllerSpec:
             v = out.extra[k]
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"{path}: {k} must be an integer >= 0, got {v!r}")
+        v = out.extra["library_seed"]
+        if isinstance(v, bool) or not isinstance(v, int) or v < -1:
+            raise ValueError(f"{path}: library_seed must be an integer >= -1, got {v!r}")
         if out.extra["horizon"] < 1 or out.extra["cem_elites"] < 1:
             raise ValueError(f"{path}: horizon and cem_elites must be >= 1")
         for k in ("safe", "noise", "plan_rtol"):

@@ -1,0 +1,478 @@
+"""A learned stride controller distilled from the MPC expert (DAgger), and its controller.
+
+**What the student chooses.** At an apex z past the expert's ``safe`` radius the student picks
+one row of a fixed library of stride profiles (coefficients u of the LQR's basis): row 0 is the
+LQR's own plan u_lqr(z), the others are zero, +-max, every one-switch bang-bang profile and
+``n_random`` random sign vectors drawn once from ``library_seed``
+(`bound_env.control.mpc.library`). An MLP maps the normalized apex error x = (z - z*) / s (s
+the tasks' apex scales) to one logit per row; the controller plays the argmax. A categorical
+head, because the expert's choices are multimodal: two different bang-bang profiles often
+both rescue a start, and a regression would average them into a profile that rescues
+neither. Within ``safe`` the controller is the LQR (the gate that keeps zero torque on the
+cycle, as the expert does).
+
+**The expert's labels.** For a state z the expert scores every library row by shooting (the
+row's stride on the step env's interval torques, then the LQR for up to ``horizon`` strides;
+`MPCController.evaluate`). The *good* rows are: the LQR's row alone if the LQR returns; else
+every row that returns within one stride of the fastest return; else the three best rows that
+survive the horizon. States from which every row falls carry no label. The loss is
+-log sum_{good} p(row | x): any good row is a right answer.
+
+**DAgger.** Round 0 labels starts z* + r |z*| xi (r ~ U(0, ``r_max``); xi uniform on the
+6-sphere scaled to max |xi_i| = 1, or one axis with probability ``axis_prob``; the seeds are
+disjoint from the test set's 12345 and from the validation seed) and the states the expert
+visits from them; every later round rolls the current student out from fresh starts on the
+planning model and labels the states it visits. The network is retrained on the aggregate
+after each round. Each round's data is saved (``round_<k>.npz``, atomic), so a killed run
+resumes at the first missing round.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bound_env.cache import atomic_write
+from bound_env.control import load_controller as load_classical
+from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, _simulate, library
+from bound_env.fast import EVENT_CAPACITY, event_log, recorder
+from bound_env.stride import state_from_z, z_from_state
+from bound_env.stride_task import NO_APEX_TIME
+
+POLICY_FILE = "choice.npz"  # the student's weights and library, in a policy folder
+VALIDATION_SEED = 777  # validation directions of every design choice (test set: 12345)
+
+
+@dataclass
+class DistillConfig:
+    """Settings of one distillation run (all of them go into its config.json)."""
+
+    expert: str = "mpc"  # controller spec of the expert (its LQR, safe radius and horizon)
+    n_random: int = 48  # random sign rows of the library
+    library_seed: int = 5
+    r_max: float = 0.45  # starts up to this relative size
+    axis_prob: float = 0.25
+    rounds: int = 4  # DAgger rounds (round 0: expert data)
+    starts_first: int = 3000  # starts labelled in round 0
+    starts_round: int = 1500  # starts the student is rolled out from in each later round
+    rollout_strides: int = 6  # strides of a student rollout (states past `safe` are labelled)
+    hidden: tuple = (128, 128)
+    epochs: int = 60
+    batch: int = 256
+    lr: float = 3e-3
+    seed: int = 0
+
+
+# --------------------------------------------------------------------------------------------
+# The controller (NumPy inference: margins and rollout never import torch for it)
+# --------------------------------------------------------------------------------------------
+
+
+def _forward(layers, x: np.ndarray) -> np.ndarray:
+    """The MLP: tanh hidden layers, linear output (rows of x)."""
+    h = x
+    for k, (W, b) in enumerate(layers):
+        h = h @ W.T + b
+        if k < len(layers) - 1:
+            h = np.tanh(h)
+    return h
+
+
+@dataclass
+class ChoicePolicyController(MPCController):
+    """The distilled student (module docstring): the MPC's protocol, its plan a library row."""
+
+    layers: list = field(default_factory=list, repr=False)  # [(W, b), ...]
+    rows: np.ndarray | None = field(default=None, repr=False)  # the library (row 0: the LQR's)
+
+    def logits(self, z) -> np.ndarray:
+        x = (np.atleast_2d(z) - self.z_ref) / self.scales
+        return _forward(self.layers, x)
+
+    def plan(self, z) -> np.ndarray:
+        z = np.asarray(z, dtype=float)
+        u_lqr = self.lqr.coefficients(z)
+        if np.max(np.abs(z - self.z_ref) / self.scales) <= self.safe:
+            return u_lqr
+        c = int(np.argmax(self.logits(z)[0]))
+        return u_lqr if c == 0 else self.rows[c].copy()
+
+    def fingerprint(self) -> str:
+        h = hashlib.sha256(b"choice")
+        h.update(super().fingerprint().encode())
+        for W, b in self.layers:
+            h.update(np.ascontiguousarray(W).tobytes())
+            h.update(np.ascontiguousarray(b).tobytes())
+        h.update(np.ascontiguousarray(self.rows).tobytes())
+        return h.hexdigest()[:16]
+
+
+def save_policy(folder: Path, expert: MPCController, layers, rows, config: dict) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    arrays = {"rows": rows, "n_layers": np.array(len(layers))}
+    for k, (W, b) in enumerate(layers):
+        arrays[f"W{k}"], arrays[f"b{k}"] = W, b
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    atomic_write(folder / POLICY_FILE, buf.getvalue())
+    lqr = expert.lqr
+    spec = {
+        "kind": "choice",
+        "expert": {  # the expert's LQR and settings, frozen: later spec edits change nothing
+            "name": str(expert.name),
+            "gait": lqr.gait,
+            "basis": lqr.basis.name,
+            "K": lqr.basis.K,
+            "max_torque": lqr.max_torque,
+            "dt": lqr.dt,
+            "gain": lqr.gain.tolist(),
+            "settings": expert.settings(),
+        },
+        **config,
+    }
+    atomic_write(folder / "config.json", json.dumps(spec, indent=2, default=str) + "\n")
+
+
+def load_choice_policy(folder, gait=None) -> ChoicePolicyController:
+    """A saved student (a folder with ``choice.npz`` and ``config.json``)."""
+    folder = Path(folder)
+    try:
+        cfg = json.loads((folder / "config.json").read_text())
+        with np.load(folder / POLICY_FILE) as d:
+            n = int(d["n_layers"])
+            layers = [(d[f"W{k}"].astype(float), d[f"b{k}"].astype(float)) for k in range(n)]
+            rows = d["rows"].astype(float)
+    except (OSError, KeyError, ValueError, json.JSONDecodeError) as e:
+        raise ValueError(f"{folder}: not a readable distilled policy ({e})") from None
+    try:
+        expert = expert_of(cfg["expert"], gait)
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"{folder}: not a readable distilled policy (missing {e})") from None
+    if layers[-1][0].shape[0] != rows.shape[0] or rows.shape[1] != expert.basis.K:
+        raise ValueError(f"{folder}: the network's output does not match its library")
+    s = expert.settings()
+    return ChoicePolicyController(
+        name=str(folder),
+        lqr=expert.lqr,
+        params=expert.params,
+        safe=s["safe"],
+        horizon=s["horizon"],
+        rtol=s["rtol"],
+        layers=layers,
+        rows=rows,
+    )
+
+
+def expert_of(frozen: dict, gait=None) -> MPCController:
+    """The expert saved with a policy (its LQR gain explicit, not re-designed)."""
+    from bound_env.control.spec import MPC_DEFAULTS, ControllerSpec
+
+    s = dict(frozen["settings"])
+    s["plan_rtol"] = s.pop("rtol")
+    spec = ControllerSpec(
+        controller="mpc",
+        gait=frozen["gait"],
+        max_torque=float(frozen["max_torque"]),
+        dt=float(frozen["dt"]),
+        basis=frozen["basis"],
+        K=int(frozen["K"]),
+        gain=frozen["gain"],
+        extra={**MPC_DEFAULTS, **s},
+    )
+    spec.path = None
+    return load_classical(spec, gait)
+
+
+# --------------------------------------------------------------------------------------------
+# Labels and rollouts on the planning model
+# --------------------------------------------------------------------------------------------
+
+
+def good_rows(outcome, strides, scores) -> np.ndarray | None:
+    """The rows that count as right (module docstring); None when every row falls."""
+    if outcome[0] == RETURNED:
+        good = np.zeros(len(outcome), dtype=bool)
+        good[0] = True
+        return good
+    ret = outcome == RETURNED
+    if ret.any():
+        return ret & (strides <= strides[ret].min() + 1)
+    surv = outcome == SURVIVED
+    if surv.any():
+        top = np.argsort(-np.where(surv, scores, -np.inf))[:3]
+        good = np.zeros(len(outcome), dtype=bool)
+        good[top] = surv[top]
+        return good
+    return None
+
+
+def stride_of(expert: MPCController, z, u, log, rec):
+    """The planning model's next apex from z under coefficients u (None on a fall)."""
+    status, _, y = _simulate(
+        state_from_z(z),
+        expert._aux0,
+        expert._edges,
+        expert.interval_torques(u)[0],
+        expert.rtol,
+        NO_APEX_TIME,
+        log,
+        rec,
+    )
+    from bound_env.events import APEX
+
+    return z_from_state(y) if status == APEX else None
+
+
+def sample_starts(rng, n: int, z_ref, r_max: float, axis_prob: float) -> np.ndarray:
+    from .stride import sample_direction
+
+    r = rng.uniform(0.0, r_max, n)
+    xi = np.array([sample_direction(rng, axis_prob) for _ in range(n)])
+    return z_ref + r[:, None] * np.abs(z_ref) * xi
+
+
+class Labeller:
+    def __init__(self, expert: MPCController, rows: np.ndarray):
+        self.expert, self.rows = expert, rows
+        self.log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
+        self.rec = recorder(0, 0.0)
+
+    def past_safe(self, z) -> bool:
+        e = self.expert
+        return float(np.max(np.abs(z - e.z_ref) / e.scales)) > e.safe
+
+    def label(self, z):
+        """(good mask or None, the expert's row) at z."""
+        U = self.rows.copy()
+        U[0] = self.expert.lqr.coefficients(z)
+        s, outcome, strides = self.expert.evaluate(z, U)
+        good = good_rows(outcome, strides, s)
+        best = 0 if outcome[0] == RETURNED else int(np.argmax(s))
+        return good, best, U
+
+    def rollout(self, z0, choose, strides: int, out: list) -> None:
+        """From z0, ``strides`` strides of ``choose(z, good, best, U) -> u`` (stopping at a fall
+        or within safe); every state past safe that has a label is appended to ``out``."""
+        z = np.asarray(z0, dtype=float)
+        for _ in range(strides):
+            if not self.past_safe(z):
+                return
+            good, best, U = self.label(z)
+            if good is not None:
+                out.append((z.copy(), good))
+            u = choose(z, good, best, U)
+            z = stride_of(self.expert, z, u, self.log, self.rec)
+            if z is None or not np.all(np.isfinite(z)):
+                return
+
+
+# --------------------------------------------------------------------------------------------
+# Training (torch only here)
+# --------------------------------------------------------------------------------------------
+
+
+def fit(X, G, cfg: DistillConfig, scales, z_ref, init=None, log=print):
+    """The classifier on inputs X (apex states) and good masks G: -log sum_good softmax."""
+    import torch
+
+    torch.manual_seed(cfg.seed)
+    torch.set_num_threads(1)
+    x = torch.as_tensor((X - z_ref) / scales, dtype=torch.float32)
+    g = torch.as_tensor(G, dtype=torch.bool)
+    sizes = (6, *cfg.hidden, G.shape[1])
+    mods = []
+    for k in range(len(sizes) - 1):
+        mods.append(torch.nn.Linear(sizes[k], sizes[k + 1]))
+        if k < len(sizes) - 2:
+            mods.append(torch.nn.Tanh())
+    net = torch.nn.Sequential(*mods)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.epochs)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    n = len(x)
+    for _ in range(cfg.epochs):
+        perm = torch.randperm(n, generator=gen)
+        total = 0.0
+        for i in range(0, n, cfg.batch):
+            idx = perm[i : i + cfg.batch]
+            lp = torch.log_softmax(net(x[idx]), dim=1)
+            loss = -torch.logsumexp(lp.masked_fill(~g[idx], -1e9), dim=1).mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * len(idx)
+        sched.step()
+    with torch.no_grad():
+        pick = net(x).argmax(dim=1)
+        acc = float(g[torch.arange(n), pick].float().mean())
+    log(f"[distill] fit: {n} states, loss {total / n:.3f}, picks a good row on {acc:.1%}")
+    lin = [m for m in net if isinstance(m, torch.nn.Linear)]
+    return [(m.weight.detach().double().numpy(), m.bias.detach().double().numpy()) for m in lin]
+
+
+def distill(cfg: DistillConfig, out_dir: Path, progress: bool = True) -> dict:
+    """Run (or resume) DAgger into ``out_dir``; returns the summary (also summary.json)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    def log(msg):
+        if progress:
+            print(msg, file=sys.stderr, flush=True)
+
+    settings = json.dumps(asdict(cfg), sort_keys=True, default=str)
+    cfg_path = out_dir / "distill.json"
+    if cfg_path.is_file() and json.loads(cfg_path.read_text()) != json.loads(settings):
+        raise ValueError(f"{out_dir}: holds a run with other settings; use another --out")
+    atomic_write(cfg_path, settings + "\n")
+    expert = load_classical(cfg.expert)
+    if not isinstance(expert, MPCController):
+        raise ValueError(f"expert {cfg.expert!r} is not an mpc controller spec")
+    K = expert.basis.K
+    rows = library(K, np.zeros(K), np.random.default_rng(cfg.library_seed), cfg.n_random, 0, 0.0)
+    lab = Labeller(expert, rows)
+    t0 = time.perf_counter()
+    layers = None
+    X, G = np.empty((0, 6)), np.empty((0, len(rows)), dtype=bool)
+    history = []
+    for k in range(cfg.rounds):
+        path = out_dir / f"round_{k}.npz"
+        if path.is_file():
+            with np.load(path) as d:
+                Xk, Gk = d["X"], d["G"]
+            log(f"[distill] round {k}: {len(Xk)} labelled states (saved)")
+        else:
+            rng = np.random.default_rng([cfg.seed, k, 4242])
+            data: list = []
+            n = cfg.starts_first if k == 0 else cfg.starts_round
+            starts = sample_starts(rng, n, expert.z_ref, cfg.r_max, cfg.axis_prob)
+            student = None
+            if k > 0:
+                student = ChoicePolicyController(
+                    name="student",
+                    lqr=expert.lqr,
+                    params=expert.params,
+                    safe=expert.safe,
+                    horizon=expert.horizon,
+                    rtol=expert.rtol,
+                    layers=layers,
+                    rows=rows,
+                )
+            if student is None:  # round 0: the expert's own choices, 4 strides
+
+                def choose(z, good, best, U):
+                    return U[best]
+
+                strides = 4
+            else:
+                choose, strides = (lambda z, g, b, U, s=student: s.plan(z)), cfg.rollout_strides
+            for i, z0 in enumerate(starts):
+                lab.rollout(z0, choose, strides, data)
+                if progress and (i + 1) % 250 == 0:
+                    log(
+                        f"[distill] round {k}: {i + 1}/{n} starts, {len(data)} states "
+                        f"({time.perf_counter() - t0:.0f} s)"
+                    )
+            Xk = np.array([d[0] for d in data]).reshape(-1, 6)
+            Gk = np.array([d[1] for d in data], dtype=bool).reshape(-1, len(rows))
+            import io
+
+            buf = io.BytesIO()
+            np.savez(buf, X=Xk, G=Gk)
+            atomic_write(path, buf.getvalue())
+        X, G = np.vstack([X, Xk]), np.vstack([G, Gk])
+        layers = fit(X, G, cfg, expert.scales, expert.z_ref, log=log)
+        history.append({"round": k, "states": int(len(Xk)), "total": int(len(X))})
+    save_policy(
+        out_dir / "policy",
+        expert,
+        layers,
+        rows,
+        {"distill": asdict(cfg)},
+    )
+    summary = {
+        "rounds": history,
+        "seconds": time.perf_counter() - t0,
+        "policy": str(out_dir / "policy"),
+    }
+    atomic_write(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+# --------------------------------------------------------------------------------------------
+# bound-env distill
+# --------------------------------------------------------------------------------------------
+
+
+def register(sub) -> None:
+    from bound_env.cli_args import add_json_arg, add_progress_args, number
+
+    p = sub.add_parser(
+        "distill",
+        help="distill the MPC expert into a stride controller (DAgger; runs/distill_s<seed>/)",
+    )
+    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="(default: 0)")
+    p.add_argument("--out", help="run folder, resumable (default: runs/distill_s<seed>)")
+    p.add_argument(
+        "--expert", default="mpc", help="mpc controller spec: name or .yaml (default: mpc)"
+    )
+    d = DistillConfig()
+    p.add_argument(
+        "--rounds", type=number(int, 1, 100), default=d.rounds, help="(default: %(default)s)"
+    )
+    p.add_argument(
+        "--starts",
+        type=number(int, 10, 10**6),
+        default=d.starts_first,
+        help="starts of round 0; later rounds take half (default: %(default)s)",
+    )
+    p.add_argument(
+        "--epochs", type=number(int, 1, 10**4), default=d.epochs, help="(default: %(default)s)"
+    )
+    p.add_argument(
+        "--export",
+        metavar="DIR",
+        help="copy the final policy there (e.g. agents/policies/distilled/s0); an existing "
+        "folder is refused without --force",
+    )
+    p.add_argument("--force", action="store_true", help="let --export replace a folder")
+    add_progress_args(p)
+    add_json_arg(p)
+    p.set_defaults(func=cmd_distill)
+
+
+def cmd_distill(args) -> int:
+    import shutil
+
+    out = Path(args.out or f"runs/distill_s{args.seed}")
+    if args.export and Path(args.export).exists() and not args.force:
+        raise ValueError(f"--export {args.export} exists; give --force to replace it")
+    cfg = DistillConfig(
+        expert=args.expert,
+        rounds=args.rounds,
+        starts_first=args.starts,
+        starts_round=max(1, args.starts // 2),
+        epochs=args.epochs,
+        seed=args.seed,
+    )
+    summary = distill(cfg, out, progress=not args.no_progress)
+    if args.export:
+        dest = Path(args.export)
+        tmp = dest.with_name(dest.name + ".tmp")
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.copytree(out / "policy", tmp)
+        shutil.rmtree(dest, ignore_errors=True)
+        tmp.rename(dest)
+        summary["exported"] = str(dest)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"distilled policy: {summary.get('exported', summary['policy'])}")
+    return 0

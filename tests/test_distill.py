@@ -1,0 +1,110 @@
+"""Tests of the distilled stride controller (agents/distill.py): the expert's labels, a small
+DAgger run end to end, resuming it, loading the policy by path without torch, the gate that
+keeps zero torque on the cycle, and bad input."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from agents.distill import (
+    DistillConfig,
+    distill,
+    good_rows,
+    load_choice_policy,
+)
+from bound_env.control.mpc import FELL, RETURNED, SURVIVED
+
+SMALL = {"rounds": 2, "starts_first": 40, "starts_round": 20, "epochs": 5, "n_random": 8}
+
+
+def test_good_rows_follow_the_expert():
+    o = np.array([RETURNED, RETURNED, FELL])
+    assert good_rows(o, np.array([3, 1, 0]), np.zeros(3)).tolist() == [True, False, False]
+    o = np.array([SURVIVED, RETURNED, RETURNED, RETURNED, FELL])
+    g = good_rows(o, np.array([12, 2, 3, 5, 0]), np.zeros(5))
+    assert g.tolist() == [False, True, True, False, False]  # within one stride of the fastest
+    o = np.array([FELL, SURVIVED, SURVIVED, SURVIVED, SURVIVED, FELL])
+    s = np.array([0.0, 5.0, 7.0, 6.0, 1.0, 9.0])
+    assert good_rows(o, np.full(6, 12), s).tolist() == [False, True, True, True, False, False]
+    assert good_rows(np.array([FELL, FELL]), np.zeros(2), np.array([0.5, 0.7])) is None
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("distill")
+    summary = distill(DistillConfig(**SMALL), out, progress=False)
+    return out, summary
+
+
+def test_a_small_run_makes_a_policy(run):
+    out, summary = run
+    assert [r["round"] for r in summary["rounds"]] == [0, 1]
+    assert all(r["states"] > 0 for r in summary["rounds"])
+    pol = load_choice_policy(out / "policy")
+    assert pol.rows.shape == (4 + 2 * 7 + 8, 8)
+    # the gate: the LQR (zero torque) on the cycle and near it
+    assert np.array_equal(pol.coefficients(pol.z_ref), np.zeros(8))
+    z = pol.z_ref + 0.3 * np.abs(pol.z_ref) * np.array([1, -1, 1, -1, 1, -1])
+    u = pol.plan(z)
+    c = int(np.argmax(pol.logits(z)[0]))
+    assert np.array_equal(u, pol.lqr.coefficients(z) if c == 0 else pol.rows[c])
+    # by path, through the loader every command uses
+    from agents.policy import load_controller
+
+    same = load_controller(out / "policy")
+    assert same.fingerprint() == pol.fingerprint()
+    assert np.array_equal(same.plan(z), u)
+
+
+def test_a_rerun_resumes_from_the_saved_rounds(run, monkeypatch):
+    out, summary = run
+    import agents.distill as d
+
+    def no_labels(*a, **k):
+        raise AssertionError("a saved round was labelled again")
+
+    monkeypatch.setattr(d.Labeller, "label", no_labels)
+    again = distill(DistillConfig(**SMALL), out, progress=False)
+    assert again["rounds"] == summary["rounds"]
+    with pytest.raises(ValueError, match="other settings"):
+        distill(DistillConfig(**{**SMALL, "epochs": 6}), out, progress=False)
+
+
+def test_the_policy_acts_without_torch(run):
+    out, _ = run
+    code = (
+        "import sys, numpy as np; from agents.policy import load_controller; "
+        f"p = load_controller({str(out / 'policy')!r}); "
+        "p.plan(p.z_ref * 1.2); print('torch' in sys.modules)"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert r.stdout.strip() == "False"
+
+
+def test_the_weights_are_the_fingerprint(run, tmp_path):
+    import shutil
+
+    out, _ = run
+    pol = load_choice_policy(out / "policy")
+    copy = tmp_path / "p"
+    shutil.copytree(out / "policy", copy)
+    with np.load(copy / "choice.npz") as f:
+        arrays = dict(f)
+    arrays["b0"] = arrays["b0"] + 1e-3
+    np.savez(copy / "choice.npz", **arrays)
+    assert load_choice_policy(copy).fingerprint() != pol.fingerprint()
+    (copy / "config.json").write_text(json.dumps({"kind": "choice"}))
+    with pytest.raises(ValueError, match="not a readable distilled policy"):
+        load_choice_policy(copy)
+
+
+def test_cli_distill_refuses_an_existing_export(tmp_path):
+    from bound_env.cli import main
+
+    (tmp_path / "e").mkdir()
+    args = ["distill", "--out", str(tmp_path / "r"), "--export", str(tmp_path / "e"), "--quiet"]
+    assert main(args) == 2
+    assert not (tmp_path / "r").exists()
