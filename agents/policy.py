@@ -208,16 +208,12 @@ def shipped_policies() -> dict[str, Path]:
     if not SHIPPED_DIR.is_dir():
         return {}
     out = {}
-
-    def is_policy(folder: Path) -> bool:  # a PPO model, or a distilled student (agents.distill)
-        return (folder / "model.zip").is_file() or (folder / "choice.npz").is_file()
-
     for p in sorted(SHIPPED_DIR.iterdir()):
-        if is_policy(p):
+        if (p / "model.zip").is_file():
             out[p.name] = p
         elif p.is_dir():
             for q in sorted(p.iterdir()):
-                if is_policy(q):
+                if (q / "model.zip").is_file():
                     out[f"{p.name}/{q.name}"] = q
     return out
 
@@ -534,19 +530,12 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     path = resolve_policy(path)
     if isinstance(path, str):
         return CONTROLLERS[path][0](gait=gait)
-    if Path(path).is_dir() and (Path(path) / "choice.npz").is_file():
-        from .distill import load_choice_policy  # a distilled student (agents/distill.py)
-
-        return load_choice_policy(path, gait=gait)
     files = find_policy_files(path)
     if files.config is not None and read_policy_section(files)[1] == "PassiveBoundStride-v0":
         from .stride import load_stride_policy  # a stride-level policy (agents/stride.py)
 
         return load_stride_policy(path, gait=gait, force=force)
     model_path, vecnorm_path = files.model, files.vecnormalize
-    section, env_id, seed = read_policy_section(files)
-    for w in check_policy_files(files, section, force):  # before anything reads the files
-        print(f"warning: {w}", file=sys.stderr)
     from stable_baselines3 import PPO
 
     try:
@@ -554,9 +543,12 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
         model = PPO.load(str(model_path), device="cpu", custom_objects=_INFERENCE_ONLY)
     except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
         raise ValueError(f"cannot load {model_path} as an SB3 PPO model: {e}") from None
+    section, env_id, seed = read_policy_section(files)
     env_kwargs = section_env_kwargs(section, env_id)
     wrappers = section.get("env_wrapper") or []
     obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
+    for w in check_policy_files(files, section, force):
+        print(f"warning: {w}", file=sys.stderr)
     layers, activation = _extract_actor(model, model_path)
     ctrl = MLPController(
         name=str(path),

@@ -102,6 +102,7 @@ def test_commands_in_a_checkout_change_no_tracked_file(tmp_path):
         ],
         ["continue", "--param", "kc", "--to", "296", "--step", "0.5", "--out", "out/kc", "--json"],
         ["animate", "--strides", "1", "--out", "out/a.gif", "--json"],
+        ["animate", "--strides", "1", "--json"],  # the default --out: out/animate/
         ["margins", "--policy", "passive", "--budget", "test", "--workers", "1", "--json"],
         ["rollout", "--policy", "default", "--strides", "2", "--json"],
         ["compare", "--budget", "test", "--workers", "1", "--no-progress", "--json"],
