@@ -208,12 +208,16 @@ def shipped_policies() -> dict[str, Path]:
     if not SHIPPED_DIR.is_dir():
         return {}
     out = {}
+
+    def is_policy(folder: Path) -> bool:  # a PPO model, or a distilled student (agents.distill)
+        return (folder / "model.zip").is_file() or (folder / "choice.npz").is_file()
+
     for p in sorted(SHIPPED_DIR.iterdir()):
-        if (p / "model.zip").is_file():
+        if is_policy(p):
             out[p.name] = p
         elif p.is_dir():
             for q in sorted(p.iterdir()):
-                if (q / "model.zip").is_file():
+                if is_policy(q):
                     out[f"{p.name}/{q.name}"] = q
     return out
 
@@ -530,6 +534,10 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     path = resolve_policy(path)
     if isinstance(path, str):
         return CONTROLLERS[path][0](gait=gait)
+    if Path(path).is_dir() and (Path(path) / "choice.npz").is_file():
+        from .distill import load_choice_policy  # a distilled student (agents/distill.py)
+
+        return load_choice_policy(path, gait=gait)
     files = find_policy_files(path)
     if files.config is not None and read_policy_section(files)[1] == "PassiveBoundStride-v0":
         from .stride import load_stride_policy  # a stride-level policy (agents/stride.py)
