@@ -165,6 +165,14 @@ def register(sub) -> None:
         default="quick",
         help=BUDGET_HELP + " (default: %(default)s)",
     )
+    p.add_argument(
+        "--seed",
+        type=number(int, 0, 2**32 - 1),
+        default=12345,  # agents.margins.DEFAULT_SEED
+        help="picks the random directions, rough-terrain runs, push trials and MFPT robots "
+        "(default: %(default)s, the test set of docs/MARGINS.md; any other seed is a "
+        "held-out validation set)",
+    )
     add_gait_args(p, default=None, overrides=False, help=POLICY_GAIT_HELP)
     p.add_argument(
         "--force",
@@ -231,6 +239,14 @@ def register(sub) -> None:
         choices=("test", "quick", "standard", "full"),
         default="full",
         help=BUDGET_HELP + " (default: %(default)s)",
+    )
+    p.add_argument(
+        "--seed",
+        type=number(int, 0, 2**32 - 1),
+        default=12345,  # agents.margins.DEFAULT_SEED
+        help="picks the random directions, rough-terrain runs, push trials and MFPT robots "
+        "(default: %(default)s, the test set of docs/MARGINS.md; any other seed is a "
+        "held-out validation set)",
     )
     p.add_argument("--workers", type=number(int, 1, 256), default=2)
     add_scheduler_args(p, workers_default=None)
@@ -456,6 +472,8 @@ def cmd_margins(args) -> int:
     from .policy import load_controller
 
     name = _policy_label(args.policy)
+    if args.seed != 12345:  # a held-out set: not over the test set's outputs
+        name += f"-seed{args.seed}"
     out = out_dir(args.out or Path("out") / "margins" / name)
     progress = (args.budget == "full" or sys.stderr.isatty()) and not args.no_progress
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
@@ -469,6 +487,7 @@ def cmd_margins(args) -> int:
         progress=progress,
         use_cache=not args.no_cache,
         scheduler=args.scheduler,
+        seed=args.seed,
     )
     if args.json:
         print(strict_json(r))
@@ -496,6 +515,7 @@ def cmd_compare(args) -> int:
         progress=sys.stderr.isatty() and not args.no_progress,
         note=args.note,
         scheduler=args.scheduler,
+        seed=args.seed,
     )
     say(args, f"wrote {path}")
     if args.json:
@@ -506,6 +526,8 @@ def cmd_compare(args) -> int:
                     "out": args.out,
                     "budget": args.budget,
                     "entries": [e[0] for e in entries],
+                    "seed": args.seed,
+                    "paired": str(path.with_name("paired.json")),
                 }
             )
         )

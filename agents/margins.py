@@ -23,7 +23,8 @@ Measures (JSON keys)
   central differences through the simulator with the policy in the loop) and the eigenvalues
   of the Jacobian of P_pi there (``[re, im]`` pairs, largest modulus first);
   ``fixed_point_shift`` = z_cl - z* (SI).
-- ``basin``: for each apex component i and each sign, the largest relative perturbation s
+- ``basin`` (a **minimal fatal shock** per axis): for each apex component i and each sign,
+  the largest relative perturbation s
   such that the loop started at z_cl + s |z*_i| e_i *returns*: max_j |z_j - z_cl_j| < 1e-4
   (SI) within a bounded number of strides, without a fall. **Uncapped**: s = 1e-3 and s = 1
   are tried first; while the loop returns, the bracket grows by doubling from the last
@@ -55,14 +56,18 @@ Measures (JSON keys)
   height at the start is below l_b cos gamma_b, so the leg cannot be placed; the start state
   invalid) or "no admissible profile found" with the best profile's failure.
   ``basin_share_min`` (``basin_share_min_direction``) is the smallest basin / ceiling.
-- ``basin_curve``: the probability of returning against the size r of a perturbation in a
-  random direction: z_cl + r |z*| * u with u uniform on the sphere and scaled to max |u_i| = 1
-  (so r is the largest relative perturbation of any component, in the ``zstar`` scale); the
-  same directions (seed ``CURVE_SEED``) for every size and every controller; 95 % Wilson
+- ``basin_curve`` (a **basin stability** estimate, Menck et al. 2013): the probability of
+  returning against the size r of a perturbation in a random direction: z_cl + r |z*| * u
+  with u uniform on the sphere and scaled to max |u_i| = 1 (so r is the largest relative
+  perturbation of any component, in the ``zstar`` scale); the same directions (``--seed``,
+  default ``CURVE_SEED``: the test set) for every size and every controller; 95 % Wilson
   intervals per point (``ci_low``, ``ci_high``); ``r50`` = the size at which P(return) first
   falls below 0.5, interpolated linearly in log r between the two sizes around the crossing
   (``r50_grid``: the largest grid size up to which P >= 0.5, the earlier definition, which
   depends on the grid); ``r50_ci`` = the same crossing of the interval's bounds.
+  ``outcomes``: per size, the outcome (1: returned, 0: not) from each direction, in the
+  order of ``random_directions(directions, direction_seed)``, for paired comparisons of two
+  controllers on the same directions (`agents.compare`, `bound_env.analysis.paired`).
 - ``terrain``: survival of ``terrain_runs`` runs of ``terrain_strides`` strides from z_cl on
   rough terrain (``slope_noise_deg`` = sigma: the slope changes by sigma xi at every apex,
   `bound_env.terrain`), each run one long episode with its own seed (``TERRAIN_SEED`` + k),
@@ -70,6 +75,14 @@ Measures (JSON keys)
   survival first falls below one half (log-interpolated as r50; ``terrain_sigma50_grid_deg``:
   the largest grid sigma with survival >= 1/2; ``terrain_sigma50_ci_deg`` from the interval's
   bounds).
+- ``mfpt`` (the **mean first-passage time**, Byl & Tedrake 2009): for each sigma of
+  ``mfpt_sigmas``, ``mfpt_robots`` runs from z_cl on rough terrain for up to
+  ``mfpt_strides`` strides (env seeds from the seed's MFPT base), batched on the task's
+  kernel (`rough_episodes`); with a constant per-stride hazard, MFPT = strides attempted /
+  falls (``strides_total``, ``failures``; the maximum-likelihood estimate with runs censored
+  at the horizon), a lower bound (``lower_bound: true``, = strides_total) with no fall, and
+  an exact Poisson interval (``ci``). ``mfpt_sigma_100_deg``: the sigma at which the MFPT
+  falls to 100 strides, log MFPT interpolated linearly in log sigma (None if not bracketed).
 - ``slope_window_deg``, ``kc_window``: the range of slope alpha (deg), and separately of
   spine stiffness k_c (N m/rad), containing the nominal value over which the loop started at
   z_cl survives ``window_strides`` strides (50) without a fall (``gait_overrides``); edges by
@@ -89,11 +102,21 @@ protocol ``__call__(obs) -> float`` (normalized torque in [-1, 1]), ``fingerprin
 made for, e.g. ``max_torque``), optional ``name`` and optional ``on_apex(z, time_since_apex)``
 (called at the start apex of every episode and at every apex reached).
 
+Seeds
+-----
+``--seed`` (``seed``) picks every random sample: the directions, the rough-terrain runs, the
+push trials and the MFPT robots (`sample_seeds`). The default (``DEFAULT_SEED`` = 12345) is
+the test set that docs/MARGINS.md reports, with the samples it always had; any other seed is
+a held-out (validation) set. The seed is in the JSON (``seed``, ``seed_role``) and the key.
+
 Evaluations run through a `concurrent.futures` executor (``--workers N`` processes; any
 object with ``submit`` returning futures can be passed to `compute_margins`). Every task's
-result is cached in ``<out>/cache.jsonl`` under a key of the controller, gait, budget and
-every module setting that changes a result (`SETTINGS`), so an interrupted run resumes and
-a changed setting never returns a stale result.
+result is cached in ``<out>/cache.jsonl`` under a key (`setup_key`) of the controller's
+fingerprint and env kwargs, the gait's name and file contents, the budget, the seed, every
+module setting that changes a result (`SETTINGS`: tolerances, seeds of the push and MFPT
+samples, the ceiling search's settings) and a hash of the source (`source_hash`: every .py
+file of bound_env/ and the margins modules of agents/), so an interrupted run resumes and a
+changed setting or code never returns a stale result.
 """
 
 from __future__ import annotations
@@ -114,7 +137,7 @@ from bound_env.analysis.numerics import (  # noqa: F401 - bisect_threshold: re-e
     map_fixed_point,
     sorted_eigenvalues,
 )
-from bound_env.cache import TaskCache, settings_hash
+from bound_env.cache import TaskCache, atomic_write, settings_hash
 from bound_env.parallel import (
     SerialExecutor,  # noqa: F401 - its old home, kept as an alias
     TasksFailed,
@@ -124,7 +147,13 @@ from bound_env.parallel import (
 from bound_env.params import Z_NAMES, Z_SI_UNITS
 
 from .policy import load_controller
-from .stats import crossing_on_grid, threshold_on_grid, wilson_interval
+from .stats import (
+    crossing_on_grid,
+    mfpt_crossing,
+    mfpt_estimate,
+    threshold_on_grid,
+    wilson_interval,
+)
 
 ENV_ID = "PassiveBound-v0"
 Z_LABELS, Z_UNITS = Z_NAMES, Z_SI_UNITS  # apex components and their SI units
@@ -133,8 +162,17 @@ EVAL_RTOL = 1e-10  # integrator tolerance of every evaluation (training uses the
 BASIN_LO, BASIN_HI = 1e-3, 1.0  # first bracket of the relative basin search (then it grows)
 BASIN_CAP = 64.0  # largest relative perturbation tried where the start state stays valid
 CURVE_SEED = 12345  # random directions of the test curve (training validation uses others)
-TERRAIN_SEED = 20_000  # rough-terrain run k uses env seed TERRAIN_SEED + k
+DEFAULT_SEED = CURVE_SEED  # --seed: the test set (docs/MARGINS.md); any other is held out
+TERRAIN_SEED = 20_000  # rough-terrain run k uses env seed TERRAIN_SEED + k (default seed)
+PUSH_SEED = 2024  # push trial j of size index i: rng([i, kind, PUSH_SEED]) (default seed)
+MFPT_SEED = 30_000  # MFPT robot k uses env seed MFPT_SEED + k (default seed)
+MFPT_CHUNK = 16  # MFPT robots per task (a cached, resumable unit)
+MFPT_LEVEL = 100.0  # mfpt_sigma_100_deg: the sigma at which the MFPT falls to this [strides]
 PROFILE_SEG = 5  # ceiling search: control intervals per piece of a torque profile
+PROFILE_SPAN = 1.3  # ceiling search: the profile covers 1.3 x the strides' nominal duration
+# ceiling search, (1+1)-ES: share of pieces mutated, first step, growth on success, shrink on
+# failure, step bounds
+CEILING_ES = {"mutate": 0.3, "step": 0.5, "grow": 1.5, "shrink": 0.85, "min": 0.05, "max": 2.0}
 CYCLE_RECORD_DT = 1e-3  # sampling of the passive stride for the cycle scale [s]
 FD_REL = 1e-4  # central-difference step, relative to max(|z*_i|, FD_FLOOR_i)
 FD_FLOOR = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1])  # SI floors of the FD step scale
@@ -164,10 +202,14 @@ class Budget:
     terrain_sigmas: tuple = (0.05, 0.1, 0.2, 0.5, 1.0)  # slope noise [deg]
     terrain_runs: int = 16  # rough-terrain runs per sigma
     terrain_strides: int = 50  # strides to survive
+    mfpt_sigmas: tuple = (0.2, 0.35, 0.6, 1.0)  # slope noise of the MFPT [deg]
+    mfpt_robots: int = 16  # robots per sigma, each one long run from the cycle
+    mfpt_strides: int = 100  # horizon of a run [strides] (censored there)
 
 
 _CURVE_FULL = tuple(float(x) for x in np.round(np.geomspace(0.005, 0.5, 16), 5)) + (0.7, 1.0)
 _TERRAIN_FULL = (0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
+_MFPT_FULL = (0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.75, 1.0, 1.5)
 BUDGETS = {
     "test": Budget(
         "test",
@@ -189,6 +231,9 @@ BUDGETS = {
         terrain_sigmas=(0.05, 0.5),
         terrain_runs=2,
         terrain_strides=5,
+        mfpt_sigmas=(0.2, 2.0),
+        mfpt_robots=3,
+        mfpt_strides=8,
     ),
     "quick": Budget(
         "quick",
@@ -220,6 +265,9 @@ BUDGETS = {
         terrain_sigmas=_TERRAIN_FULL,
         terrain_runs=64,
         terrain_strides=100,
+        mfpt_sigmas=_MFPT_FULL,
+        mfpt_robots=32,
+        mfpt_strides=10_000,
     ),
     # ~1/3 of the full budget's cost where it matters (fewer curve sizes and push samples,
     # fewer terrain levels), the same definitions otherwise: 256 random directions, 300
@@ -242,6 +290,9 @@ BUDGETS = {
         terrain_sigmas=(0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0),
         terrain_runs=64,
         terrain_strides=100,
+        mfpt_sigmas=_MFPT_FULL,
+        mfpt_robots=32,
+        mfpt_strides=2000,
     ),
 }
 # Window scans: first offset from nominal, doubling up to the limit.
@@ -269,6 +320,28 @@ def random_directions(n: int, seed: int = CURVE_SEED) -> np.ndarray:
     """n directions uniform on the 6-sphere, each scaled to max |u_i| = 1."""
     u = np.random.default_rng(seed).standard_normal((n, 6))
     return u / np.max(np.abs(u), axis=1, keepdims=True)
+
+
+def check_seed(seed) -> int:
+    """``--seed`` as an int in [0, 2**32) (numpy's seeds are non-negative), else ValueError."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
+        raise ValueError(f"--seed must be an integer in [0, 2**32), got {seed!r}")
+    return int(seed)
+
+
+def sample_seeds(seed: int = DEFAULT_SEED) -> dict:
+    """The seeds of every random sample that ``--seed`` picks: the random directions
+    (``directions``: `random_directions`' seed), the rough-terrain runs (``terrain``: run k
+    uses env seed terrain + k), the push trials (``push``: the tail of their RNG key
+    [size index, kind, *push]) and the MFPT robots (``mfpt``: robot k uses env seed mfpt + k).
+    The default seed gives the test set's samples as they always were (directions of seed
+    12345, terrain seeds 20000 + k, push key [i, kind, 2024]); any other seed gives fresh
+    ones, derived from it (`numpy.random.SeedSequence`), for a held-out (validation) set."""
+    seed = check_seed(seed)
+    if seed == DEFAULT_SEED:
+        return {"directions": seed, "terrain": TERRAIN_SEED, "push": [PUSH_SEED], "mfpt": MFPT_SEED}
+    terrain, mfpt = (int(v) for v in np.random.SeedSequence([seed, 1]).generate_state(2) >> 2)
+    return {"directions": seed, "terrain": terrain, "push": [PUSH_SEED, seed], "mfpt": mfpt}
 
 
 # --------------------------------------------------------------------------------------------
@@ -439,6 +512,73 @@ def apply_kick(env, index: int, delta: float) -> None:
     env.kick(d)
 
 
+def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
+    """`ClosedLoop.episode` for many robots at once: robot k runs the episode of
+    ``loop.episode(z0, max_strides, seed=seeds[k])`` (the same task, hence ``loop``'s rough
+    terrain, and the same slope draws from its own env RNG), all advanced together by the
+    task's batch kernel, one controller call per control interval: ``batch(obs)`` for a
+    controller that has one (and no ``on_apex``), else one copy per robot called row by row
+    with ``on_apex`` at every apex, as the single env calls it (then bit-identical to
+    ``episode``). Returns {"strides": completed strides per robot, "fell": 0/1 per robot,
+    "failures": {reason: count}}."""
+    import copy
+
+    from gymnasium.utils import seeding
+
+    from bound_env.task import _Z_IDX, FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_STRIDES
+
+    task, ctrl = loop.env.task, loop.controller
+    n = len(seeds)
+    z0 = task.check_apex_state(z0)
+    b = task.new_batch(n)
+    rngs = []
+    for i, sd in enumerate(seeds):
+        rngs.append(seeding.np_random(int(sd))[0])
+        task.reset_robot(b, i, z0)
+        task.draw_slope_noise(b, i, rngs[i])
+    on_apex = getattr(ctrl, "on_apex", None)
+    batched = callable(getattr(ctrl, "batch", None)) and on_apex is None
+    copies = None if batched else [copy.deepcopy(ctrl) for _ in range(n)]
+    if copies is not None and on_apex is not None:
+        for c in copies:
+            c.on_apex(z0.copy(), 0.0)
+    strides = np.zeros(n, dtype=np.int64)
+    fell = np.zeros(n, dtype=np.int64)
+    failures: dict = {}
+    live = b.s[:, S_STATUS] < FAIL_FIRST  # an invalid start fails at the reset (0 strides)
+    for i in np.flatnonzero(~live):
+        fell[i] = 1
+        name = FAILURE_NAMES[int(b.s[i, S_STATUS])]
+        failures[name] = failures.get(name, 0) + 1
+    while live.any():
+        if batched:
+            b.actions[:] = ctrl.batch(b.obs)
+        else:
+            for i in np.flatnonzero(live):
+                b.actions[i] = copies[i](b.obs[i])
+        b.active[:] = live
+        task.step(b)
+        s = b.s
+        apex = live & (s[:, S_NAPEX] > 0)
+        for i in np.flatnonzero(apex):
+            task.draw_slope_noise(b, i, rngs[i])
+        failed = live & (s[:, S_STATUS] >= FAIL_FIRST)
+        for i in np.flatnonzero(failed):
+            fell[i], strides[i] = 1, int(s[i, S_STRIDES])
+            name = FAILURE_NAMES[int(s[i, S_STATUS])]
+            failures[name] = failures.get(name, 0) + 1
+        live &= ~failed
+        for i in np.flatnonzero(apex & live):
+            strides[i] = int(s[i, S_STRIDES])
+            if strides[i] >= max_strides:
+                live[i] = False
+            elif copies is not None and on_apex is not None:
+                napex = int(s[i, S_NAPEX])
+                z1 = b.apex[i, min(napex, b.apex.shape[1]) - 1][_Z_IDX]
+                copies[i].on_apex(np.array(z1, dtype=float), float(b.obs[i, loop.i_since_apex]))
+    return {"strides": strides.tolist(), "fell": fell.tolist(), "failures": failures}
+
+
 # --------------------------------------------------------------------------------------------
 # Tasks (run in worker processes)
 # --------------------------------------------------------------------------------------------
@@ -456,6 +596,7 @@ class Setup:
     cycle_steps: int = 0
     key: str = ""
     period: float = math.nan  # closed-loop stride period [s]
+    seed: int = DEFAULT_SEED  # --seed: the random directions, terrain and push samples
 
 
 _LOOPS: dict = {}
@@ -666,14 +807,18 @@ def _profile_search(
     for a in cands:
         if trial(a):
             return True, best
-    step = 0.5
+    es = CEILING_ES
+    step = es["step"]
     for _ in range(b.ceiling_opt):
-        mask = rng.random(n_pieces) < 0.3
+        mask = rng.random(n_pieces) < es["mutate"]
         child = np.clip(best_a + mask * rng.normal(0.0, step, n_pieces), -1.0, 1.0)
         before = best["score"]
         if trial(child):
             return True, best
-        step = min(2.0, step * 1.5) if best["score"] > before else max(0.05, step * 0.85)
+        if best["score"] > before:
+            step = min(es["max"], step * es["grow"])
+        else:
+            step = max(es["min"], step * es["shrink"])
     return False, best
 
 
@@ -684,7 +829,7 @@ def task_ceiling(setup: Setup, i: int, sign: int) -> dict:
     zs, zc, b = setup.z_star, setup.z_cl, setup.budget
     n = b.ceiling_strides
     period = setup.period if math.isfinite(setup.period) else 0.39
-    n_pieces = int(math.ceil(1.3 * n * period / loop.dt / PROFILE_SEG))
+    n_pieces = int(math.ceil(PROFILE_SPAN * n * period / loop.dt / PROFILE_SEG))
     found_at: dict = {}
 
     def start(s):
@@ -750,13 +895,21 @@ def task_ceiling(setup: Setup, i: int, sign: int) -> dict:
 
 
 def task_curve(setup: Setup, size: float) -> dict:
+    """Basin stability at one size: the outcome (1: returned) from each random direction."""
     loop = _loop(setup)
     zs, zc = setup.z_star, setup.z_cl
-    wins = 0
-    dirs = random_directions(setup.budget.curve_dirs)
-    for u in dirs:
-        wins += loop.run(zc + size * np.abs(zs) * u, zc, setup.budget.basin_strides)[0]
-    return {"size": size, "success": wins / len(dirs), "n": len(dirs), "k": int(wins)}
+    dirs = random_directions(setup.budget.curve_dirs, sample_seeds(setup.seed)["directions"])
+    outcomes = [
+        int(loop.run(zc + size * np.abs(zs) * u, zc, setup.budget.basin_strides)[0]) for u in dirs
+    ]
+    wins = sum(outcomes)
+    return {
+        "size": size,
+        "success": wins / len(dirs),
+        "n": len(dirs),
+        "k": int(wins),
+        "outcomes": outcomes,
+    }
 
 
 def task_terrain(setup: Setup, sigma: float) -> dict:
@@ -764,9 +917,10 @@ def task_terrain(setup: Setup, sigma: float) -> dict:
     [deg] survive ``terrain_strides`` strides."""
     loop = _loop(setup, env_extra={"slope_noise_deg": float(sigma)})
     b = setup.budget
+    base = sample_seeds(setup.seed)["terrain"]
     k, strides, reasons = 0, [], {}
     for j in range(b.terrain_runs):
-        ok, n, failure = loop.episode(setup.z_cl, b.terrain_strides, seed=TERRAIN_SEED + j)
+        ok, n, failure = loop.episode(setup.z_cl, b.terrain_strides, seed=base + j)
         k += ok
         strides.append(n)
         if failure:
@@ -824,7 +978,9 @@ def task_window(setup: Setup, key: str, side: int) -> dict:
 def task_push(setup: Setup, kind: str, size: float, index: int) -> dict:
     loop = _loop(setup)
     y_index = {"xdot": Y_XDOT, "th1dot": Y_TH1DOT}[kind]
-    rng = np.random.default_rng([index, 0 if kind == "xdot" else 1, 2024])
+    rng = np.random.default_rng(
+        [index, 0 if kind == "xdot" else 1, *sample_seeds(setup.seed)["push"]]
+    )
     wins = 0
     n = setup.budget.push_samples
     steps = max(1, setup.cycle_steps - 1)
@@ -837,6 +993,19 @@ def task_push(setup: Setup, kind: str, size: float, index: int) -> dict:
     return {"kind": kind, "size": size, "success": wins / n, "n": n}
 
 
+def task_mfpt(setup: Setup, sigma: float, chunk: int) -> dict:
+    """Robots chunk * MFPT_CHUNK ... of the MFPT at slope noise sigma [deg]: each one run of up
+    to ``mfpt_strides`` strides from z_cl (env seed = the seed's MFPT base + robot index),
+    batched (`rough_episodes`)."""
+    loop = _loop(setup, env_extra={"slope_noise_deg": float(sigma)})
+    b = setup.budget
+    first = chunk * MFPT_CHUNK
+    robots = range(first, min(b.mfpt_robots, first + MFPT_CHUNK))
+    base = sample_seeds(setup.seed)["mfpt"]
+    out = rough_episodes(loop, setup.z_cl, [base + k for k in robots], b.mfpt_strides)
+    return {"sigma_deg": sigma, "chunk": chunk, "robots": len(robots), **out}
+
+
 TASKS = {
     "cycle": task_cycle,
     "basin": task_basin,
@@ -845,6 +1014,7 @@ TASKS = {
     "push": task_push,
     "ceiling": task_ceiling,
     "terrain": task_terrain,
+    "mfpt": task_mfpt,
 }
 
 
@@ -901,9 +1071,9 @@ def _run_all(
     return results
 
 
-# Every module setting that changes a result: part of each cache key (with the budget).
+# Every module setting that changes a result: part of each cache key (with the budget, the
+# seed, the gait file's contents, the controller's fingerprint and the source hash below).
 SETTINGS = {
-    "version": 3,
     "rtol": EVAL_RTOL,
     "return_tol": RETURN_TOL,
     "basin_lo": BASIN_LO,
@@ -913,21 +1083,71 @@ SETTINGS = {
     "fd_floor": FD_FLOOR.tolist(),
     "curve_seed": CURVE_SEED,
     "terrain_seed": TERRAIN_SEED,
+    "push_seed": PUSH_SEED,
+    "mfpt_seed": MFPT_SEED,
+    "mfpt_chunk": MFPT_CHUNK,
     "profile_seg": PROFILE_SEG,
+    "profile_span": PROFILE_SPAN,
+    "ceiling_es": CEILING_ES,
+    "ceiling_rng": "default_rng([component, sign > 0, round(s * 1e9) % 2**32])",
     "window_scan": WINDOW_SCAN,
     "env_id": ENV_ID,
     "cycle_record_dt": CYCLE_RECORD_DT,
 }
 
 
-def setup_key(controller, gait: str, budget: Budget) -> str:
+# The agents modules whose code a margins result depends on (besides all of bound_env/):
+# the tasks, the controllers (policy, stride) and the statistics.
+AGENTS_SOURCES = ("margins.py", "policy.py", "stride.py", "stats.py")
+
+
+def source_files() -> list[Path]:
+    """Every .py file under bound_env/ and the margins modules of agents/ (`AGENTS_SOURCES`)."""
+    import bound_env
+
+    pkg = Path(bound_env.__file__).resolve().parent
+    here = Path(__file__).resolve().parent
+    return sorted(pkg.rglob("*.py")) + [here / name for name in AGENTS_SOURCES]
+
+
+def source_hash(files=None) -> str:
+    """sha256 (16 hex digits) of the names and contents of ``files`` (default:
+    `source_files`): any change of the simulator, the task, the controllers or the margins
+    code gives a new cache key (no hand-kept version number)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for f in files if files is not None else source_files():
+        f = Path(f)
+        h.update(f"{f.parent.name}/{f.name}\0".encode())
+        h.update(f.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()[:16]
+
+
+def gait_key(gait) -> dict:
+    """The gait's name and the sha256 of its file's contents (a changed file, a new key)."""
+    import hashlib
+
+    from bound_env.params import resolve_gait_path
+
+    digest = hashlib.sha256(resolve_gait_path(gait).read_bytes()).hexdigest()
+    return {"name": str(gait), "file_sha256": digest}
+
+
+def setup_key(controller, gait: str, budget: Budget, seed: int = DEFAULT_SEED) -> str:
+    """Cache key of one evaluation: the controller's fingerprint and env kwargs, the gait
+    (name and file contents), the budget, the seed, `SETTINGS` and the `source_hash`."""
     env_kwargs = getattr(controller, "env_kwargs", None) or {}
     return settings_hash(
         {
             "controller": controller.fingerprint(),
-            "gait": str(gait),
+            "gait": gait_key(gait),
             "budget": asdict(budget),
+            "seed": check_seed(seed),
+            "samples": sample_seeds(seed),
             "settings": SETTINGS,
+            "source": source_hash(),
             "env_kwargs": sorted((str(k), repr(v)) for k, v in env_kwargs.items()),
         }
     )
@@ -976,10 +1196,14 @@ def compute_margins(
     progress: bool = False,
     use_cache: bool = True,
     scheduler: str | None = None,
+    seed: int = DEFAULT_SEED,
 ) -> dict:
     """All margins of ``policy`` (``"passive"``, a path, or a controller) as a JSON-able dict.
 
     ``policy`` may be any object with the controller protocol (module docstring).
+    ``seed`` picks the random directions, the rough-terrain runs, the push trials and the
+    MFPT robots (`sample_seeds`): the default is the test set of docs/MARGINS.md, any other
+    a held-out (validation) set.
     ``executor``: any `concurrent.futures.Executor`-like object; default: the one
     `bound_env.parallel.open_pool` builds from ``scheduler`` and ``workers`` (a process pool
     of ``workers`` processes, in-process when ``workers == 1``, or Dask). ``out``: directory
@@ -993,6 +1217,7 @@ def compute_margins(
         budget = BUDGETS[budget]
     if workers < 1:
         raise ValueError(f"--workers must be at least 1, got {workers}")
+    seed = check_seed(seed)
     controller = as_controller(policy, gait)
     g = load_gait(gait)
     z_star = np.asarray(g.z0, dtype=float)
@@ -1011,7 +1236,8 @@ def compute_margins(
         gait=gait,
         budget=budget,
         z_star=z_star,
-        key=setup_key(controller, gait, budget),
+        key=setup_key(controller, gait, budget, seed),
+        seed=seed,
     )
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
@@ -1030,13 +1256,15 @@ def compute_margins(
         jobs += [("ceiling", (i, s)) for i in range(6) for s in (1, -1)]
         jobs += [("curve", (r,)) for r in budget.curve_sizes]
         jobs += [("terrain", (v,)) for v in budget.terrain_sigmas]
+        chunks = range(math.ceil(budget.mfpt_robots / MFPT_CHUNK))
+        jobs += [("mfpt", (v, c)) for v in budget.mfpt_sigmas for c in chunks]
         jobs += [("window", (k, s)) for k in ("alpha_deg", "kc") for s in (-1, 1)]
         jobs += [("push", ("xdot", v, j)) for j, v in enumerate(budget.push_xdot)]
         jobs += [("push", ("th1dot", v, j)) for j, v in enumerate(budget.push_th1dot)]
         res = _run_all(
             executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}"
         )
-    result = assemble(controller, gait, budget, z_star, cyc, res, scale)
+    result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
     result["seconds"] = time.perf_counter() - t0
     if out_dir is not None:
         write_outputs(result, out_dir)
@@ -1072,7 +1300,37 @@ def _rate_curve(xs, items) -> dict:
     }
 
 
-def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
+def mfpt_curve(budget: Budget, res: dict) -> list[dict]:
+    """The MFPT per sigma from the chunks' results (`agents.stats.mfpt_estimate`)."""
+    out = []
+    chunks = range(math.ceil(budget.mfpt_robots / MFPT_CHUNK))
+    for v in budget.mfpt_sigmas:
+        parts = [res[("mfpt", (v, c))] for c in chunks]
+        completed = sum(sum(p["strides"]) for p in parts)
+        fell = sum(sum(p["fell"]) for p in parts)
+        reasons: dict = {}
+        for p in parts:
+            for name, n in p["failures"].items():
+                reasons[name] = reasons.get(name, 0) + n
+        total = completed + fell  # strides attempted: the failing ones count
+        est = mfpt_estimate(total, fell)
+        out.append(
+            {
+                "sigma_deg": v,
+                "robots": budget.mfpt_robots,
+                "horizon": budget.mfpt_strides,
+                "strides_total": int(total),
+                "failures": int(fell),
+                "mfpt": est["mfpt"],
+                "lower_bound": est["lower_bound"],
+                "ci": est["ci"],
+                "failure_reasons": reasons,
+            }
+        )
+    return out
+
+
+def assemble(controller, gait, budget, z_star, cyc, res, scale=None, seed=DEFAULT_SEED) -> dict:
     scale = scale or {
         "names": list(Z_LABELS),
         "units": list(Z_UNITS),
@@ -1108,6 +1366,10 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
     ccurve = _rate_curve(list(budget.curve_sizes), curve)
     terr = [res[("terrain", (v,))] for v in budget.terrain_sigmas]
     tcurve = _rate_curve(list(budget.terrain_sigmas), terr)
+    samples = sample_seeds(seed)
+    mfpt = (
+        mfpt_curve(budget, res) if all(("mfpt", (v, 0)) in res for v in budget.mfpt_sigmas) else []
+    )
     push = {}
     for kind, sizes in (("xdot", budget.push_xdot), ("th1dot", budget.push_th1dot)):
         rates = [res[("push", (kind, v, j))]["success"] for j, v in enumerate(sizes)]
@@ -1124,6 +1386,8 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
         "policy": controller_name(controller),
         "gait": gait,
         "budget": budget.name,
+        "seed": seed,
+        "seed_role": "test" if seed == DEFAULT_SEED else "validation (held out)",
         "basin_scale": scale,
         "basin": basin,
         "basin_min": worst[0],
@@ -1147,8 +1411,13 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
             "r50_grid": ccurve["x50_grid"],
             "r50_at_grid_end": ccurve["x50_at_grid_end"],
             "directions": budget.curve_dirs,
-            "direction_seed": CURVE_SEED,
+            "direction_seed": samples["directions"],
             "scale": "zstar",
+            # per size, the outcome from each direction (1: returned), directions in the
+            # order of random_directions(directions, direction_seed): for paired comparisons
+            "outcomes": [c["outcomes"] for c in curve]
+            if all("outcomes" in c for c in curve)
+            else None,
         },
         "terrain": {
             "sigmas_deg": list(budget.terrain_sigmas),
@@ -1160,7 +1429,7 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
             "interval": "95% Wilson",
             "runs": budget.terrain_runs,
             "strides": budget.terrain_strides,
-            "seeds": [TERRAIN_SEED, TERRAIN_SEED + budget.terrain_runs - 1],
+            "seeds": [samples["terrain"], samples["terrain"] + budget.terrain_runs - 1],
             "mean_strides": [t["mean_strides"] for t in terr],
             "failures": [t["failures"] for t in terr],
         },
@@ -1168,6 +1437,24 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
         "terrain_sigma50_grid_deg": tcurve["x50_grid"],
         "terrain_sigma50_ci_deg": tcurve["x50_ci"],
         "terrain_sigma50_at_grid_end": tcurve["x50_at_grid_end"],
+        "mfpt": mfpt,
+        "mfpt_sigma_100_deg": mfpt_crossing(
+            [m["sigma_deg"] for m in mfpt],
+            [m["mfpt"] for m in mfpt],
+            [m["lower_bound"] for m in mfpt],
+            MFPT_LEVEL,
+        )
+        if mfpt
+        else None,
+        "mfpt_settings": {
+            "robots": budget.mfpt_robots,
+            "horizon": budget.mfpt_strides,
+            "sigmas_deg": list(budget.mfpt_sigmas),
+            "seeds": [samples["mfpt"], samples["mfpt"] + budget.mfpt_robots - 1],
+            "level": MFPT_LEVEL,
+            "estimator": "strides_total / failures (constant-hazard MLE; censored at the "
+            "horizon); no failure: lower bound strides_total; ci: exact Poisson",
+        },
         "emax": cyc["emax"],
         "eigenvalues": cyc["eigenvalues"],
         "z_star": z_star.tolist(),
@@ -1203,6 +1490,10 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
             },
             "terrain_runs": budget.terrain_runs,
             "terrain_strides": budget.terrain_strides,
+            "seed": seed,
+            "samples": samples,
+            "mfpt_robots": budget.mfpt_robots,
+            "mfpt_strides": budget.mfpt_strides,
         },
     }
 
@@ -1213,8 +1504,8 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None) -> dict:
 
 
 def write_outputs(result: dict, out_dir: Path) -> None:
-    """margins.json, basin.csv, curve.csv, push.csv and PNG plots."""
-    (out_dir / "margins.json").write_text(json.dumps(result, indent=2) + "\n")
+    """margins.json, basin.csv, curve.csv, push.csv, mfpt.csv and PNG plots."""
+    atomic_write(out_dir / "margins.json", json.dumps(result, indent=2) + "\n")
     for name, key in (("basin.csv", "basin"), ("ceiling.csv", "basin_ceiling")):
         with (out_dir / name).open("w", newline="") as f:
             w = csv.writer(f)
@@ -1283,6 +1574,31 @@ def write_outputs(result: dict, out_dir: Path) -> None:
             strict=True,
         ):
             w.writerow(row)
+    if result.get("mfpt"):
+        with (out_dir / "mfpt.csv").open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(
+                [
+                    "sigma_deg",
+                    "strides_total",
+                    "failures",
+                    "mfpt",
+                    "lower_bound",
+                    "ci_low",
+                    "ci_high",
+                ]
+            )
+            for m in result["mfpt"]:
+                w.writerow(
+                    [
+                        m["sigma_deg"],
+                        m["strides_total"],
+                        m["failures"],
+                        m["mfpt"],
+                        m["lower_bound"],
+                        *m["ci"],
+                    ]
+                )
     with (out_dir / "push.csv").open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["kind", "unit", "size", "success"])
@@ -1369,13 +1685,47 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
         paths.append(out_dir / f"{prefix}terrain.png")
         fig.savefig(paths[-1])
         plt.close(fig)
+
+    if any(r.get("mfpt") for r in results):
+        from matplotlib.ticker import NullFormatter
+
+        fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
+        for r, lab in zip(results, labels, strict=True):
+            m = r.get("mfpt") or []
+            if not m:
+                continue
+            sig = np.array([e["sigma_deg"] for e in m])
+            val = np.array([e["mfpt"] for e in m], dtype=float)
+            lb = np.array([e["lower_bound"] for e in m], dtype=bool)
+            line = ax.plot(sig, val, "-", label=lab)[0]
+            ax.plot(sig[~lb], val[~lb], "o", ms=3, color=line.get_color())
+            ax.plot(sig[lb], val[lb], "^", ms=5, mfc="none", color=line.get_color())
+            lo = np.array([e["ci"][0] for e in m], dtype=float)
+            hi = np.array([e["ci"][1] if e["ci"][1] is not None else np.nan for e in m])
+            ok = ~lb & np.isfinite(lo) & np.isfinite(hi)
+            if ok.any():
+                ax.vlines(sig[ok], lo[ok], hi[ok], color=line.get_color(), alpha=0.5)
+        ax.axhline(MFPT_LEVEL, color="0.6", lw=0.8, ls=":")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        grid = sorted({e["sigma_deg"] for r in results for e in (r.get("mfpt") or [])})
+        ax.set_xticks(grid, [f"{v:g}" for v in grid])
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("slope noise sigma per apex [deg]")
+        ax.set_ylabel("MFPT [strides] (^: lower bound)")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        paths.append(out_dir / f"{prefix}mfpt.png")
+        fig.savefig(paths[-1])
+        plt.close(fig)
     return paths
 
 
 def summary_text(r: dict) -> str:
     """A few human-readable lines."""
     lines = [
-        f"policy {r['policy']}  gait {r['gait']}  budget {r['budget']}  ({r['seconds']:.1f} s)",
+        f"policy {r['policy']}  gait {r['gait']}  budget {r['budget']}  seed {r.get('seed')}"
+        f"  ({r['seconds']:.1f} s)",
         f"basin_min {r['basin_min']:.4g} ({r['basin_min_direction']}, "
         f"abs {r['basin_min_abs']:.4g})   cycle scale {r['basin_min_cycle']:.4g} "
         f"({r['basin_min_cycle_direction']})   share of ceiling "
@@ -1383,7 +1733,8 @@ def summary_text(r: dict) -> str:
         f"r50 {r['basin_curve']['r50']:.3g} [{r['basin_curve']['r50_ci'][0]:.3g}, "
         f"{r['basin_curve']['r50_ci'][1]:.3g}]   terrain sigma50 "
         f"{r['terrain_sigma50_deg']:.3g} deg [{r['terrain_sigma50_ci_deg'][0]:.3g}, "
-        f"{r['terrain_sigma50_ci_deg'][1]:.3g}]",
+        f"{r['terrain_sigma50_ci_deg'][1]:.3g}]   MFPT = 100 strides at sigma "
+        f"{_num(r.get('mfpt_sigma_100_deg'), 3)} deg",
         f"emax {r['emax']:.4f}   fixed-point shift max |dz| "
         f"{np.max(np.abs(r['fixed_point_shift'])):.3g}",
         f"slope window {r['slope_window_deg'][0]:.4f} .. {r['slope_window_deg'][1]:.4f} deg   "

@@ -132,6 +132,8 @@ class MLPController:
             h.update(self.obs_mean.tobytes())
             h.update(self.obs_var.tobytes())
         h.update(repr(sorted(self.env_kwargs.items())).encode())
+        # the activation and the normalization constants change the actions too
+        h.update(repr((self.activation, self.epsilon, self.clip_obs)).encode())
         return h.hexdigest()[:16]
 
 

@@ -9,6 +9,12 @@
 - `crossing_on_grid`: where a rate first falls below 0.5, interpolated linearly in log x
   between the two grid points around the crossing (r50, sigma50); applied to the rate's
   lower and upper interval bounds it gives the crossing's interval.
+- `mfpt_estimate`: the mean first-passage time (in strides) of a constant per-stride
+  failure hazard from censored runs, and its exact Poisson interval;
+- `mfpt_crossing`: where an MFPT curve falls to a level (100 strides), log-log interpolated.
+
+The paired comparisons of two columns (McNemar, bootstrap of Delta r50) are in
+`bound_env.analysis.paired`.
 """
 
 from __future__ import annotations
@@ -74,3 +80,48 @@ def crossing_on_grid(xs, rates, level: float = 0.5) -> float:
             return math.exp(math.log(x0) + t * (math.log(x) - math.log(x0)))
         prev = (x, p)
     return float(xs[-1]) if len(xs) else 0.0
+
+
+def mfpt_estimate(strides_total: int, failures: int, level: float = 0.95) -> dict:
+    """Mean first-passage time [strides] of runs with a constant per-stride failure hazard
+    (Byl & Tedrake 2009), from ``failures`` falls in ``strides_total`` strides attempted
+    (completed strides plus the strides in which a robot fell; a run that reaches the horizon
+    is censored there). The hazard's maximum-likelihood estimate is failures / strides_total,
+    so MFPT = strides_total / failures. With no failure only a bound exists: ``mfpt`` is then
+    strides_total (as if one failure were next), flagged ``lower_bound``. ``ci``: the exact
+    (Garwood) Poisson interval of the failure count with the strides as exposure, inverted
+    (the upper end is None, unbounded, with no failure)."""
+    from scipy.stats import chi2
+
+    if strides_total < 0 or failures < 0 or failures > strides_total:
+        raise ValueError(f"need 0 <= failures <= strides_total, got {failures}, {strides_total}")
+    t, k = float(strides_total), int(failures)
+    if t == 0:
+        return {"mfpt": math.nan, "lower_bound": True, "ci": [math.nan, None]}
+    a = 1.0 - level
+    lo = 2.0 * t / float(chi2.ppf(1 - a / 2, 2 * k + 2))
+    hi = None if k == 0 else 2.0 * t / float(chi2.ppf(a / 2, 2 * k))
+    return {"mfpt": t / max(k, 1), "lower_bound": k == 0, "ci": [lo, hi]}
+
+
+def mfpt_crossing(sigmas, mfpts, lower_bounds, level: float = 100.0) -> float | None:
+    """The sigma at which the MFPT first falls to ``level``: log MFPT interpolated linearly
+    in log sigma between the last grid point known to be above ``level`` and the first
+    estimate below it. A zero-failure point counts as above only if its lower bound is; one
+    whose bound is below ``level`` leaves the crossing undetermined there. None if the curve
+    does not bracket ``level`` (below at the first sigma, never below, or undetermined)."""
+    prev = None
+    for s, m, lb in zip(sigmas, mfpts, lower_bounds, strict=True):
+        if m is None or not math.isfinite(m):
+            prev = None
+        elif m >= level:
+            prev = (s, m)
+        elif lb:
+            prev = None  # "at least m", m < level: the crossing may be anywhere around here
+        else:
+            if prev is None:
+                return None
+            (s0, m0), (s1, m1) = prev, (s, m)
+            t = (math.log(m0) - math.log(level)) / (math.log(m0) - math.log(m1))
+            return math.exp(math.log(s0) + t * (math.log(s1) - math.log(s0)))
+    return None
