@@ -19,6 +19,8 @@ Modules, read top to bottom:
 - `sweeps`: e_max against alpha and kc the paper's way, stability windows (Figs. 7-8).
 - `numerics`: finite-difference Jacobian, Newton, fixed points of a map, eigenvalue sort,
   bisection, on any map ``f(z) -> z | None`` (the agents' margins use them too).
+- `paired`: paired comparisons of two closed loops scored on the same random samples
+  (exact McNemar / sign test, bootstrap of the difference of r50; `bound-env compare`).
 - `reproduce` (a package; `reproduce_report` is its old name for the figures and report):
   ``bound-env reproduce``, every published number measured again (Figs. 3-8,
   REPRODUCTION.md).
