@@ -899,16 +899,38 @@ def task_curve(setup: Setup, size: float) -> dict:
     loop = _loop(setup)
     zs, zc = setup.z_star, setup.z_cl
     dirs = random_directions(setup.budget.curve_dirs, sample_seeds(setup.seed)["directions"])
+    timed = getattr(loop.controller, "decision_seconds", None)  # a controller that times itself
+    n0 = len(timed) if timed is not None else 0
     outcomes = [
         int(loop.run(zc + size * np.abs(zs) * u, zc, setup.budget.basin_strides)[0]) for u in dirs
     ]
     wins = sum(outcomes)
-    return {
+    out = {
         "size": size,
         "success": wins / len(dirs),
         "n": len(dirs),
         "k": int(wins),
         "outcomes": outcomes,
+    }
+    if timed is not None:  # every decision of these closed loops [s]
+        out["decision_seconds"] = [float(t) for t in timed[n0:]]
+    return out
+
+
+def decision_summary(curve: list) -> dict | None:
+    """p50, p99, mean and max of a controller's decision times over the random-direction
+    curve's closed loops (None for a controller that does not time its decisions)."""
+    ts = [t for c in curve for t in c.get("decision_seconds", [])]
+    if not any("decision_seconds" in c for c in curve) or not ts:
+        return None
+    a = np.asarray(ts)
+    return {
+        "p50": float(np.median(a)),
+        "p99": float(np.quantile(a, 0.99)),
+        "mean": float(a.mean()),
+        "max": float(a.max()),
+        "n": int(a.size),
+        "measured_on": "every decision of the random-direction curve's closed loops",
     }
 
 
@@ -1470,6 +1492,7 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None, seed=DEFAUL
         "push": push,
         "effort": cyc["effort"],
         "effort_frac": cyc["effort"] / cyc["max_torque"],
+        "decision_seconds": decision_summary(curve),
         "max_torque": cyc["max_torque"],
         "period": cyc["period"],
         "settings": {
@@ -1742,6 +1765,12 @@ def summary_text(r: dict) -> str:
         f"push p50: xdot {r['push']['xdot']['p50']:g} m/s, th1dot {r['push']['th1dot']['p50']:g}"
         f" rad/s   effort {r['effort']:.3g} N m ({100 * r['effort_frac']:.2f} % of max torque)",
     ]
+    d = r.get("decision_seconds")
+    if d:
+        lines.append(
+            f"decision time p50 {1e3 * d['p50']:.3g} ms, p99 {1e3 * d['p99']:.3g} ms, mean "
+            f"{1e3 * d['mean']:.3g} ms, max {1e3 * d['max']:.3g} ms ({d['n']} decisions)"
+        )
     return "\n".join(lines)
 
 

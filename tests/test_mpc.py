@@ -161,3 +161,50 @@ def test_bad_mpc_specs_are_refused(tmp_path, text, message):
     p.write_text(f"controller: mpc\nK: 8\n{text}\n")
     with pytest.raises(ValueError, match=message):
         load_spec(p)
+
+
+def test_decision_summary_of_the_curve():
+    from agents.margins import decision_summary
+
+    curve = [
+        {"size": 0.1, "decision_seconds": [0.001, 0.003]},
+        {"size": 0.2, "decision_seconds": [0.002]},
+    ]
+    d = decision_summary(curve)
+    assert d["n"] == 3 and d["p50"] == 0.002 and d["max"] == 0.003
+    assert d["mean"] == pytest.approx(0.002)
+    assert decision_summary([{"size": 0.1, "success": 1.0}]) is None  # an untimed controller
+
+
+@pytest.mark.slow
+def test_margins_reports_the_mpcs_decision_times(tmp_path):
+    """`bound-env margins --policy mpc` (test budget): every closed-loop decision is timed."""
+    import json
+    import subprocess
+    import sys
+
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "bound_env.cli",
+            "margins",
+            "--policy",
+            "mpc",
+            "--budget",
+            "test",
+            "--out",
+            str(tmp_path),
+            "--json",
+            "--workers",
+            "1",
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    out = json.loads(r.stdout)
+    d = out["decision_seconds"]
+    assert d["n"] > 0 and 0 < d["p50"] <= d["p99"] <= d["max"]
+    assert out["effort"] < 1e-6  # zero torque on the cycle
