@@ -7,14 +7,17 @@ from the command line's ``--scheduler`` and ``--workers``:
 | ``--scheduler`` | executor |
 | --- | --- |
 | (none), ``--workers 1`` | `SerialExecutor`: each task runs at submit time, in this process |
-| (none), ``--workers N`` | `concurrent.futures.ProcessPoolExecutor` with N processes (no Dask) |
+| (none), ``--workers N`` | `RestartingProcessPool`: N worker processes (no Dask) |
 | ``local`` (``local:N``) | `distributed.LocalCluster`: one 1-thread worker process per core (N) |
 | ``tcp://HOST:PORT`` | a `distributed.Client` connected to a running ``dask scheduler`` |
 
 Dask is an optional extra (``pip install -e ".[dask]"``); only the last two rows import it.
 A Dask worker that dies (e.g. SIGKILL) has its tasks rescheduled on the other workers by the
-scheduler (``distributed.scheduler.allowed-failures``, 3 by default); `run_tasks` reports a
-task that raises with its key and arguments and carries on with the others.
+scheduler (``distributed.scheduler.allowed-failures``, 3 by default). The local process pool
+does the same: when a worker process dies (SIGKILL, the OOM killer), `RestartingProcessPool`
+starts a new pool and resubmits the unfinished tasks (at most ``MAX_RESTARTS`` times per
+run; after that they fail with ``BrokenProcessPool``). `run_tasks` reports a task that raises
+with its key and arguments and carries on with the others.
 """
 
 from __future__ import annotations
@@ -23,11 +26,14 @@ import concurrent.futures as cf
 import contextlib
 import os
 import sys
+import threading
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
 DASK_HINT = 'pip install -e ".[dask]"'
 LOCAL = "local"
 CONNECT_TIMEOUT_S = 20  # connecting to a remote scheduler
+MAX_RESTARTS = 3  # new pools after a dead worker, per run (Dask's allowed-failures is 3 too)
 
 
 class SerialExecutor(cf.Executor):
@@ -40,6 +46,100 @@ class SerialExecutor(cf.Executor):
         except BaseException as e:  # noqa: BLE001 - delivered through the future
             fut.set_exception(e)
         return fut
+
+
+class RestartingProcessPool(cf.Executor):
+    """A `concurrent.futures.ProcessPoolExecutor` of ``workers`` processes that survives a
+    dead worker. A killed worker breaks a ProcessPoolExecutor for good (every unfinished
+    future raises ``BrokenProcessPool``); here a new pool is started instead and every task
+    that was unfinished is submitted to it again, so a task's future gets its result as if
+    nothing happened (tasks are functions of their arguments). After ``max_restarts`` new
+    pools the next break is final: the unfinished futures raise ``BrokenProcessPool``."""
+
+    def __init__(self, workers: int, max_restarts: int = MAX_RESTARTS):
+        self.workers, self.max_restarts = int(workers), int(max_restarts)
+        self.restarts = 0
+        self._lock = threading.Lock()
+        self._pool = cf.ProcessPoolExecutor(self.workers)
+        self._generation = 0
+        self._closed = False
+
+    def submit(self, fn, /, *args, **kwargs):
+        outer = cf.Future()
+        self._submit(outer, fn, args, kwargs)
+        return outer
+
+    def _submit(self, outer, fn, args, kwargs) -> None:
+        while True:
+            with self._lock:
+                if self._closed:
+                    raise RuntimeError("cannot submit to a pool that was shut down")
+                pool, generation = self._pool, self._generation
+            try:
+                inner = pool.submit(fn, *args, **kwargs)
+                break
+            except BrokenProcessPool as e:  # broke before this task reached it
+                if not self._restart(generation):
+                    _settle(outer, exc=e)
+                    return
+
+        def done(f):
+            if f.cancelled():
+                outer.cancel()
+                return
+            exc = f.exception()
+            if isinstance(exc, BrokenProcessPool) and self._restart(generation):
+                try:
+                    self._submit(outer, fn, args, kwargs)
+                except RuntimeError as e:  # shut down meanwhile
+                    _settle(outer, exc=e)
+            else:
+                if isinstance(exc, BrokenProcessPool):
+                    exc = BrokenProcessPool(f"{exc} (after {self.restarts} restarts of the pool)")
+                _settle(outer, exc=exc, result=None if exc is not None else f.result())
+
+        inner.add_done_callback(done)
+
+    def _restart(self, generation: int) -> bool:
+        """Replace the pool that broke in ``generation`` (once, whichever task notices it
+        first); False when the restarts are used up or the pool was shut down."""
+        with self._lock:
+            if self._closed:
+                return False
+            if generation != self._generation:
+                return True  # replaced already
+            if self.restarts >= self.max_restarts:
+                return False
+            old = self._pool
+            self._pool = cf.ProcessPoolExecutor(self.workers)
+            self._generation += 1
+            self.restarts += 1
+        old.shutdown(wait=False, cancel_futures=True)
+        print(
+            f"[parallel] a worker process died: restarted the pool ({self.workers} workers, "
+            f"restart {self.restarts} of at most {self.max_restarts}) and resubmitted its "
+            "unfinished tasks",
+            file=sys.stderr,
+            flush=True,
+        )
+        return True
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        with self._lock:
+            self._closed = True
+            pool = self._pool
+        pool.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+
+def _settle(fut: cf.Future, exc=None, result=None) -> None:
+    """Finish ``fut`` unless it was cancelled meanwhile (``run_tasks`` cancels what is left)."""
+    try:
+        if exc is not None:
+            fut.set_exception(exc)
+        else:
+            fut.set_result(result)
+    except cf.InvalidStateError:
+        pass
 
 
 def cpu_count() -> int:
@@ -136,7 +236,7 @@ def open_pool(scheduler: str | None = None, workers: int = 1, quiet: bool = Fals
         if workers == 1:
             yield Pool(SerialExecutor(), "serial", 1)
             return
-        ex = cf.ProcessPoolExecutor(int(workers))
+        ex = RestartingProcessPool(int(workers))
         try:
             yield Pool(ex, "processes", int(workers))
         finally:

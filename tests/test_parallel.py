@@ -6,7 +6,6 @@ they start (process groups, in ``finally``).
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import json
 import operator
 import os
@@ -23,6 +22,8 @@ import pytest
 
 from bound_env.cli import main
 from bound_env.parallel import (
+    MAX_RESTARTS,
+    RestartingProcessPool,
     SerialExecutor,
     TasksFailed,
     check_scheduler,
@@ -59,13 +60,44 @@ def test_missing_dask_is_a_one_line_error(monkeypatch, capsys):
 def test_a_failing_task_is_reported_and_the_others_finish(workers, capsys):
     tasks = {f"div-{d}": (operator.truediv, (1.0, d)) for d in (1, 2, 0, 4)}
     with open_pool(None, workers) as pool:
-        assert isinstance(pool.executor, SerialExecutor if workers == 1 else cf.ProcessPoolExecutor)
+        assert isinstance(pool.executor, SerialExecutor if workers == 1 else RestartingProcessPool)
         done, failures = run_tasks(pool.executor, tasks, desc="div")
     assert done == {"div-1": 1.0, "div-2": 0.5, "div-4": 0.25}
     assert [f.key for f in failures] == ["div-0"] and failures[0].args == (1.0, 0)
     assert "ZeroDivisionError" in failures[0].error
     err = capsys.readouterr().err
     assert "div-0" in err and "(1.0, 0)" in err and "ZeroDivisionError" in err
+
+
+def _die_once(marker, x):
+    """Kill this worker process (SIGKILL) the first time, return 2 x afterwards."""
+    if not os.path.exists(marker):
+        open(marker, "w").close()
+        os.kill(os.getpid(), signal.SIGKILL)
+    return 2 * x
+
+
+def _die(x):
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_process_pool_recovers_from_a_killed_worker(tmp_path, capsys):
+    """A killed worker breaks a ProcessPoolExecutor for good; the local pool restarts and
+    resubmits the unfinished tasks, so every result arrives; a task that kills its worker
+    every time fails after MAX_RESTARTS with BrokenProcessPool, a one-line report."""
+    tasks = {f"x{i}": (operator.mul, (i, 3)) for i in range(8)}
+    tasks["killer"] = (_die_once, (str(tmp_path / "died"), 21))
+    with open_pool(None, 2) as pool:
+        done, failures = run_tasks(pool.executor, tasks, desc="kill")
+        assert pool.executor.restarts == 1
+        assert pool.executor.submit(operator.add, 1, 2).result(timeout=60) == 3  # still usable
+    assert not failures and done == {**{f"x{i}": 3 * i for i in range(8)}, "killer": 42}
+    assert "worker process died" in capsys.readouterr().err
+    with open_pool(None, 2) as pool:
+        done, failures = run_tasks(pool.executor, {"always": (_die, (1,))}, desc="kill")
+        assert pool.executor.restarts == MAX_RESTARTS
+    assert not done and [f.key for f in failures] == ["always"]
+    assert "BrokenProcessPool" in failures[0].error and "restarts" in failures[0].error
 
 
 # -- helpers for real clusters -------------------------------------------------------------------
