@@ -272,8 +272,10 @@ def register(sub) -> None:
     register_basin_map(sub)
 
     from .distill import register as register_distill
+    from .finetune import register as register_finetune
 
     register_distill(sub)
+    register_finetune(sub)
 
 
 def cmd_rollout(args) -> int:

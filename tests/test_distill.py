@@ -108,3 +108,50 @@ def test_cli_distill_refuses_an_existing_export(tmp_path):
     args = ["distill", "--out", str(tmp_path / "r"), "--export", str(tmp_path / "e"), "--quiet"]
     assert main(args) == 2
     assert not (tmp_path / "r").exists()
+
+
+def test_finetune_env_rewards_survival_and_rescues(run):
+    from agents.finetune import ChoiceStrideEnv
+
+    out, _ = run
+    pol = load_choice_policy(out / "policy")
+    env = ChoiceStrideEnv(pol, horizon=30)
+    obs, _ = env.reset(seed=3)
+    assert env._past_safe(env.z) and obs.shape == (6,)
+    assert np.array_equal(obs, ((env.z - pol.z_ref) / pol.scales).astype(np.float32))
+    total, done, k = 0.0, False, 0
+    while not done:
+        obs, r, term, trunc, info = env.step(0)  # the LQR's plan, stride after stride
+        total, done, k = total + r, term or trunc, k + 1
+    if info.get("returned"):
+        assert total == 30.0  # a rescue is worth the whole horizon
+    elif info.get("fell"):
+        assert total == k - 1
+    else:
+        assert trunc and total == 30.0 and k == 30
+
+
+def test_finetune_starts_exactly_as_the_student(run, tmp_path):
+    """PPO's actor gets the distilled weights: its deterministic choice is the student's."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from agents.finetune import ChoiceStrideEnv, _actor_layers, _copy_actor
+
+    out, _ = run
+    pol = load_choice_policy(out / "policy")
+    hidden = [W.shape[0] for W, _ in pol.layers[:-1]]
+    model = PPO(
+        "MlpPolicy",
+        ChoiceStrideEnv(pol),
+        policy_kwargs={"net_arch": {"pi": hidden, "vf": [8]}, "activation_fn": torch.nn.Tanh},
+        device="cpu",
+    )
+    _copy_actor(model, pol.layers)
+    x = np.random.default_rng(0).normal(size=(200, 6)).astype(np.float32)
+    act, _ = model.predict(x, deterministic=True)
+    want = np.argmax(pol.logits(pol.z_ref + x * pol.scales), axis=1)
+    assert np.mean(act == want) > 0.99  # float32 vs float64 ties aside
+    for (a, b), (c, d) in zip(_actor_layers(model), pol.layers, strict=True):
+        np.testing.assert_allclose(a, c, atol=1e-6)
+        np.testing.assert_allclose(b, d, atol=1e-6)

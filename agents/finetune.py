@@ -1,0 +1,254 @@
+"""PPO fine-tuning of a distilled stride controller (agents/distill.py).
+
+**The task** (`ChoiceStrideEnv`): one step = one stride of the planning model the expert and
+the student use, i.e. the step env's own interval torques simulated event-accurately from the
+apex (`bound_env.control.mpc`), so what is learned is what `margins` measures. The action is a
+row of the student's library (Discrete; row 0 the LQR's plan u_lqr(z)); the observation the
+normalized apex error x = (z - z*) / s. Episodes start past the safe radius at z* + r |z*| xi
+(r ~ U(0, ``r_max``), the distillation's start distribution). Reward: 1 per stride survived;
+reaching the safe radius (where the LQR takes over for good) ends the episode with the strides
+left to ``horizon`` as a bonus, so the return is the number of strides survived out of
+``horizon`` and a rescue is worth surviving them all; a fall ends it with nothing more.
+
+**Warm start**: PPO's actor (two tanh layers and the action head) starts with the distilled
+weights, so its deterministic policy starts exactly as the student; the critic starts fresh and
+is first fitted alone (``critic_warmup`` rollouts with the actor frozen). The categorical head
+explores among the library's profiles, which are exactly the far-apart rescues (bang-bang,
+random signs) that Gaussian noise on the coefficients never reached.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+from bound_env.cache import atomic_write
+from bound_env.fast import EVENT_CAPACITY, event_log, recorder
+
+from .distill import ChoicePolicyController, load_choice_policy, sample_starts, save_policy
+from .distill import stride_of as model_stride
+
+
+class ChoiceStrideEnv(gym.Env):
+    """See the module docstring."""
+
+    def __init__(self, policy: ChoicePolicyController, r_max=0.45, axis_prob=0.25, horizon=30):
+        self.pol = policy
+        self.r_max, self.axis_prob, self.horizon = float(r_max), float(axis_prob), int(horizon)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (6,), np.float32)
+        self.action_space = gym.spaces.Discrete(len(policy.rows))
+        self._log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
+        self._rec = recorder(0, 0.0)
+        self.z = policy.z_ref.copy()
+        self.k = 0
+
+    def _obs(self):
+        return ((self.z - self.pol.z_ref) / self.pol.scales).astype(np.float32)
+
+    def _past_safe(self, z) -> bool:
+        return float(np.max(np.abs(z - self.pol.z_ref) / self.pol.scales)) > self.pol.safe
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        while True:
+            z = sample_starts(self.np_random, 1, self.pol.z_ref, self.r_max, self.axis_prob)[0]
+            if self._past_safe(z):
+                break
+        self.z, self.k = z, 0
+        return self._obs(), {}
+
+    def step(self, action):
+        a = int(action)
+        u = self.pol.lqr.coefficients(self.z) if a == 0 else self.pol.rows[a]
+        z1 = model_stride(self.pol, self.z, u, self._log, self._rec)
+        self.k += 1
+        if z1 is None or not np.all(np.isfinite(z1)):
+            return self._obs(), 0.0, True, False, {"fell": True}
+        self.z = z1
+        if not self._past_safe(z1):
+            return self._obs(), 1.0 + (self.horizon - self.k), True, False, {"returned": True}
+        return self._obs(), 1.0, False, self.k >= self.horizon, {}
+
+
+@dataclass
+class FinetuneConfig:
+    timesteps: int = 300_000
+    n_envs: int = 8
+    n_steps: int = 256
+    batch_size: int = 256
+    n_epochs: int = 5
+    learning_rate: float = 1e-4
+    clip_range: float = 0.1
+    ent_coef: float = 0.001
+    gamma: float = 0.98
+    critic_warmup: int = 10  # rollouts with the actor frozen
+    r_max: float = 0.45
+    horizon: int = 30
+    seed: int = 0
+
+
+def _copy_actor(model, layers) -> None:
+    import torch
+
+    lin = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
+    lin.append(model.policy.action_net)
+    if len(lin) != len(layers):
+        raise ValueError("the PPO actor and the distilled network differ in depth")
+    with torch.no_grad():
+        for m, (W, b) in zip(lin, layers, strict=True):
+            m.weight.copy_(torch.as_tensor(W, dtype=torch.float32))
+            m.bias.copy_(torch.as_tensor(b, dtype=torch.float32))
+
+
+def _actor_layers(model) -> list:
+    import torch
+
+    lin = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
+    lin.append(model.policy.action_net)
+    return [(m.weight.detach().double().numpy(), m.bias.detach().double().numpy()) for m in lin]
+
+
+def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -> dict:
+    """PPO from the distilled student in ``student_dir``; the final model is exported to
+    ``out_dir/policy`` (same format as a distilled policy). Checkpoints every 50k steps;
+    a rerun resumes from the last one."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import CheckpointCallback
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    torch.set_num_threads(1)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    student = load_choice_policy(student_dir)
+    t0 = time.perf_counter()
+
+    def make(i):
+        def f():
+            env = ChoiceStrideEnv(student, cfg.r_max, horizon=cfg.horizon)
+            env.reset(seed=cfg.seed * 1000 + i)
+            return gym.wrappers.RecordEpisodeStatistics(env)
+
+        return f
+
+    venv = DummyVecEnv([make(i) for i in range(cfg.n_envs)])
+    venv.seed(cfg.seed)
+    ckpts = sorted(out_dir.glob("ckpt_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
+    if ckpts:
+        model = PPO.load(ckpts[-1], env=venv, device="cpu")
+        if progress:
+            print(f"[finetune] resuming from {ckpts[-1].name}", file=sys.stderr)
+    else:
+        hidden = [W.shape[0] for W, _ in student.layers[:-1]]
+        model = PPO(
+            "MlpPolicy",
+            venv,
+            n_steps=cfg.n_steps,
+            batch_size=cfg.batch_size,
+            n_epochs=cfg.n_epochs,
+            learning_rate=cfg.learning_rate,
+            clip_range=cfg.clip_range,
+            ent_coef=cfg.ent_coef,
+            gamma=cfg.gamma,
+            policy_kwargs={
+                "net_arch": {"pi": hidden, "vf": [128, 128]},
+                "activation_fn": torch.nn.Tanh,
+            },
+            seed=cfg.seed,
+            device="cpu",
+            verbose=0,
+        )
+        _copy_actor(model, student.layers)
+        # the critic alone first: the actor's parameters frozen for the warm-up rollouts
+        actor = list(model.policy.mlp_extractor.policy_net.parameters())
+        actor += list(model.policy.action_net.parameters())
+        for p in actor:
+            p.requires_grad_(False)
+        warm = cfg.critic_warmup * cfg.n_steps * cfg.n_envs
+        model.learn(warm, reset_num_timesteps=True)
+        for p in actor:
+            p.requires_grad_(True)
+        if progress:
+            print(f"[finetune] critic warm-up: {warm} steps", file=sys.stderr)
+    left = cfg.timesteps - model.num_timesteps
+    if left > 0:
+        model.learn(
+            left,
+            reset_num_timesteps=False,
+            callback=CheckpointCallback(50_000 // cfg.n_envs, str(out_dir), "ckpt"),
+            progress_bar=False,
+        )
+    layers = _actor_layers(model)
+    save_policy(
+        out_dir / "policy",
+        student,
+        layers,
+        student.rows,
+        {"finetune": asdict(cfg), "student": str(student_dir)},
+    )
+    ep = [e["r"] for e in model.ep_info_buffer] if model.ep_info_buffer else []
+    summary = {
+        "timesteps": int(model.num_timesteps),
+        "seconds": time.perf_counter() - t0,
+        "mean_return_last": float(np.mean(ep)) if ep else None,
+        "policy": str(out_dir / "policy"),
+    }
+    atomic_write(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def register(sub) -> None:
+    from bound_env.cli_args import add_json_arg, add_progress_args, number
+
+    p = sub.add_parser(
+        "finetune", help="PPO fine-tuning of a distilled stride controller (runs/finetune_s<seed>/)"
+    )
+    p.add_argument("--student", required=True, help="a distilled policy folder or shipped name")
+    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="(default: 0)")
+    p.add_argument("--out", help="run folder, resumable (default: runs/finetune_s<seed>)")
+    p.add_argument(
+        "--timesteps",
+        type=number(int, 1000, 10**9),
+        default=FinetuneConfig.timesteps,
+        help="strides of PPO (default: %(default)s)",
+    )
+    p.add_argument(
+        "--export",
+        metavar="DIR",
+        help="copy the final policy there (refused if it exists, without --force)",
+    )
+    p.add_argument("--force", action="store_true")
+    add_progress_args(p)
+    add_json_arg(p)
+    p.set_defaults(func=cmd_finetune)
+
+
+def cmd_finetune(args) -> int:
+    import shutil
+
+    from .policy import resolve_policy
+
+    student = resolve_policy(args.student)
+    if isinstance(student, str) or not (Path(student) / "choice.npz").is_file():
+        raise ValueError(f"--student {args.student}: not a distilled policy (no choice.npz)")
+    if args.export and Path(args.export).exists() and not args.force:
+        raise ValueError(f"--export {args.export} exists; give --force to replace it")
+    out = Path(args.out or f"runs/finetune_s{args.seed}")
+    cfg = FinetuneConfig(timesteps=args.timesteps, seed=args.seed)
+    summary = finetune(student, out, cfg, progress=not args.no_progress)
+    if args.export:
+        dest = Path(args.export)
+        tmp = dest.with_name(dest.name + ".tmp")
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.copytree(out / "policy", tmp)
+        shutil.rmtree(dest, ignore_errors=True)
+        tmp.rename(dest)
+        summary["exported"] = str(dest)
+    print(json.dumps(summary) if args.json else f"fine-tuned policy: {summary['policy']}")
+    return 0
