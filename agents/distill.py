@@ -406,6 +406,22 @@ def distill(cfg: DistillConfig, out_dir: Path, progress: bool = True) -> dict:
     return summary
 
 
+def write_run_info(folder: Path, seed: int, command: str, seconds: float, made: str) -> None:
+    """``run.json`` of an exported policy: how it was made (read by `compare`'s provenance)."""
+    import os
+    import platform
+
+    info = {
+        "seed": seed,
+        "timesteps_done": made,
+        "wall_time_s": seconds,
+        "command": command,
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        "selection": "final model, no selection",
+    }
+    atomic_write(Path(folder) / "run.json", json.dumps(info, indent=2) + "\n")
+
+
 # --------------------------------------------------------------------------------------------
 # bound-env distill
 # --------------------------------------------------------------------------------------------
@@ -463,6 +479,14 @@ def cmd_distill(args) -> int:
         seed=args.seed,
     )
     summary = distill(cfg, out, progress=not args.no_progress)
+    states = sum(r["states"] for r in summary["rounds"])
+    write_run_info(
+        out / "policy",
+        args.seed,
+        "bound-env " + " ".join(sys.argv[1:]),
+        summary["seconds"],
+        f"{states} labelled states in {len(summary['rounds'])} DAgger rounds",
+    )
     if args.export:
         dest = Path(args.export)
         tmp = dest.with_name(dest.name + ".tmp")

@@ -242,6 +242,15 @@ def cmd_finetune(args) -> int:
     out = Path(args.out or f"runs/finetune_s{args.seed}")
     cfg = FinetuneConfig(timesteps=args.timesteps, seed=args.seed)
     summary = finetune(student, out, cfg, progress=not args.no_progress)
+    from .distill import write_run_info
+
+    write_run_info(
+        out / "policy",
+        args.seed,
+        "bound-env " + " ".join(sys.argv[1:]),
+        summary["seconds"],
+        f"{summary['timesteps']} PPO strides from the distilled student {args.student}",
+    )
     if args.export:
         dest = Path(args.export)
         tmp = dest.with_name(dest.name + ".tmp")
