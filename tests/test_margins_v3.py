@@ -321,7 +321,7 @@ def test_compare_pairs_each_column_with_lqr_and_trained_ones_with_mpc(tmp_path):
     assert "within the noise" in text  # mpc vs lqr: identical outcomes
     # the classical columns say how they were chosen
     lqr_text = " ".join(_provenance({"policies": ["lqr"]}))
-    assert "selected on the test set" in lqr_text and "no selection" not in lqr_text
+    assert "chosen on the validation seed 777" in lqr_text and "no selection" not in lqr_text
 
 
 # -- the cache key -------------------------------------------------------------------------------
