@@ -22,8 +22,9 @@ from bound_env.resources import controllers_dir
 # is built on every start of bound-env)
 _CONTROLLER_NAMES = ", ".join(sorted(p.stem for p in controllers_dir().glob("*.yaml")))
 POLICY_HELP = (
-    "'passive', a shipped policy ('default', 'literal-cycle', 'ppo-v1', "
-    "'stride-residual/s0' .. 's2'), a classical controller (" + _CONTROLLER_NAMES + ": "
+    "'passive', a shipped policy ('default': the learned controller chosen on validation, "
+    "'ppo-v1', 'literal-cycle', 'distilled/s0' .. 's2', 'stride-residual/s0' .. 's2'), a "
+    "classical controller (" + _CONTROLLER_NAMES + ": "
     "bound_env.control, or a controller spec .yaml), or a path: a run/policy folder, a "
     "model .zip, an rl-zoo3 run folder"
 )
@@ -276,6 +277,18 @@ def register(sub) -> None:
 
     register_distill(sub)
     register_finetune(sub)
+
+    # the main job's passive-vs-learned comparison (bound-env demo; agents/demo.py)
+    from bound_env.render_cli import register_demo_part
+
+    register_demo_part("comparison", demo_comparison)
+
+
+def demo_comparison(**kwargs):
+    """`agents.demo.demo_comparison`, imported when ``bound-env demo`` runs it."""
+    from .demo import demo_comparison as run
+
+    return run(**kwargs)
 
 
 def cmd_rollout(args) -> int:

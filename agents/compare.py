@@ -60,10 +60,10 @@ SEED_GROUPS = (
 def default_entries() -> list[tuple[str, list[str], str]]:
     """(label, policies, gait) for the passive gait and every shipped policy."""
     entries = [("passive", ["passive"], "default")]
-    for name in ("ppo-v1", "default"):
-        if (POLICIES_DIR / name / "model.zip").is_file():
-            entries.append(("learned", [str(POLICIES_DIR / name)], "default"))
-            break
+    # the PPO step-level policy; the shipped `default` (the learned controller chosen on
+    # validation) is one of the distilled seeds, a column of its own group below
+    if (POLICIES_DIR / "ppo-v1" / "model.zip").is_file():
+        entries.append(("ppo-v1", [str(POLICIES_DIR / "ppo-v1")], "default"))
     for label, group in SEED_GROUPS:
         seeds = sorted(p for p in (POLICIES_DIR / group).glob("s*") if p.is_dir())
         if seeds:

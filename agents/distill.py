@@ -139,11 +139,66 @@ def save_policy(folder: Path, expert: MPCController, layers, rows, config: dict)
         **config,
     }
     atomic_write(folder / "config.json", json.dumps(spec, indent=2, default=str) + "\n")
+    write_choice_fingerprint(folder)
 
 
-def load_choice_policy(folder, gait=None) -> ChoicePolicyController:
-    """A saved student (a folder with ``choice.npz`` and ``config.json``)."""
+# what a choice policy's fingerprint.json binds together (the network and library, and the
+# frozen expert: its LQR gain, basis, max_torque, dt and settings)
+FINGERPRINTED = (POLICY_FILE, "config.json")
+
+
+def write_choice_fingerprint(folder) -> Path:
+    """``fingerprint.json`` of a choice policy folder: the sha256 of ``choice.npz`` and
+    ``config.json`` (written atomically), checked by `check_choice_fingerprint`, as
+    `agents.policy.write_fingerprint` binds a PPO policy's files."""
+    from .policy import FINGERPRINT_FILE, file_sha256
+
     folder = Path(folder)
+    data = {name: file_sha256(folder / name) for name in FINGERPRINTED}
+    return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
+
+
+def check_choice_fingerprint(folder, force: bool = False) -> list[str]:
+    """ValueError when ``choice.npz`` or ``config.json`` does not match the folder's
+    ``fingerprint.json`` (changed or cut short since the policy was saved, or files of two
+    policies mixed); ``force`` evaluates it as it is, and the mismatch comes back as a
+    warning. A folder without a fingerprint (saved before they were written) passes."""
+    from .policy import FINGERPRINT_FILE, file_sha256
+
+    folder = Path(folder)
+    fp = folder / FINGERPRINT_FILE
+    if not fp.is_file():
+        return []
+    try:
+        want = json.loads(fp.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise ValueError(f"{fp}: not a readable JSON file") from None
+    if not isinstance(want, dict):
+        raise ValueError(f"{fp}: not a fingerprint (a JSON object of sha256 digests)")
+    warnings = []
+    for name in FINGERPRINTED:
+        path = folder / name
+        if name in want and (not path.is_file() or file_sha256(path) != want[name]):
+            msg = (
+                f"{path} does not match {fp} (sha256): it was changed or cut short after the "
+                "policy was saved"
+            )
+            if not force:
+                raise ValueError(
+                    msg + "; pass --force (margins, rollout, basin-map) to evaluate the policy "
+                    "with it as it is"
+                )
+            warnings.append(msg)
+    return warnings
+
+
+def load_choice_policy(folder, gait=None, force: bool = False) -> ChoicePolicyController:
+    """A saved student (a folder with ``choice.npz`` and ``config.json``), checked against its
+    ``fingerprint.json`` (`check_choice_fingerprint`; ``force`` loads a mismatch with a
+    warning)."""
+    folder = Path(folder)
+    for w in check_choice_fingerprint(folder, force):
+        print(f"warning: {w}", file=sys.stderr)
     try:
         cfg = json.loads((folder / "config.json").read_text())
         with np.load(folder / POLICY_FILE) as d:

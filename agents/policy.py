@@ -539,7 +539,7 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     if Path(path).is_dir() and (Path(path) / "choice.npz").is_file():
         from .distill import load_choice_policy  # a distilled student (agents/distill.py)
 
-        return load_choice_policy(path, gait=gait)
+        return load_choice_policy(path, gait=gait, force=force)
     files = find_policy_files(path)
     if files.config is not None and read_policy_section(files)[1] == "PassiveBoundStride-v0":
         from .stride import load_stride_policy  # a stride-level policy (agents/stride.py)

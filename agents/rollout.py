@@ -40,11 +40,15 @@ ENV_ID = "PassiveBound-v0"  # the env class; the policy's env id only adds its r
 
 
 def _policy_wrappers(path) -> list:
-    """[(class, kwargs)] of the observation/action wrappers in a saved policy's config."""
+    """[(class, kwargs)] of the observation/action wrappers in a saved policy's config (none
+    for a distilled choice policy, `agents.distill`: it reads the env's own observation)."""
     import gymnasium as gym
 
     from .config import _entries, get_class_by_name
+    from .distill import POLICY_FILE
 
+    if Path(path).is_dir() and (Path(path) / POLICY_FILE).is_file():
+        return []
     section, _, _ = read_policy_section(find_policy_files(path))
     out = []
     for name, kwargs in _entries(section.get("env_wrapper")):

@@ -84,7 +84,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--grid", type=int, default=64, help="passive grid (default: 64)")
     ap.add_argument("--policy-grid", type=int, default=64, help="policy grid (0: skip)")
-    ap.add_argument("--policy", default="default", help="shipped policy name or path")
+    ap.add_argument(
+        "--policy",
+        default="ppo-v1",
+        help="shipped policy name or path (default: ppo-v1, the PPO policy of the README's row)",
+    )
     ap.add_argument("--no-dask", action="store_true")
     ap.add_argument("--repeat", type=int, default=1, help="rounds of the passive cases")
     args = ap.parse_args()

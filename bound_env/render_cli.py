@@ -4,15 +4,39 @@
 The robot runs PassiveBound-v0 with zero action from the gait's apex state (no start noise),
 so the animation shows exactly the passive model; frames are taken from the environment's
 ``rgb_array`` rendering.
+
+``bound-env demo`` is the main job: the passive cycle (a zero-action episode, ``bound.gif``),
+then every registered *demo part* (`register_demo_part`). The core registers none: a part
+that needs more than the core lives above it and registers itself when its commands are
+registered (the ``bound_env.commands`` entry point, `bound_env.cli`); ``agents`` adds the
+passive-vs-learned comparison from a perturbed start (agents/demo.py, ``comparison`` in
+``summary.json``, ``compare.gif``). bound_env never imports agents (tests/test_layers.py).
 """
 
 from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
-from .cli_args import add_gait_args, gait_overrides, number, out_dir, strict_json
+from .cli_args import (
+    add_gait_args,
+    add_progress_args,
+    gait_overrides,
+    number,
+    out_dir,
+    strict_json,
+)
+
+# name -> part(gait=..., out=..., progress=...) -> (JSON-able summary, lines to print at the
+# end); ``bound-env demo`` runs them in order and stores each summary under its name
+DEMO_PARTS: dict[str, Callable] = {}
+
+
+def register_demo_part(name: str, part: Callable) -> None:
+    """Add ``part`` to ``bound-env demo`` (its summary goes to ``summary.json[name]``)."""
+    DEMO_PARTS[name] = part
 
 
 def register(sub) -> None:
@@ -54,10 +78,13 @@ def register(sub) -> None:
         help="also save one frame (mid-stance of the first stride) as a PNG",
     )
     p.add_argument("--json", action="store_true", help="print a JSON summary")
+    add_progress_args(p)
     p.set_defaults(func=cmd_animate)
 
     p = sub.add_parser(
-        "demo", help="the main job: a zero-action episode of PassiveBound-v0 on the passive cycle"
+        "demo",
+        help="the main job: a zero-action episode of PassiveBound-v0 on the passive cycle, "
+        "then passive vs the shipped learned controller from a perturbed start",
     )
     add_gait_args(p, default="default", overrides=False)
     p.add_argument("--out", default="out/demo", help="folder for summary.json and bound.gif")
@@ -68,16 +95,26 @@ def register(sub) -> None:
         help="strides in the animation",
     )
     p.add_argument("--json", action="store_true", help="print the JSON summary")
+    add_progress_args(p)
     p.set_defaults(func=cmd_demo)
 
 
 def animation_frames(
-    gait="default", overrides=None, strides=3.0, fps=50.0, slowdown=1.0, width=640, height=360
+    gait="default",
+    overrides=None,
+    strides=3.0,
+    fps=50.0,
+    slowdown=1.0,
+    width=640,
+    height=360,
+    progress=False,
+    desc="frames",
 ):
     """(frames, stride period [s], simulated time between frames [s]) of the passive gait.
 
     One frame every ``slowdown / fps`` seconds of simulated time (rounded to whole control
-    intervals of the environment); stops early if the gait fails.
+    intervals of the environment); stops early if the gait fails. ``progress``: a progress
+    bar (stderr) over the control intervals.
     """
     import numpy as np
 
@@ -100,14 +137,25 @@ def animation_frames(
     env.reset(seed=0)
     frames = [env.render()]
     zero = np.zeros(1, dtype=np.float32)
-    for k in range(1, n_steps + 1):
-        _, _, terminated, _, info = env.step(zero)
-        if k % every == 0 or terminated:
-            frames.append(env.render())
-        if terminated:
-            print(f"the gait failed after {k * env.dt:.2f} s: {info['failure']}")
-            break
-    env.close()
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=n_steps, desc=desc, unit="step", file=sys.stderr)
+    try:
+        for k in range(1, n_steps + 1):
+            _, _, terminated, _, info = env.step(zero)
+            if k % every == 0 or terminated:
+                frames.append(env.render())
+            if bar is not None:
+                bar.update()
+            if terminated:
+                print(f"the gait failed after {k * env.dt:.2f} s: {info['failure']}")
+                break
+    finally:
+        if bar is not None:
+            bar.close()
+        env.close()
     return frames, period, every * env.dt
 
 
@@ -129,7 +177,15 @@ def cmd_animate(args) -> int:
         out_dir(Path(args.frame).parent, "--frame")
     overrides = gait_overrides(args)
     frames, period, frame_dt = animation_frames(
-        args.gait, overrides, args.strides, args.fps, args.slowdown, args.width, args.height
+        args.gait,
+        overrides,
+        args.strides,
+        args.fps,
+        args.slowdown,
+        args.width,
+        args.height,
+        progress=not args.no_progress,
+        desc=target.name,
     )
     if not frames:
         raise ValueError(f"gait {args.gait!r} gives no frames to animate")
@@ -160,12 +216,15 @@ def cmd_animate(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    """Zero action from z* for a whole episode; print a summary, write JSON and a GIF."""
+    """Zero action from z* for a whole episode, then the registered demo parts (`DEMO_PARTS`:
+    with agents installed, passive vs the shipped learned controller from a perturbed start);
+    print a summary, write ``summary.json`` and the GIFs."""
     import gymnasium as gym
     import numpy as np
 
+    from .cache import atomic_write
     from .params import z_to_paper
-    from .render import save_gif
+    from .render import write_video
 
     out = out_dir(args.out)
     env = gym.make("PassiveBound-v0", gait=args.gait, reset_noise_scale=0.0)
@@ -194,9 +253,16 @@ def cmd_demo(args) -> int:
         "truncated": bool(truncated),
         "failure": info.get("failure"),
     }
-    (out / "summary.json").write_text(strict_json(summary))
-    frames, period, frame_dt = animation_frames(args.gait, None, args.gif_strides)
-    gif = save_gif(frames, out / "bound.gif", fps=1.0 / frame_dt) if frames else None
+    progress = not args.no_progress
+    frames, period, frame_dt = animation_frames(
+        args.gait, None, args.gif_strides, progress=progress, desc="bound.gif"
+    )
+    gif = write_video(frames, out / "bound.gif", fps=1.0 / frame_dt) if frames else None
+    later = []  # the parts' lines, printed at the end
+    for name, part in DEMO_PARTS.items():
+        summary[name], lines = part(gait=args.gait, out=out, progress=progress)
+        later += lines
+    atomic_write(out / "summary.json", strict_json(summary))
     if args.json:
         print(
             strict_json(
@@ -217,4 +283,6 @@ def cmd_demo(args) -> int:
         if gif
         else f"wrote {out / 'summary.json'} (no frames: the gait fails at once)"
     )
+    for line in later:
+        print(line)
     return 0

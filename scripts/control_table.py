@@ -27,7 +27,7 @@ from bound_env.control import ControllerSpec, load_controller
 XD = [1.0, 1.0, 1.0, 10.0, 1.0, 1.0]  # Q weighting forward speed 10x
 SETTINGS = [  # (label, spec keyword arguments)
     ("passive", None),
-    ("learned (agents/policies/default)", "agents/policies/default"),
+    ("learned (agents/policies/ppo-v1)", "agents/policies/ppo-v1"),  # the PPO policy
     ("lqr windows K=4 R=1", dict(basis="windows", K=4, R=1.0)),
     ("lqr windows K=6 R=0.1", dict(basis="windows", K=6, R=0.1)),
     ("lqr windows K=8 R=1", dict(basis="windows", K=8, R=1.0)),

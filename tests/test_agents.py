@@ -22,7 +22,8 @@ from agents.margins import (
 )
 from agents.policy import MLPController, ZeroController, load_controller
 
-SHIPPED = Path(__file__).resolve().parent.parent / "agents" / "policies" / "default"
+# the shipped PPO policy (the `default` controller is a distilled choice policy: test_distill)
+SHIPPED = Path(__file__).resolve().parent.parent / "agents" / "policies" / "ppo-v1"
 MARGIN_KEYS = (
     "basin",
     "basin_min",

@@ -47,7 +47,7 @@ def test_progress_flag_and_alias_on_long_commands():
     from bound_env.cli import build_parser
 
     parser = build_parser()
-    for cmd in ("train", "margins", "compare", "continue", "sweep", "reproduce"):
+    for cmd in ("train", "margins", "compare", "continue", "sweep", "reproduce", "demo", "animate"):
         sub = parser._subparsers._group_actions[0].choices[cmd]
         flags = set(sub._option_string_actions)
         assert {"--no-progress", "--quiet"} <= flags, cmd

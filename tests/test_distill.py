@@ -95,10 +95,54 @@ def test_the_weights_are_the_fingerprint(run, tmp_path):
         arrays = dict(f)
     arrays["b0"] = arrays["b0"] + 1e-3
     np.savez(copy / "choice.npz", **arrays)
+    with pytest.raises(ValueError, match="choice.npz does not match"):  # fingerprint.json
+        load_choice_policy(copy)
+    (copy / "fingerprint.json").unlink()  # a folder saved before fingerprints: not checked
     assert load_choice_policy(copy).fingerprint() != pol.fingerprint()
     (copy / "config.json").write_text(json.dumps({"kind": "choice"}))
     with pytest.raises(ValueError, match="not a readable distilled policy"):
         load_choice_policy(copy)
+
+
+def test_the_shipped_default_is_a_fingerprinted_choice_policy(tmp_path, capsys):
+    """`default` is the learned controller chosen on validation (a distilled choice policy):
+    its fingerprint.json binds choice.npz and config.json; a changed file is refused with a
+    one-line error unless --force (then a warning)."""
+    import shutil
+
+    from agents.distill import ChoicePolicyController
+    from agents.policy import load_controller, shipped_policies
+    from bound_env.cli import main
+
+    src = shipped_policies()["default"]
+    fp = json.loads((src / "fingerprint.json").read_text())
+    assert set(fp) == {"choice.npz", "config.json"}
+    ctrl = load_controller("default")
+    assert isinstance(ctrl, ChoicePolicyController)
+    assert ctrl.fingerprint() == load_controller(src).fingerprint()
+    copy = tmp_path / "pol"
+    shutil.copytree(src, copy)
+    cfg = json.loads((copy / "config.json").read_text())
+    cfg["note"] = "edited"
+    (copy / "config.json").write_text(json.dumps(cfg))
+    with pytest.raises(ValueError, match="config.json does not match.*--force"):
+        load_controller(copy)
+    assert main(["rollout", "--policy", str(copy), "--strides", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "config.json does not match" in err and "--force" in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    forced = load_controller(copy, force=True)
+    assert forced.fingerprint() == ctrl.fingerprint()  # the edit changed nothing it uses
+    assert "warning:" in capsys.readouterr().err
+
+
+def test_a_saved_policy_carries_its_fingerprint(run):
+    from agents.distill import check_choice_fingerprint
+
+    out, _ = run
+    fp = json.loads((out / "policy" / "fingerprint.json").read_text())
+    assert set(fp) == {"choice.npz", "config.json"}
+    assert check_choice_fingerprint(out / "policy") == []
 
 
 def test_cli_distill_refuses_an_existing_export(tmp_path):
@@ -155,3 +199,16 @@ def test_finetune_starts_exactly_as_the_student(run, tmp_path):
     for (a, b), (c, d) in zip(_actor_layers(model), pol.layers, strict=True):
         np.testing.assert_allclose(a, c, atol=1e-6)
         np.testing.assert_allclose(b, d, atol=1e-6)
+
+
+def test_the_default_controller_runs_in_margins_and_basin_map(tmp_path, capsys):
+    """The shipped default (a choice policy) by name through every evaluation command."""
+    from bound_env.cli import main
+
+    m = ["margins", "--policy", "default", "--budget", "test", "--workers", "1", "--no-cache"]
+    assert main([*m, "--no-progress", "--json", "--out", str(tmp_path / "m")]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["emax"] < 0.5 and r["basin_min"] > 0  # the LQR's cycle, stiffer than passive
+    b = ["basin-map", "--policy", "default", "--grid", "2", "--no-progress"]
+    assert main([*b, "--out", str(tmp_path / "b")]) == 0
+    assert (tmp_path / "b" / "basin.npz").is_file()

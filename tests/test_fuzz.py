@@ -41,16 +41,23 @@ def files(tmp_path):
     blocker.write_text("x")
     out["file"] = str(blocker)
     out["dir"] = str(tmp_path)
-    # a policy whose config.yaml was cut at a line boundary before env_kwargs: it parses and
-    # matches the observation shape, but would run at the env's default max_torque
+    # a PPO policy whose config.yaml was cut at a line boundary before env_kwargs: it parses
+    # and matches the observation shape, but would run at the env's default max_torque
     from agents.policy import shipped_policies
 
     cut = tmp_path / "cut-policy"
-    shutil.copytree(shipped_policies()["default"], cut)
+    shutil.copytree(shipped_policies()["ppo-v1"], cut)
     lines = (cut / "config.yaml").read_text().splitlines(keepends=True)
     end = next(i for i, line in enumerate(lines) if line.lstrip().startswith("env_kwargs"))
     (cut / "config.yaml").write_text("".join(lines[:end]))
     out["cut_policy"] = str(cut)
+    # the shipped default (a distilled choice policy) with its config.json cut short: its
+    # fingerprint.json holds the sha256
+    cut = tmp_path / "cut-choice"
+    shutil.copytree(shipped_policies()["default"], cut)
+    text = (cut / "config.json").read_text()
+    (cut / "config.json").write_text(text[: len(text) // 2])
+    out["cut_choice"] = str(cut)
     return out
 
 
@@ -248,6 +255,11 @@ def _cases(f):
                 f["dir"] + "/cmp",
             ],
             "config.yaml does not match",
+        ),
+        (["rollout", "--policy", f["cut_choice"], "--strides", "1"], "config.json does not match"),
+        (
+            ["margins", "--policy", f["cut_choice"], "--budget", "test", "--out", f["dir"] + "/m"],
+            "config.json does not match",
         ),
         # overwrites
         (_train(f, "--export", f["cut_policy"]), "--force"),

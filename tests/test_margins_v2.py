@@ -157,3 +157,14 @@ def test_compare_entries_take_several_policies():
     for bad in ("nolabel", "x=", "=a"):
         with pytest.raises(ValueError, match="entry"):
             parse_entry(bad)
+
+
+def test_compare_default_columns_keep_ppo_v1_and_the_distilled_seeds():
+    """ppo-v1 (PPO) has its own column; the shipped `default` (a distilled choice policy) is
+    not a second PPO column: it is one of the distilled seeds."""
+    from agents.compare import default_entries
+
+    entries = {label: (policies, gait) for label, policies, gait in default_entries()}
+    assert entries["ppo-v1"][0][0].endswith("ppo-v1") and "learned" not in entries
+    assert any(p.endswith("distilled/s0") for p in entries["distilled"][0])
+    assert not any(p.rstrip("/").endswith("default") for e in entries.values() for p in e[0])

@@ -22,42 +22,32 @@ ROOT = Path(__file__).resolve().parent.parent
 
 @pytest.fixture
 def policy_copy(tmp_path):
-    """A writable copy of the shipped default policy."""
+    """A writable copy of the shipped PPO policy (ppo-v1; `default` is a choice policy)."""
     dest = tmp_path / "pol"
-    shutil.copytree(shipped_policies()["default"], dest)
+    shutil.copytree(shipped_policies()["ppo-v1"], dest)
     return dest
 
 
 def test_shipped_policies_by_name_and_fingerprinted():
     shipped = shipped_policies()
-    assert set(shipped) >= {"default", "literal-cycle"}
+    assert set(shipped) >= {"default", "literal-cycle", "ppo-v1"}
     for folder in shipped.values():
         assert (folder / "fingerprint.json").is_file()
         load_controller(folder)  # passes every check (fingerprint, normalization, config)
 
 
-def test_rollout_reports_strides_torque_and_apex_error(tmp_path, capsys):
-    assert (
-        main(
-            [
-                "rollout",
-                "--policy",
-                "default",
-                "--strides",
-                "3",
-                "--json",
-                "--out",
-                str(tmp_path / "r"),
-            ]
-        )
-        == 0
-    )
+@pytest.mark.parametrize("policy", ["ppo-v1", "default"])
+def test_rollout_reports_strides_torque_and_apex_error(tmp_path, capsys, policy):
+    """The PPO policy and the shipped default (a distilled stride controller)."""
+    out = tmp_path / "r"
+    argv = ["rollout", "--policy", policy, "--strides", "3", "--noise", "0.3"]
+    assert main([*argv, "--json", "--out", str(out)]) == 0
     r = json.loads(capsys.readouterr().out)
     assert r["strides"] == 3 and r["fell"] is False and r["failure"] is None
     assert len(r["apex_error"]) == 3
     # the policy uses its own max_torque (80 N m, from its config), not the env default (40)
     assert r["max_torque"] == 80.0 and 0 < r["mean_abs_tau"] < 80.0
-    assert json.loads((tmp_path / "r" / "summary.json").read_text()) == r
+    assert json.loads((out / "summary.json").read_text()) == r
 
 
 def test_passive_rollout_applies_no_torque():
@@ -81,7 +71,7 @@ def test_load_policy_matches_plain_sb3_and_readme_example_runs():
     exec(example.replace("range(400)", "range(60)"), scope)  # noqa: S102 - the README's code
     assert scope["done"].shape == (1,)
     # the README's SB3 route and load_policy's act give the same actions
-    make_env, act = load_policy("default")
+    make_env, act = load_policy("ppo-v1")
     venv = scope["venv"]
     model = PPO.load(scope["folder"] / "model.zip", device="cpu")
     env = make_env()
@@ -136,13 +126,13 @@ def test_refuses_another_gait_unless_forced(capsys):
     assert "--force" in capsys.readouterr().err
     ctrl = load_controller("literal-cycle", gait="default", force=True)
     assert ctrl.env_kwargs["gait"] == "literal-cycle"
-    load_controller("default", gait=ROOT / "configs" / "gaits" / "default.yaml")  # same gait
+    load_controller("ppo-v1", gait=ROOT / "configs" / "gaits" / "default.yaml")  # same gait
 
 
 def test_rl_zoo3_run_folder_is_read(tmp_path):
     """rl-zoo3's layout: <run>/<env id>.zip and <run>/<env id>/{config.yml, vecnormalize.pkl},
     the config dumped as an OrderedDict by PyYAML."""
-    src = shipped_policies()["default"]
+    src = shipped_policies()["ppo-v1"]
     run = tmp_path / "PassiveBound-v0_1"
     params = run / "PassiveBound-v0"
     params.mkdir(parents=True)
@@ -153,7 +143,7 @@ def test_rl_zoo3_run_folder_is_read(tmp_path):
     assert "OrderedDict" in (params / "config.yml").read_text()
     files = find_policy_files(run)
     assert files.layout == "rl-zoo3" and files.model.name == "PassiveBound-v0.zip"
-    want = load_controller("default").fingerprint()
+    want = load_controller("ppo-v1").fingerprint()
     for given in (run, params, run / "PassiveBound-v0.zip"):
         assert load_controller(given).fingerprint() == want
 
@@ -161,6 +151,9 @@ def test_rl_zoo3_run_folder_is_read(tmp_path):
 def test_fingerprint_covers_the_config_and_old_fingerprints_still_load(policy_copy):
     for name, folder in shipped_policies().items():
         fp = json.loads((folder / "fingerprint.json").read_text())
+        if (folder / "choice.npz").is_file():  # a distilled choice policy (test_distill)
+            assert set(fp) == {"choice.npz", "config.json"}, name
+            continue
         assert "config.yaml" in fp, name
         assert ("base.json" in fp) == (folder / "base.json").is_file(), name
     # a fingerprint written before it covered the config (model and statistics only) loads
