@@ -51,6 +51,7 @@ CLASSICAL_SELECTION = {
 }
 # Learned columns with one folder per training seed, shipped in agents/policies/<group>/s<k>
 SEED_GROUPS = (
+    ("fine-tuned", "finetuned"),  # agents/finetune.py: PPO from the distilled, final models
     ("distilled", "distilled"),  # agents/distill.py: DAgger from mpc, final models
     ("ppo-v1 final", "ppo-v1-final"),  # ppo-v1's recipe, final models
     ("stride-residual", "stride-residual"),  # agents/stride.py: PPO residual on the LQR
