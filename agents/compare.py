@@ -49,26 +49,31 @@ CLASSICAL_SELECTION = {
     "a larger library, more cross-entropy rounds, a wider safe radius) on 96 random directions "
     "of seed 777 at r = 0.15-0.35 (README); its LQR is `lqr`'s design",
 }
-# Learned columns with one folder per training seed, shipped in agents/policies/<group>/s<k>
+# Learned columns with one folder per training seed, shipped in agents/policies/<group>/s<k>:
+# the page's (SEED_GROUPS), and the ablations a user can add with --entry (EXTRA_GROUPS)
 SEED_GROUPS = (
-    ("fine-tuned", "finetuned"),  # agents/finetune.py: PPO from the distilled, final models
-    ("distilled", "distilled"),  # agents/distill.py: DAgger from mpc, final models
-    ("ppo-v1 final", "ppo-v1-final"),  # ppo-v1's recipe, final models
+    ("fine-tuned", "finetuned"),  # agents/finetune.py: PPO from the distilled (`default`: s0)
+    ("ppo-v1", "ppo-v1-final"),  # ppo-v1's recipe (step-level PPO), final models
+)
+EXTRA_GROUPS = (
+    ("distilled", "distilled"),  # agents/distill.py: DAgger from mpc, before fine-tuning
     ("stride-residual", "stride-residual"),  # agents/stride.py: PPO residual on the LQR
 )
+
+
+def seed_group(group: str) -> list[str]:
+    """The shipped seed folders of a group (``agents/policies/<group>/s*``)."""
+    return [str(p) for p in sorted((POLICIES_DIR / group).glob("s*")) if p.is_dir()]
 
 
 def default_entries() -> list[tuple[str, list[str], str]]:
     """(label, policies, gait) for the passive gait and every shipped policy."""
     entries = [("passive", ["passive"], "default")]
-    # the PPO step-level policy; the shipped `default` (the learned controller chosen on
-    # validation) is one of the distilled seeds, a column of its own group below
-    if (POLICIES_DIR / "ppo-v1" / "model.zip").is_file():
-        entries.append(("ppo-v1", [str(POLICIES_DIR / "ppo-v1")], "default"))
+    # learned columns, one policy per seed (the shipped `default` is fine-tuned/s0; the
+    # selected checkpoint `agents/policies/ppo-v1` is left out: its final-model seeds are in)
     for label, group in SEED_GROUPS:
-        seeds = sorted(p for p in (POLICIES_DIR / group).glob("s*") if p.is_dir())
-        if seeds:
-            entries.append((label, [str(p) for p in seeds], "default"))
+        if seed_group(group):
+            entries.append((label, seed_group(group), "default"))
     # the classical stride-level controllers (bound_env.control, configs/controllers/)
     entries += [(name, [name], "default") for name in CLASSICAL]
     if (POLICIES_DIR / "literal-cycle" / "model.zip").is_file():

@@ -159,12 +159,16 @@ def test_compare_entries_take_several_policies():
             parse_entry(bad)
 
 
-def test_compare_default_columns_keep_ppo_v1_and_the_distilled_seeds():
-    """ppo-v1 (PPO) has its own column; the shipped `default` (a distilled choice policy) is
-    not a second PPO column: it is one of the distilled seeds."""
-    from agents.compare import default_entries
+def test_compare_default_columns_are_the_pages():
+    """The page's columns: passive, the fine-tuned seeds (the shipped `default` is s0, not a
+    column of its own), ppo-v1's final-model seeds, the classical controllers with mpc, and
+    the literal cycle; the distilled and stride-residual seeds are ablations added by
+    --entry."""
+    from agents.compare import CLASSICAL, default_entries
 
     entries = {label: (policies, gait) for label, policies, gait in default_entries()}
-    assert entries["ppo-v1"][0][0].endswith("ppo-v1") and "learned" not in entries
-    assert any(p.endswith("distilled/s0") for p in entries["distilled"][0])
+    assert [p.split("/")[-1] for p in entries["fine-tuned"][0]] == ["s0", "s1", "s2"]
+    assert all("ppo-v1-final/s" in p for p in entries["ppo-v1"][0])
+    assert set(CLASSICAL) <= set(entries) and "mpc" in entries
+    assert "distilled" not in entries and "learned" not in entries
     assert not any(p.rstrip("/").endswith("default") for e in entries.values() for p in e[0])
