@@ -49,6 +49,17 @@ CLASSICAL_SELECTION = {
     "a larger library, more cross-entropy rounds, a wider safe radius) on 96 random directions "
     "of seed 777 at r = 0.15-0.35 (README); its LQR is `lqr`'s design",
 }
+# How a learned recipe was chosen (README: "Model-predictive control, and a learned
+# controller distilled from it"), said under its column's provenance
+LEARNED_SELECTION = {
+    "finetuned": "recipe **chosen on the validation seed 777** (96 random directions, r = "
+    "0.15-0.35), never on this page's test set: each seed is PPO (1.5e6 strides) from the "
+    "student distilled by DAgger from `mpc` with the same seed (`agents/policies/distilled/sS`);"
+    " fine-tuning was chosen over the distilled students and 1.5e6 strides over 3e5 there; "
+    "`agents/policies/default` is seed 0 (no choice among seeds)",
+    "ppo-v1-final": "ppo-v1's recipe (configs/ppo.yaml) unchanged, its final models (the "
+    "shipped `agents/policies/ppo-v1` is a checkpoint selected on axis basins, left out here)",
+}
 # Learned columns with one folder per training seed, shipped in agents/policies/<group>/s<k>:
 # the page's (SEED_GROUPS), and the ablations a user can add with --entry (EXTRA_GROUPS)
 SEED_GROUPS = (
@@ -420,11 +431,16 @@ def _provenance(g) -> list[str]:
             )
         else:
             sel = "final model, **no selection**"
+        made = info.get("timesteps_done", "?")
+        made = made if isinstance(made, str) else f"{made} timesteps"  # or said in words
         lines.append(
-            f"`{_rel(policy)}`: seed {info.get('seed', '?')}, {info.get('timesteps_done', '?')} "
-            f"timesteps, {'%.1f min' % (t / 60) if t else '?'} of training on "
+            f"`{_rel(policy)}`: seed {info.get('seed', '?')}, {made}, "
+            f"{'%.1f min' % (t / 60) if t else '?'} of training on "
             f"{info.get('machine', '?')}; {sel}; command `{_command(info.get('command', '?'))}`"
         )
+    group = Path(g["policies"][0]).parent.name if g["policies"] else ""
+    if group in LEARNED_SELECTION:
+        lines.append(LEARNED_SELECTION[group])
     return lines
 
 
