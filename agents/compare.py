@@ -187,7 +187,7 @@ def compare(
             shutil.copyfile(src, dst)
             curves.append((g["label"], g["policies"][0], dst))
     pairs = paired_comparisons(groups)
-    page = render_markdown(groups, plots, curves, budget, note, pairs)
+    page = render_markdown(groups, plots, curves, budget, note, pairs, basin_maps(docs))
     path = docs / "MARGINS.md"
     atomic_write(
         path.with_name("paired.json"),
@@ -514,7 +514,31 @@ def paired_text(pairs) -> str:
     return "\n".join(words) + "\n\n" + table + "\n\n" + "\n\n".join(details)
 
 
-def render_markdown(groups, plots, curves, budget, note: str = "", pairs=None) -> str:
+# Basin maps the page shows when they are in its folder (`bound-env basin-map --png
+# DIR/basin_<name>_<slice>.png`; the README's "Basin maps" section has the commands)
+BASIN_MAPS = ("passive", "lqr", "mpc", "default")
+BASIN_SLICES = (("xdot_y", "ẋ_g × y_g"), ("th1_th1dot", "θ1 × θ̇1"))
+
+
+def basin_maps(docs: Path) -> str:
+    """Markdown of the basin-map PNGs present in ``docs`` (empty if none)."""
+    rows = []
+    for key, title in BASIN_SLICES:
+        cells = [
+            f"![{name}, {title}](basin_{name}_{key}.png)"
+            for name in BASIN_MAPS
+            if (Path(docs) / f"basin_{name}_{key}.png").is_file()
+        ]
+        if cells:
+            rows.append(
+                f"**{title}** ({', '.join(BASIN_MAPS)}, where made):\n\n" + "\n".join(cells)
+            )
+    return "\n\n".join(rows)
+
+
+def render_markdown(
+    groups, plots, curves, budget, note: str = "", pairs=None, maps: str = ""
+) -> str:
     from .margins import BUDGETS
 
     labels = [g["label"] for g in groups]
@@ -816,6 +840,14 @@ first) and the stance phase in which it happened, and what the start state itsel
 ![mean first-passage time on rough terrain](margins_mfpt.png)
 
 ![push recovery](margins_push.png)
+
+## Basin maps
+
+Slices through z* (64 × 64 starts, 100 strides; `bound-env basin-map`; `default` is the
+fine-tuned seed 0), each outlining the passive basin in red; the right panel of each says why
+the falls fell.
+
+{maps or "(no basin maps in this folder)"}
 
 ## Training curves
 

@@ -172,3 +172,14 @@ def test_compare_default_columns_are_the_pages():
     assert set(CLASSICAL) <= set(entries) and "mpc" in entries
     assert "distilled" not in entries and "learned" not in entries
     assert not any(p.rstrip("/").endswith("default") for e in entries.values() for p in e[0])
+
+
+def test_the_page_shows_the_basin_maps_in_its_folder(tmp_path):
+    from agents.compare import basin_maps
+
+    assert basin_maps(tmp_path) == ""
+    (tmp_path / "basin_mpc_xdot_y.png").write_bytes(b"png")
+    (tmp_path / "basin_default_th1_th1dot.png").write_bytes(b"png")
+    text = basin_maps(tmp_path)
+    assert "](basin_mpc_xdot_y.png)" in text and "](basin_default_th1_th1dot.png)" in text
+    assert "basin_lqr" not in text
