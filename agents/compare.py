@@ -437,6 +437,7 @@ def _provenance(g) -> list[str]:
             f"`{_rel(policy)}`: seed {info.get('seed', '?')}, {made}, "
             f"{'%.1f min' % (t / 60) if t else '?'} of training on "
             f"{info.get('machine', '?')}; {sel}; command `{_command(info.get('command', '?'))}`"
+            + (f" ({info['note']})" if info.get("note") else "")
         )
     group = Path(g["policies"][0]).parent.name if g["policies"] else ""
     if group in LEARNED_SELECTION:
