@@ -89,6 +89,12 @@ def main() -> None:
         default="ppo-v1",
         help="shipped policy name or path (default: ppo-v1, the PPO policy of the README's row)",
     )
+    ap.add_argument(
+        "--also",
+        default="lqr,default",
+        help="more controllers timed like the policy, comma-separated (default: lqr, the "
+        "stride LQR, per robot in Python; default, the fine-tuned stride controller); '' none",
+    )
     ap.add_argument("--no-dask", action="store_true")
     ap.add_argument("--repeat", type=int, default=1, help="rounds of the passive cases")
     args = ap.parse_args()
@@ -109,16 +115,18 @@ def main() -> None:
     if args.policy_grid:
         from agents.policy import load_controller
 
-        ctrl = load_controller(args.policy)
-        pspec = spec_for(args.policy_grid, ctrl, ctrl.env_kwargs.get("gait") or "default")
-        su, ptime = timed(pspec, None, 2)
-        row(
-            f"policy {args.policy} {args.policy_grid}x{args.policy_grid}, pool 2",
-            pspec.n_starts,
-            su,
-            ptime,
-            None,
-        )
+        names = [args.policy] + [n for n in args.also.split(",") if n.strip()]
+        for name in names:
+            ctrl = load_controller(name.strip())
+            pspec = spec_for(args.policy_grid, ctrl, ctrl.env_kwargs.get("gait") or "default")
+            su, ptime = timed(pspec, None, 2)
+            row(
+                f"policy {name} {args.policy_grid}x{args.policy_grid}, pool 2",
+                pspec.n_starts,
+                su,
+                ptime,
+                None,
+            )
     print(f"load average at end: {os.getloadavg()}")
 
 
