@@ -83,6 +83,12 @@ def register(sub) -> None:
         "--resume", action="store_true", help="continue runs/<name>/ from its last checkpoint"
     )
     p.add_argument(
+        "--init-from",
+        metavar="POLICY",
+        help="warm start (PassiveBound-v0): clone a stride controller's torques (a name, e.g. "
+        "default, or a policy folder) into the actor before PPO (agents/warmstart.py)",
+    )
+    p.add_argument(
         "--out",
         "--runs-dir",
         dest="runs_dir",
@@ -351,6 +357,7 @@ def cmd_train(args) -> int:
         resume=args.resume,
         runs_dir=args.runs_dir,
         vec_env=args.vec_env,
+        init_from=args.init_from,
         eval_freq=_default(args.eval_freq, 100_000, args.resume),
         n_eval_episodes=_default(args.n_eval_episodes, 10, args.resume),
         save_freq=_default(args.save_freq, 200_000, args.resume),

@@ -722,8 +722,12 @@ def train(
     save_freq: int | None = None,
     progress_bar: bool = True,
     verbose: int = 0,
+    init_from: str | None = None,
 ) -> Path:
-    """Train PPO as the config section of ``env_id`` says; returns the run directory."""
+    """Train PPO as the config section of ``env_id`` says; returns the run directory.
+
+    ``init_from``: a stride controller whose torques the actor clones before PPO
+    (`agents.warmstart`; a fresh run only, a resume continues from its checkpoint)."""
     import torch as th
     from stable_baselines3 import PPO
     from stable_baselines3.common.utils import set_random_seed
@@ -753,6 +757,13 @@ def train(
         if (run_dir / "model.zip").exists() or last_checkpoint(run_dir) is not None:
             raise ValueError(f"run {run_dir} exists; use --resume or another --name")
         ckpt = None
+    teacher = None
+    if init_from is not None and ckpt is None:  # loaded before the run folder exists
+        from .policy import load_controller
+
+        teacher = load_controller(init_from)
+        if not hasattr(teacher, "on_apex"):
+            raise ValueError(f"--init-from {init_from}: not a stride controller (no on_apex)")
     for key, default in (("eval_freq", 20_000), ("save_freq", 50_000), ("n_eval_episodes", 10)):
         schedule[key] = int(schedule[key] if schedule[key] is not None else default)
         if schedule[key] < 1:
@@ -838,6 +849,14 @@ def train(
             verbose=verbose,
             **spec.algo_kwargs,
         )
+    if teacher is not None:
+        from .warmstart import clone, collect
+
+        bc_env = make_env(env_id, spec.env_kwargs, spec, seed + 20_000)
+        X, A = collect(bc_env, teacher, seed, progress=progress_bar)
+        bc_env.close()
+        info["init_from"] = {"policy": str(init_from), **clone(model, venv, X, A, seed)}
+        _atomic_write_text(info_path, json.dumps(info, indent=2) + "\n")
     n_envs = spec.n_envs
     # evaluation before the checkpoint of the same step, so a checkpoint never precedes an
     # evaluation it should include; both count timesteps, so a resume keeps their schedules
