@@ -57,6 +57,10 @@ LEARNED_SELECTION = {
     "student distilled by DAgger from `mpc` with the same seed (`agents/policies/distilled/sS`);"
     " fine-tuning was chosen over the distilled students and 1.5e6 strides over 3e5 there; "
     "`agents/policies/default` is seed 0 (no choice among seeds)",
+    "warm-started": "ppo-v1's recipe (configs/ppo.yaml, 3e6 steps) unchanged, but the actor "
+    "first clones the torques of the shipped `default` (fine-tuned/s0) in the training env "
+    "(`train --init-from default`, agents/warmstart.py); final models, nothing chosen on any "
+    "yardstick",
     "ppo-v1-final": "ppo-v1's recipe (configs/ppo.yaml) unchanged, its final models (the "
     "shipped `agents/policies/ppo-v1` is a checkpoint selected on axis basins, left out here)",
 }
@@ -64,6 +68,7 @@ LEARNED_SELECTION = {
 # the page's (SEED_GROUPS), and the ablations a user can add with --entry (EXTRA_GROUPS)
 SEED_GROUPS = (
     ("fine-tuned", "finetuned"),  # agents/finetune.py: PPO from the distilled (`default`: s0)
+    ("warm-started", "warm-started"),  # step-level PPO cloned from `default` first
     ("ppo-v1", "ppo-v1-final"),  # ppo-v1's recipe (step-level PPO), final models
 )
 EXTRA_GROUPS = (

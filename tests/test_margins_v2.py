@@ -169,6 +169,8 @@ def test_compare_default_columns_are_the_pages():
     entries = {label: (policies, gait) for label, policies, gait in default_entries()}
     assert [p.split("/")[-1] for p in entries["fine-tuned"][0]] == ["s0", "s1", "s2"]
     assert all("ppo-v1-final/s" in p for p in entries["ppo-v1"][0])
+    if "warm-started" in entries:
+        assert all("warm-started/s" in p for p in entries["warm-started"][0])
     assert set(CLASSICAL) <= set(entries) and "mpc" in entries
     assert "distilled" not in entries and "learned" not in entries
     assert not any(p.rstrip("/").endswith("default") for e in entries.values() for p in e[0])
