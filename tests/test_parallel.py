@@ -219,6 +219,23 @@ def assert_same_map(a: Path, b: Path) -> None:
         assert np.array_equal(x[k], y[k]), k
 
 
+@pytest.fixture(scope="module")
+def warm_cache(tmp_path_factory):
+    """Compile (or load) every kernel the basin map and the margins run, once, in one process
+    that writes Numba's cache, before any run that compares processes bit for bit. With a
+    cold cache (a fresh clone) the first process compiles in-session while the others load
+    the cache, and the two can differ by round-off (fast-math; README, "Round-off depends on
+    the compile"): a comparison of two executors must compare the same machine code. It also
+    keeps a worker killed on purpose from dying while it writes the cache."""
+    tmp = tmp_path_factory.mktemp("warm")
+    for argv in (
+        ["basin-map", "--grid", "2", "--strides", "3", "--out", tmp / "b", "--no-overlay"],
+        ["margins", "--policy", "passive", "--budget", "test", "--out", tmp / "m", "--no-cache"],
+    ):
+        r = run([BIN / "bound-env", *argv, "--workers", "1", "--quiet"])
+        assert r.returncode == 0, r.stderr
+
+
 def basin_cli(out: Path, *extra) -> subprocess.CompletedProcess:
     return run(
         [
@@ -300,7 +317,7 @@ def test_zero_action_through_the_vector_kernel_matches_the_passive_map():
 
 
 @pytest.mark.slow
-def test_basin_map_files_resume_and_bad_input(tmp_path, capsys):
+def test_basin_map_files_resume_and_bad_input(tmp_path, capsys, warm_cache):
     out = tmp_path / "b"
     assert (
         main(
@@ -388,7 +405,7 @@ def test_basin_map_files_resume_and_bad_input(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_local_cluster_margins_equal_the_serial_run(tmp_path):
+def test_local_cluster_margins_equal_the_serial_run(tmp_path, warm_cache):
     """``margins`` for passive: LocalCluster with 2 worker processes vs serial, the same JSON
     (apart from the wall time). Budget ``test``: ``quick`` (margins v2) takes minutes on a
     loaded 2-core machine; the tasks are the same kinds."""
@@ -417,7 +434,7 @@ def test_local_cluster_margins_equal_the_serial_run(tmp_path):
 
 
 @pytest.mark.slow
-def test_remote_scheduler_basin_map_equals_the_process_pool(tmp_path):
+def test_remote_scheduler_basin_map_equals_the_process_pool(tmp_path, warm_cache):
     """``dask scheduler`` + two ``dask worker`` processes; basin-map through tcp:// gives the
     process pool's map, also when a worker is killed (SIGKILL) in the middle of the run."""
     ref = basin_cli(tmp_path / "pool", "--workers", "2", "--no-overlay")
@@ -460,7 +477,7 @@ def test_remote_scheduler_basin_map_equals_the_process_pool(tmp_path):
 
 
 @pytest.mark.slow
-def test_killed_client_resumes_with_the_missing_tasks_only(tmp_path):
+def test_killed_client_resumes_with_the_missing_tasks_only(tmp_path, warm_cache):
     """Kill the client (SIGKILL, with its LocalCluster) mid-run, rerun on another executor:
     the cached tasks are not run again, and the result equals an uninterrupted run."""
     pytest.importorskip("distributed")
