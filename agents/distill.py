@@ -40,7 +40,8 @@ import numpy as np
 
 from bound_env.cache import atomic_write
 from bound_env.control import load_controller as load_classical
-from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, _simulate, library
+from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library, simulate_profile
+from bound_env.events import APEX
 from bound_env.fast import EVENT_CAPACITY, event_log, recorder
 from bound_env.stride import state_from_z, z_from_state
 from bound_env.stride_task import NO_APEX_TIME
@@ -113,16 +114,20 @@ class ChoicePolicyController(MPCController):
         return h.hexdigest()[:16]
 
 
+def _npz_bytes(**arrays) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
 def save_policy(folder: Path, expert: MPCController, layers, rows, config: dict) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     arrays = {"rows": rows, "n_layers": np.array(len(layers))}
     for k, (W, b) in enumerate(layers):
         arrays[f"W{k}"], arrays[f"b{k}"] = W, b
-    import io
-
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    atomic_write(folder / POLICY_FILE, buf.getvalue())
+    atomic_write(folder / POLICY_FILE, _npz_bytes(**arrays))
     lqr = expert.lqr
     spec = {
         "kind": "choice",
@@ -271,7 +276,7 @@ def good_rows(outcome, strides, scores) -> np.ndarray | None:
 
 def stride_of(expert: MPCController, z, u, log, rec):
     """The planning model's next apex from z under coefficients u (None on a fall)."""
-    status, _, y = _simulate(
+    status, _, y = simulate_profile(
         state_from_z(z),
         expert._aux0,
         expert._edges,
@@ -281,8 +286,6 @@ def stride_of(expert: MPCController, z, u, log, rec):
         log,
         rec,
     )
-    from bound_env.events import APEX
-
     return z_from_state(y) if status == APEX else None
 
 
@@ -334,7 +337,7 @@ class Labeller:
 # --------------------------------------------------------------------------------------------
 
 
-def fit(X, G, cfg: DistillConfig, scales, z_ref, init=None, log=print):
+def fit(X, G, cfg: DistillConfig, scales, z_ref, log=print):
     """The classifier on inputs X (apex states) and good masks G: -log sum_good softmax."""
     import torch
 
@@ -437,11 +440,7 @@ def distill(cfg: DistillConfig, out_dir: Path, progress: bool = True) -> dict:
                     )
             Xk = np.array([d[0] for d in data]).reshape(-1, 6)
             Gk = np.array([d[1] for d in data], dtype=bool).reshape(-1, len(rows))
-            import io
-
-            buf = io.BytesIO()
-            np.savez(buf, X=Xk, G=Gk)
-            atomic_write(path, buf.getvalue())
+            atomic_write(path, _npz_bytes(X=Xk, G=Gk))
         X, G = np.vstack([X, Xk]), np.vstack([G, Gk])
         layers = fit(X, G, cfg, expert.scales, expert.z_ref, log=log)
         history.append({"round": k, "states": int(len(Xk)), "total": int(len(X))})

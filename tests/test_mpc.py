@@ -109,12 +109,12 @@ def test_a_plan_holds_in_the_step_env(mpc):
 
 
 def predicted_apex(ctrl, z, u):
-    from bound_env.control.mpc import _simulate
+    from bound_env.control.mpc import simulate_profile
     from bound_env.fast import EVENT_CAPACITY, event_log, recorder
     from bound_env.stride import state_from_z, z_from_state
     from bound_env.stride_task import NO_APEX_TIME
 
-    status, _, y = _simulate(
+    status, _, y = simulate_profile(
         state_from_z(z),
         ctrl._aux0,
         ctrl._edges,

@@ -64,7 +64,7 @@ def interval_weights(
 
 
 @jit
-def _simulate(y0, aux0, edges, taus, rtol, t_max, log, rec):
+def simulate_profile(y0, aux0, edges, taus, rtol, t_max, log, rec):
     """One stride from the full state y0 with interval torques ``taus`` on ``edges``."""
     y = y0.copy()
     aux = aux0.copy()
@@ -97,7 +97,7 @@ def rollouts(
             y0[_Z_IDX[i]] = z0[i]
         taus = cand[c].copy()
         for s in range(horizon + 1):
-            status, t, y = _simulate(y0, aux0, edges, taus, rtol, t_max, log, rec)
+            status, t, y = simulate_profile(y0, aux0, edges, taus, rtol, t_max, log, rec)
             if status != APEX:
                 outcome[c] = FELL
                 progress[c] = s + min(t / period, 1.0)
