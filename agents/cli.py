@@ -39,6 +39,18 @@ BUDGET_HELP = (
 POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv", "eval.png")
 
 
+def _add_sample_seed(p, number) -> None:
+    """``--seed`` of margins and compare: the random samples (test set or a held-out one)."""
+    p.add_argument(
+        "--seed",
+        type=number(int, 0, SEED_MAX),
+        default=12345,  # agents.margins.DEFAULT_SEED
+        help="picks the random directions, rough-terrain runs, push trials and MFPT robots "
+        "(default: %(default)s, the test set of docs/MARGINS.md; any other seed is a "
+        "held-out validation set)",
+    )
+
+
 def register(sub) -> None:
     from bound_env.cli_args import add_progress_args, number
     from bound_env.parallel import add_scheduler_args
@@ -173,14 +185,7 @@ def register(sub) -> None:
         default="quick",
         help=BUDGET_HELP + " (default: %(default)s)",
     )
-    p.add_argument(
-        "--seed",
-        type=number(int, 0, 2**32 - 1),
-        default=12345,  # agents.margins.DEFAULT_SEED
-        help="picks the random directions, rough-terrain runs, push trials and MFPT robots "
-        "(default: %(default)s, the test set of docs/MARGINS.md; any other seed is a "
-        "held-out validation set)",
-    )
+    _add_sample_seed(p, number)
     add_gait_args(p, default=None, overrides=False, help=POLICY_GAIT_HELP)
     p.add_argument(
         "--force",
@@ -248,14 +253,7 @@ def register(sub) -> None:
         default="full",
         help=BUDGET_HELP + " (default: %(default)s)",
     )
-    p.add_argument(
-        "--seed",
-        type=number(int, 0, 2**32 - 1),
-        default=12345,  # agents.margins.DEFAULT_SEED
-        help="picks the random directions, rough-terrain runs, push trials and MFPT robots "
-        "(default: %(default)s, the test set of docs/MARGINS.md; any other seed is a "
-        "held-out validation set)",
-    )
+    _add_sample_seed(p, number)
     p.add_argument("--workers", type=number(int, 1, 256), default=2)
     add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", default="out/margins", help="per-entry results and caches")

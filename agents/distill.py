@@ -518,12 +518,28 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_distill)
 
 
-def cmd_distill(args) -> int:
+def check_export(export, force: bool) -> None:
+    """``--export`` of distill and finetune: refused if it exists, unless ``force``."""
+    if export and Path(export).exists() and not force:
+        raise ValueError(f"--export {export} exists; give --force to replace it")
+
+
+def export_folder(src: Path, dest) -> Path:
+    """Copy a policy folder to ``dest`` whole: a copy beside it, then a rename."""
     import shutil
 
+    dest = Path(dest)
+    tmp = dest.with_name(dest.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    shutil.copytree(src, tmp)
+    shutil.rmtree(dest, ignore_errors=True)
+    tmp.rename(dest)
+    return dest
+
+
+def cmd_distill(args) -> int:
     out = Path(args.out or f"runs/distill_s{args.seed}")
-    if args.export and Path(args.export).exists() and not args.force:
-        raise ValueError(f"--export {args.export} exists; give --force to replace it")
+    check_export(args.export, args.force)
     cfg = DistillConfig(
         expert=args.expert,
         rounds=args.rounds,
@@ -542,13 +558,7 @@ def cmd_distill(args) -> int:
         f"{states} labelled states in {len(summary['rounds'])} DAgger rounds",
     )
     if args.export:
-        dest = Path(args.export)
-        tmp = dest.with_name(dest.name + ".tmp")
-        shutil.rmtree(tmp, ignore_errors=True)
-        shutil.copytree(out / "policy", tmp)
-        shutil.rmtree(dest, ignore_errors=True)
-        tmp.rename(dest)
-        summary["exported"] = str(dest)
+        summary["exported"] = str(export_folder(out / "policy", args.export))
     if args.json:
         print(json.dumps(summary))
     else:

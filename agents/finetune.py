@@ -230,15 +230,13 @@ def register(sub) -> None:
 
 
 def cmd_finetune(args) -> int:
-    import shutil
-
+    from .distill import check_export, export_folder
     from .policy import resolve_policy
 
     student = resolve_policy(args.student)
     if isinstance(student, str) or not (Path(student) / "choice.npz").is_file():
         raise ValueError(f"--student {args.student}: not a distilled policy (no choice.npz)")
-    if args.export and Path(args.export).exists() and not args.force:
-        raise ValueError(f"--export {args.export} exists; give --force to replace it")
+    check_export(args.export, args.force)
     out = Path(args.out or f"runs/finetune_s{args.seed}")
     cfg = FinetuneConfig(timesteps=args.timesteps, seed=args.seed)
     summary = finetune(student, out, cfg, progress=not args.no_progress)
@@ -252,12 +250,6 @@ def cmd_finetune(args) -> int:
         f"{summary['timesteps']} PPO strides from the distilled student {args.student}",
     )
     if args.export:
-        dest = Path(args.export)
-        tmp = dest.with_name(dest.name + ".tmp")
-        shutil.rmtree(tmp, ignore_errors=True)
-        shutil.copytree(out / "policy", tmp)
-        shutil.rmtree(dest, ignore_errors=True)
-        tmp.rename(dest)
-        summary["exported"] = str(dest)
+        summary["exported"] = str(export_folder(out / "policy", args.export))
     print(json.dumps(summary) if args.json else f"fine-tuned policy: {summary['policy']}")
     return 0
