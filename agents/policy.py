@@ -26,6 +26,7 @@ import numba as nb
 import numpy as np
 import yaml
 
+from bound_env import STRIDE_ENV_IDS
 from bound_env.resources import controllers_dir
 
 # Environment keyword arguments that shape the dynamics, the observation or the action; the
@@ -541,7 +542,7 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
 
         return load_choice_policy(path, gait=gait, force=force)
     files = find_policy_files(path)
-    if files.config is not None and read_policy_section(files)[1] == "PassiveBoundStride-v0":
+    if files.config is not None and read_policy_section(files)[1] in STRIDE_ENV_IDS:
         from .stride import load_stride_policy  # a stride-level policy (agents/stride.py)
 
         return load_stride_policy(path, gait=gait, force=force)

@@ -1,6 +1,6 @@
 """Learned stride-level spine control: residual RL on top of the stride LQR.
 
-The policy acts once per stride on `PassiveBoundStride-v0` (one step = one apex-to-apex
+The policy acts once per stride on `PassiveBoundStride-v1` (one step = one apex-to-apex
 stride; its action is the K coefficients u of the stride's spine-torque profile,
 `bound_env.stride_task`). Three rl-zoo3 ``env_wrapper`` entries (innermost first) turn that
 env into the training task of ``configs/ppo-stride.yaml``:
@@ -45,7 +45,9 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-STRIDE_ENV_ID = "PassiveBoundStride-v0"
+# policies trained before v1 (agents/policies/stride-residual) name v0: they load, and act on v1
+from bound_env import STRIDE_ENV_ID, STRIDE_ENV_IDS
+
 BASE_FILE = "base.json"
 # tolerance of the nominal stride that sets the basis' window edges in the step env: that of
 # `bound_env.control.load_controller`, so a zero residual plays out exactly as the LQR there
@@ -60,7 +62,7 @@ BASIS_RTOL = 1e-12  # the base controller of a residual policy, beside its model
 def _stride_env(env: gym.Env):
     u = env.unwrapped
     if not hasattr(u, "task") or not hasattr(u.task, "sim"):
-        raise ValueError(f"{type(env).__name__}: needs a PassiveBoundStride-v0 environment")
+        raise ValueError(f"{type(env).__name__}: needs a PassiveBoundStride-v1 environment")
     return u
 
 
@@ -447,7 +449,7 @@ class StridePolicyController:
         return np.clip(u0 + self.residual_scale * self.residual(z), -1.0, 1.0)
 
     def stride_action(self, z) -> np.ndarray:
-        """The action of PassiveBoundStride-v0 at apex state z."""
+        """The action of PassiveBoundStride-v1 at apex state z."""
         return self.coefficients(z)
 
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
@@ -525,7 +527,7 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
     files = find_policy_files(path)
     model_path, vecnorm_path = files.model, files.vecnormalize
     section, env_id, seed = read_policy_section(files)
-    if env_id != STRIDE_ENV_ID:
+    if env_id not in STRIDE_ENV_IDS:
         raise ValueError(f"policy {path} was trained on {env_id}, not {STRIDE_ENV_ID}")
     for w in check_policy_files(files, section, force):
         print(f"warning: {w}", file=sys.stderr)
@@ -619,7 +621,7 @@ def stride_curve(
 ) -> dict:
     """Return probability of a stride-level controller (``stride_action(z)``; a controller
     without it is passive) against the relative start size r, on the *stride* map of
-    PassiveBoundStride-v0 (exact profiles, rtol 1e-10), from z* + r |z*| xi with ``n_dirs``
+    PassiveBoundStride-v1 (the one stride map, rtol 1e-10), from z* + r |z*| xi with ``n_dirs``
     directions of seed ``seed`` (disjoint from margins' seed-12345 directions), around the
     closed loop's own cycle z_cl (``settle`` strides from z*; as margins, starts at
     z_cl + r |z*| xi). Returned: within ``tol`` (SI, max-abs) of z_cl in ``strides`` strides

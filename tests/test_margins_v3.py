@@ -390,8 +390,16 @@ def test_cache_key_follows_controller_spec_and_policy_weights(tmp_path):
     spec = tmp_path / "lqr2.yaml"
     shutil.copyfile(CONTROLLERS_DIR / "lqr.yaml", spec)
     k_spec = setup_key(load_classical(spec), "default", q)
-    spec.write_text(spec.read_text().replace("R: 0.1", "R: 0.2"))
+    text = spec.read_text()
+    # the shipped spec stores its gain: a changed gain changes the key
+    spec.write_text(text.replace("- [9.33", "- [9.34", 1))
     assert setup_key(load_classical(spec), "default", q) != k_spec
+    # without the stored gain the spec is designed from Q, R: a changed R changes the key
+    designed = text[: text.index("\ngain:")] + "\n"
+    spec.write_text(designed)
+    k_designed = setup_key(load_classical(spec), "default", q)
+    spec.write_text(designed.replace("R: 0.1", "R: 0.2"))
+    assert setup_key(load_classical(spec), "default", q) != k_designed
     rng = np.random.default_rng(0)
     layers = [(rng.normal(size=(4, 3)), rng.normal(size=4)), (rng.normal(size=(1, 4)), np.zeros(1))]
     mlp = MLPController("m", layers, "Tanh", env_kwargs={"max_torque": 80.0})

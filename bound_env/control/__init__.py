@@ -7,7 +7,7 @@ compare) find them by name through `load_controller`.
 
     from bound_env.control import load_controller
     ctrl = load_controller("lqr")            # configs/controllers/lqr.yaml, or a path
-    u = ctrl.stride_action(z)                # PassiveBoundStride-v0 action at apex state z
+    u = ctrl.stride_action(z)                # PassiveBoundStride-v1 action at apex state z
 
 In the step env (PassiveBound-v0, unwrapped observation) a loop calls
 ``notify_apex(ctrl, obs, info)`` after ``reset`` and after every ``step``, and ``ctrl(obs)``
