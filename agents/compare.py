@@ -20,12 +20,12 @@ import math
 import shutil
 from pathlib import Path
 
+from bound_env.analysis.margins.stats import t_interval
 from bound_env.cache import atomic_write
 from bound_env.parallel import open_pool
 
 from .margins import DEFAULT_SEED, Z_LABELS, check_seed, compute_margins, plot_margins
 from .policy import SHIPPED_DIR
-from .stats import t_interval
 
 POLICIES_DIR = SHIPPED_DIR
 ROOT = Path(__file__).resolve().parent.parent

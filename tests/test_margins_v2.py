@@ -21,8 +21,13 @@ from agents.margins import (
     setup_key,
 )
 from agents.policy import ZeroController
-from agents.stats import crossing_on_grid, t_interval, threshold_on_grid, wilson_interval
 from agents.train import VALIDATION_SEED, BasinValidationCallback
+from bound_env.analysis.margins.stats import (
+    crossing_on_grid,
+    t_interval,
+    threshold_on_grid,
+    wilson_interval,
+)
 
 
 def test_bisection_grows_past_one_to_a_known_basin_of_five():
