@@ -12,21 +12,21 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, chi2, lognorm
 
-from agents import margins
-from agents.margins import (
+from agents.margins import as_controller, policy_sources
+from agents.policy import MLPController, ZeroController
+from bound_env.analysis import margins
+from bound_env.analysis.margins import (
     BUDGETS,
     CURVE_SEED,
     DEFAULT_SEED,
     ClosedLoop,
     Setup,
-    as_controller,
     random_directions,
     rough_episodes,
     run_task,
     sample_seeds,
     setup_key,
 )
-from agents.policy import MLPController, ZeroController
 from bound_env.analysis.margins.stats import crossing_on_grid, mfpt_crossing, mfpt_estimate
 from bound_env.analysis.paired import (
     bootstrap_delta_x50,
@@ -372,7 +372,7 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
     q = BUDGETS["quick"]
     k0 = setup_key(c, "default", q)
     # the files of a controller's code outside bound_env/ (the agents front names them)
-    extra = margins.policy_sources(c)
+    extra = policy_sources(c)
     assert {f.name for f in extra} == {"policy.py", "stride.py", "distill.py"}
     assert all(f.is_file() and f.parent.name == "agents" for f in extra)
     own = tmp_path / "own.py"
@@ -403,7 +403,7 @@ def test_cache_key_follows_controller_spec_and_policy_weights(tmp_path):
     spec = tmp_path / "lqr2.yaml"
     shutil.copyfile(CONTROLLERS_DIR / "lqr.yaml", spec)
     k_spec = setup_key(load_classical(spec), "default", q)
-    assert margins.policy_sources(load_classical(spec)) == []  # bound_env's: hashed by the core
+    assert policy_sources(load_classical(spec)) == []  # bound_env's: hashed by the core
     spec.write_text(spec.read_text().replace("R: 0.1", "R: 0.2"))
     assert setup_key(load_classical(spec), "default", q) != k_spec
     rng = np.random.default_rng(0)

@@ -1,9 +1,9 @@
 """Paired comparisons of two closed loops measured on the same random samples.
 
-`agents.margins` scores every controller on the same random directions (one ``--seed``), so a
-comparison of two columns is *paired*: direction d gives both an outcome (returned: 1, not:
-0) at each size r. The direction-sampling error then largely cancels in the difference, and
-the tests below use it:
+`bound_env.analysis.margins` scores every controller on the same random directions (one
+``--seed``), so a comparison of two columns is *paired*: direction d gives both an outcome
+(returned: 1, not: 0) at each size r. The direction-sampling error then largely cancels in the
+difference, and the tests below use it:
 
 - `sign_test`: the exact two-sided sign test of paired differences (zeros, the concordant
   pairs, dropped): under "no difference" the number of positive differences among the
