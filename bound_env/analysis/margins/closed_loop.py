@@ -194,7 +194,10 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
 
     from gymnasium.utils import seeding
 
-    from bound_env.task import _Z_IDX, FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_STRIDES
+    from bound_env.params import Z_IN_Y
+    from bound_env.task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_STRIDES
+
+    z_idx = np.array(Z_IN_Y)  # z = y[z_idx] at an apex (as the task reads info["apex_z"])
 
     task, ctrl = loop.env.task, loop.controller
     n = len(seeds)
@@ -243,7 +246,7 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
                 live[i] = False
             elif copies is not None and on_apex is not None:
                 napex = int(s[i, S_NAPEX])
-                z1 = b.apex[i, min(napex, b.apex.shape[1]) - 1][_Z_IDX]
+                z1 = b.apex[i, min(napex, b.apex.shape[1]) - 1][z_idx]
                 copies[i].on_apex(np.array(z1, dtype=float), float(b.obs[i, loop.i_since_apex]))
     return {"strides": strides.tolist(), "fell": fell.tolist(), "failures": failures}
 
