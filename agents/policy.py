@@ -7,7 +7,7 @@ arguments it was trained with: ``max_torque``, ``dt``, ...). `load_controller` r
 ``clip(action_net(policy_net(normalize(obs))), -1, 1)``, exactly what
 ``model.predict(obs, deterministic=True)`` returns after ``VecNormalize.normalize_obs``, but
 evaluated with NumPy in float64 (~10 us instead of ~150 us per call), picklable, and free of
-torch in the worker processes of `agents.margins`.
+torch in the worker processes of the margins (`bound_env.analysis.margins`).
 """
 
 from __future__ import annotations

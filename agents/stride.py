@@ -6,9 +6,10 @@ stride; its action is the K coefficients u of the stride's spine-torque profile,
 env into the training task of ``configs/ppo-stride.yaml``:
 
 - `DirectionStarts`: every episode starts at z* + r |z*| xi, the yardstick's own perturbation
-  (`agents.margins`: r relative to |z*_i|, xi uniform on the 6-sphere scaled to max |xi_i| = 1,
-  or one axis), with r ~ U(0, ``r_max``). ``r_max`` is set well past the LQR's r50 (~0.15)
-  on purpose: many starts are unviable, and a fall that comes later is still better.
+  (`bound_env.analysis.margins`: r relative to |z*_i|, xi uniform on the 6-sphere scaled to
+  max |xi_i| = 1, or one axis), with r ~ U(0, ``r_max``). ``r_max`` is set well past the
+  LQR's r50 (~0.15) on purpose: many starts are unviable, and a fall that comes later is still
+  better.
 - `StrideControl`: the observation becomes the relative apex error x = (z - z*) / |z*|, and
   the action a residual du on a classical base controller: u = clip(u_base(z) +
   ``residual_scale`` du, -1, 1), with u_base the LQR of ``configs/controllers/<base>.yaml``.
@@ -24,10 +25,10 @@ env into the training task of ``configs/ppo-stride.yaml``:
 deterministic residual policy starts *exactly* as its base controller.
 
 `StridePolicyController` runs a trained stride policy inside the step env (`PassiveBound-v0`)
-with the protocol of `agents.margins.ClosedLoop`: at every apex (``on_apex``) it picks the
-coefficients u, and each control interval outputs the interval average of the profile's
-torque, as `bound_env.control.StrideFeedback` does. Inference is NumPy (no torch in margins'
-workers); the base gain is read from the policy's own ``base.json`` (written at training
+with the protocol of `bound_env.analysis.margins.ClosedLoop`: at every apex (``on_apex``) it
+picks the coefficients u, and each control interval outputs the interval average of the
+profile's torque, as `bound_env.control.StrideFeedback` does. Inference is NumPy (no torch in
+margins' workers); the base gain is read from the policy's own ``base.json`` (written at training
 time), so a later change of ``configs/controllers/lqr.yaml`` does not change a trained policy.
 """
 
@@ -68,7 +69,7 @@ def _stride_env(env: gym.Env):
 
 def sample_direction(rng: np.random.Generator, axis_prob: float) -> np.ndarray:
     """xi: one axis (either sign) with probability ``axis_prob``, else uniform on the 6-sphere
-    scaled to max |xi_i| = 1 (`agents.margins.random_directions`)."""
+    scaled to max |xi_i| = 1 (`bound_env.analysis.margins.random_directions`)."""
     if rng.random() < axis_prob:
         xi = np.zeros(6)
         xi[rng.integers(6)] = rng.choice((-1.0, 1.0))
@@ -626,7 +627,7 @@ def stride_curve(
     closed loop's own cycle z_cl (``settle`` strides from z*; as margins, starts at
     z_cl + r |z*| xi). Returned: within ``tol`` (SI, max-abs) of z_cl in ``strides`` strides
     without a fall. ``effort``: mean |tau| over a stride of the cycle [N m].
-    A validation curve, cheaper than `agents.margins` and not a substitute for it."""
+    A validation curve, cheaper than `bound_env.analysis.margins` and no substitute for it."""
     from bound_env.stride_task import StrideTask
 
     task = StrideTask(gait=gait, basis="windows", K=getattr(getattr(ctrl, "basis", None), "K", 4))

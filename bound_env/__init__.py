@@ -39,7 +39,8 @@ MAX_STRIDE_EPISODE_STEPS = 100  # time limit of the stride env: 100 strides
 ENV_KWARGS = {ENV_ID: {}, LITERAL_ENV_ID: {"gait": "literal-cycle"}}
 # No reward_threshold in the specs: the return mixes an alive bonus (+1 per step) with a
 # tracking cost whose size depends on the start noise and the apex scales (env kwargs), so no
-# single return means "solved"; policies are judged by their stability margins (agents.margins).
+# single return means "solved"; policies are judged by their stability margins
+# (bound_env.analysis.margins).
 
 
 def _register() -> None:

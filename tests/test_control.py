@@ -31,7 +31,8 @@ Z_STAR = load_gait("default").z0
 def closed_loop_jacobian(ctrl):
     """Fixed point and Jacobian of the closed-loop stride map z -> P(z, u(z)), measured in
     PassiveBoundStride-v1: Newton with a central-difference Jacobian."""
-    from agents.margins import fd_steps, find_fixed_point
+    from bound_env.analysis.margins import fd_steps
+    from bound_env.analysis.numerics import map_fixed_point
 
     env = gym.make("PassiveBoundStride-v1", **ctrl.stride_env_kwargs).unwrapped
 
@@ -40,7 +41,7 @@ def closed_loop_jacobian(ctrl):
         info = env.step(ctrl.stride_action(z))[4]
         return info.get("apex_z")
 
-    return find_fixed_point(f, Z_STAR, fd_steps(Z_STAR), settle=20, newton_iters=6)
+    return map_fixed_point(f, Z_STAR, fd_steps(Z_STAR), settle=20, newton_iters=6)
 
 
 def test_lqr_closed_loop_emax_matches_the_design():

@@ -1,10 +1,13 @@
 """Layering of the package, read from the source with `ast`: imports point down only.
 
 Every import counts, also those inside functions (deferred imports) and string imports through
-``importlib.import_module`` / ``__import__``.
+``importlib.import_module`` / ``__import__``. One check runs instead: the classical margins
+path (``bound-env margins --policy lqr``) never loads torch.
 """
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -108,6 +111,43 @@ def test_nothing_in_bound_env_imports_agents():
 def test_no_import_cycle_inside_bound_env():
     _, _, edges = _graph()
     assert _cycles(edges) == []
+
+
+# Runs ``bound-env margins`` in a fresh interpreter up to the point where the work starts (the
+# first batch of tasks, `run_tasks`), then reports which heavy modules are loaded.
+_UP_TO_THE_TASKS = """
+import sys
+
+from bound_env.analysis.margins import run
+
+
+def stop(*args, **kwargs):
+    heavy = sorted(m for m in ("torch", "stable_baselines3") if m in sys.modules)
+    print("reached the tasks; heavy modules:", heavy)
+    raise SystemExit(0)
+
+
+run.run_tasks = stop
+from bound_env.cli import main
+
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("policy", ["lqr", "passive"])
+def test_classical_margins_never_import_torch(policy, tmp_path):
+    """The command line, the agents front, the controller (`bound_env.control` for lqr), the
+    cycle scale and the cache key: everything ``margins`` loads before its first task."""
+    argv = ["margins", "--policy", policy, "--budget", "test", "--workers", "1", "--no-cache"]
+    res = subprocess.run(
+        [sys.executable, "-c", _UP_TO_THE_TASKS, *argv, "--out", str(tmp_path / "m")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 0, res.stderr
+    assert "reached the tasks; heavy modules: []" in res.stdout, res.stdout + res.stderr
 
 
 @pytest.mark.parametrize(

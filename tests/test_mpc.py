@@ -119,7 +119,7 @@ def predicted_apex(ctrl, z, u):
 def test_the_mpc_rescues_more_than_the_lqr_in_the_step_env(mpc):
     """Closed loops in the step env from 12 validation starts at r = 0.25: the MPC returns
     from at least as many, and from some the LQR loses."""
-    from agents.margins import ClosedLoop
+    from bound_env.analysis.margins import ClosedLoop
 
     lqr = mpc.lqr
     wins = {}
@@ -153,7 +153,7 @@ def test_bad_mpc_specs_are_refused(tmp_path, text, message):
 
 
 def test_decision_summary_of_the_curve():
-    from agents.margins import decision_summary
+    from bound_env.analysis.margins import decision_summary
 
     curve = [
         {"size": 0.1, "decision_seconds": [0.001, 0.003]},

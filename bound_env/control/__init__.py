@@ -2,8 +2,8 @@
 
 They live in `bound_env` rather than `agents` because they are part of the model's analysis:
 they need the simulator and its linearization (NumPy, SciPy), never torch or
-Stable-Baselines3, and `bound_env` must not import `agents`. The agents' tools (margins,
-compare) find them by name through `load_controller`.
+Stable-Baselines3, and `bound_env` must not import `agents`. The tools that take a controller
+by name (``bound-env margins``, compare, rollout) find them through `load_controller`.
 
     from bound_env.control import load_controller
     ctrl = load_controller("lqr")            # configs/controllers/lqr.yaml, or a path

@@ -1,6 +1,6 @@
 """Classical spine controllers: stride-to-stride feedback (LQR, deadbeat) and extra damping.
 
-Protocol (what `agents.margins.ClosedLoop` and any other loop over the *unwrapped*
+Protocol (what `bound_env.analysis.margins.ClosedLoop` and any other loop over the *unwrapped*
 PassiveBound-v0 env use):
 
 - ``__call__(obs) -> float``: the normalized action of the next control interval;
