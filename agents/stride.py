@@ -453,6 +453,14 @@ class StridePolicyController:
         """The action of PassiveBoundStride-v1 at apex state z."""
         return self.coefficients(z)
 
+    def interval_actions(self, Z) -> np.ndarray:
+        """The step env's actions of the strides from the apex states Z (the protocol of
+        `bound_env.control.controllers`)."""
+        from bound_env.control.controllers import interval_actions_of, observed_times
+
+        U = [self.coefficients(z) for z in np.atleast_2d(np.asarray(Z, dtype=float))]
+        return interval_actions_of(self.basis, self.max_torque, U, observed_times(self.dt), self.dt)
+
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
         self._taus = self.max_torque * (self.phi @ self.coefficients(z))
 

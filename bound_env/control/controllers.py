@@ -8,7 +8,12 @@ PassiveBound-v0 env use):
   every apex: after a reset onto an apex with 0.0, and after each step whose info has
   ``"apex_z"``, with the time elapsed since that apex at the end of the step [s];
 - ``fingerprint() -> str``, ``name``, ``env_kwargs`` (the env keyword arguments the controller
-  was designed for: gait, max_torque, dt).
+  was designed for: gait, max_torque, dt);
+- ``interval_actions(Z) -> A`` (a stride controller): for n apex states at once, the actions
+  ``__call__`` outputs on each control interval of the stride from each (after
+  ``on_apex(z, 0.0)``), bit for bit, for `bound_env.stride_map.max_intervals` intervals, so
+  that a closed loop can advance whole strides through the one stride map
+  (`bound_env.stride_map`) instead of one Python call per interval.
 
 A stride-level controller chooses the coefficients u = sat(-G (z - z*)) in ``on_apex`` and then
 outputs its torque profile tau(t) = max_torque * sum_i u_i phi_i(t). The step env holds the
@@ -26,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..stride_map import max_intervals
 from ..stride_task import TorqueBasis
 from ..task import OBS_NAMES
 
@@ -35,6 +41,32 @@ OBS_TH2DOT = OBS_NAMES[1:].index("theta2dot")
 OBS_Z = tuple(
     OBS_NAMES[1:].index(n) for n in ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
 )
+
+
+def observed_times(dt: float) -> np.ndarray:
+    """The time since the apex a stride controller reads on control interval k of a stride
+    (the observation's, rounded to float32), k < `max_intervals` (dt)."""
+    return np.float32(dt * np.arange(max_intervals(dt))).astype(float)
+
+
+def grid_times(dt: float) -> np.ndarray:
+    """The start k dt of control interval k of a stride (the MPC snaps the observed time
+    to it), k < `max_intervals` (dt)."""
+    return dt * np.arange(max_intervals(dt))
+
+
+def interval_actions_of(basis: TorqueBasis, max_torque: float, U, times, dt: float) -> np.ndarray:
+    """(n, len(times)): clip(basis.average(tau_i, t, t + dt) / max_torque, -1, 1) for the
+    profile tau_i = basis.torques(U[i], max_torque) of each row of U and each t of ``times``,
+    bit for bit as the scalar path (elementwise products, and at most two non-zero terms per
+    interval for sub-windows wider than dt, so the order of the sums cannot matter)."""
+    taus = np.array([basis.torques(u, max_torque) for u in np.atleast_2d(U)])
+    t0 = np.asarray(times, dtype=float)
+    t1 = t0 + dt
+    lo = np.clip(basis.edges[None, :-1], t0[:, None], t1[:, None])
+    hi = np.clip(np.append(basis.edges[1:-1], np.inf)[None, :], t0[:, None], t1[:, None])
+    avg = (taus[:, None, :] * (hi - lo)[None]).sum(axis=-1) / (t1 - t0)[None, :]
+    return np.clip(avg / max_torque, -1.0, 1.0)
 
 
 def notify_apex(controller, obs, info) -> None:
@@ -88,6 +120,11 @@ class StrideFeedback:
     def stride_action(self, z) -> np.ndarray:
         """The action of PassiveBoundStride-v1 at apex state z."""
         return self.coefficients(z)
+
+    def interval_actions(self, Z) -> np.ndarray:
+        """The step env's actions of the strides from the apex states Z (module docstring)."""
+        U = [self.coefficients(z) for z in np.atleast_2d(Z)]
+        return interval_actions_of(self.basis, self.max_torque, U, observed_times(self.dt), self.dt)
 
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
         self._taus = self.basis.torques(self.coefficients(z), self.max_torque)

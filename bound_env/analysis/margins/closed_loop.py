@@ -9,12 +9,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...stride_map import EVAL_RTOL, RETURN_TOL, max_intervals
+from ...events import PHASES
+from ...stride_map import EVAL_RTOL, RETURN_TOL, StrideMap, Strides, max_intervals
 from .budget import DEFAULT_SEED, Budget
 
 ENV_ID = "PassiveBound-v0"
 PROFILE_SEG = 5  # ceiling search: control intervals per piece of a torque profile
 PROFILE_SPAN = 1.3  # ceiling search: the profile covers 1.3 x the strides' nominal duration
+STRIDES = [0]  # strides advanced in this process (benchmarks/margins.py reads it)
 
 
 @dataclass
@@ -63,8 +65,40 @@ class ClosedLoop:
         self.i_since_apex = list(self.env.task.obs_names).index("time_since_apex")
         self.on_apex = getattr(controller, "on_apex", None)
         self.last_phase: str | None = None  # stance condition at the end of the last `run`
+        # a stride controller advances whole strides through the one stride map: the same
+        # strides as the env's loop below, bit for bit (its `interval_actions` are exactly
+        # what it outputs interval by interval), without a Python call per interval
+        self.stride_map = None
+        if callable(getattr(controller, "interval_actions", None)) and not kwargs.get(
+            "slope_noise_deg"
+        ):
+            self.stride_map = StrideMap(
+                gait, overrides or None, self.dt, self.max_torque, EVAL_RTOL
+            )
+
+    def strides(self, Z, kicks=None) -> Strides:
+        """One closed-loop stride from each apex state Z[i] of a stride controller, through
+        the one stride map (``kicks[i]``: (interval, state index 4..7, delta) or None)."""
+        Z = np.atleast_2d(np.asarray(Z, dtype=float))
+        r = self.stride_map.run(Z, self.controller.interval_actions(Z), kicks=kicks)
+        STRIDES[0] += len(Z)
+        return r
 
     def stride(self, z, kick: tuple | None = None) -> StrideOut:
+        if self.stride_map is not None:
+            z = np.asarray(z, dtype=float)
+            if kick is not None and not 4 <= kick[1] <= 7:
+                raise ValueError(f"a kick changes a velocity (state index 4..7), got {kick[1]}")
+            r = self.strides(z[None], None if kick is None else [kick])
+            if r.ok[0]:
+                return StrideOut(
+                    r.z1[0].copy(), None, float(r.effort[0]), float(r.period[0]),
+                    int(r.intervals[0]),
+                )  # fmt: skip
+            return StrideOut(
+                None, r.failure(0), steps=int(r.intervals[0]), phase=PHASES[int(r.phase[0])]
+            )
+        STRIDES[0] += 1
         env, ctrl = self.env, self.controller
         z = np.asarray(z, dtype=float)
         obs, info = env.reset(options={"apex_state": z})
@@ -112,6 +146,35 @@ class ClosedLoop:
             if not survive_only and np.max(np.abs(z - z_target)) < RETURN_TOL:
                 return True, n, None
         return survive_only, max_strides, None
+
+    def run_many(self, Z0, z_target, max_strides: int) -> list[tuple[bool, int, str | None]]:
+        """`run` from each row of Z0 (no kick), all robots advanced together, one batch of
+        strides through the one stride map per stride count for a stride controller (the
+        same outcomes as `run` row by row: every robot's strides are its own)."""
+        Z = np.array(np.atleast_2d(Z0), dtype=float)
+        if self.stride_map is None:
+            return [self.run(z, z_target, max_strides) for z in Z]
+        out: list = [None] * len(Z)
+        live = np.arange(len(Z))
+        for n in range(1, max_strides + 1):
+            r = self.strides(Z[live])
+            keep = []
+            for j, i in enumerate(live):
+                if not r.ok[j]:
+                    out[i] = (False, n, r.failure(j))
+                elif not np.all(np.isfinite(r.z1[j])):
+                    out[i] = (False, n, "non_finite")
+                elif np.max(np.abs(r.z1[j] - z_target)) < RETURN_TOL:
+                    out[i] = (True, n, None)
+                else:
+                    Z[i] = r.z1[j]
+                    keep.append(i)
+            live = np.array(keep, dtype=np.int64)
+            if not len(live):
+                break
+        for i in live:
+            out[i] = (False, max_strides, None)
+        return out
 
     def episode(self, z0, max_strides: int, seed: int | None = None) -> tuple:
         """One long episode from the apex state z0 (env seed ``seed``: with
