@@ -243,6 +243,14 @@ class MPCController:
         U = [self.coefficients(z) for z in np.atleast_2d(np.asarray(Z, dtype=float))]
         return interval_actions_of(self.basis, self.max_torque, U, grid_times(self.dt), self.dt)
 
+    def apex_torques(self, z) -> np.ndarray:
+        """The profile planned at apex state z: torque on each sub-window [N m]."""
+        return self.basis.torques(self.coefficients(z), self.max_torque)
+
+    def step_time(self, t_obs, t0):
+        """The observed (float32) time snapped to the grid t0 + k dt of the apex's intervals."""
+        return t0 + self.dt * np.round((t_obs - t0) / self.dt)
+
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
         self._u = self.coefficients(z)
         self._t0 = float(time_since_apex)
