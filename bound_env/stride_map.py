@@ -11,8 +11,8 @@ The plant is the step env
 A stride from the apex state z (eq. 17, t = 0 there) under the normalized **interval actions**
 a[0], a[1], ... is the step env's own zero-order hold: interval k, [k dt, (k + 1) dt], holds
 the torque tau_k = max_torque * clip(a_k, -1, 1), integrated event-accurately by the step
-env's compiled kernel (`bound_env.task.step_env`, the very function `PassiveBound-v0` steps),
-until the step in which the next apex is passed; the apex state is located on the
+env's compiled kernel (`bound_env.task.advance_interval`, the dynamics of every step of
+PassiveBound-v0), until the step in which the next apex is passed; the apex state is located on the
 integrator's dense output. The last action holds past the given ones. A stride-level profile
 tau(t) = max_torque sum_i u_i phi_i(t) enters as its **interval averages**
 a = W u (`interval_weights`), so each interval delivers the profile's impulse exactly.
@@ -43,7 +43,7 @@ from .task import (
     NO_APEX_TIME,
     PassiveBoundTask,
     S,
-    step_env,
+    advance_interval,
 )
 from .terrain import change_slope, set_slope
 
@@ -93,7 +93,7 @@ def stride(y, aux, flags, s, apex, obs, cfg, actions, kick_step, kick_index, kic
     for k in range(n_max):
         if k == kick_step:
             y[kick_index] += kick_delta
-        step_env(y, aux, flags, s, apex, obs, cfg, actions[min(k, n_a - 1)])
+        advance_interval(y, aux, flags, s, apex, cfg, actions[min(k, n_a - 1)])
         tau = abs(s[S.TAU])
         if s[S.NAPEX] > 0.0:
             t_apex = s[S.T_APEX]
@@ -120,7 +120,7 @@ def open_loop(y, aux, flags, s, apex, obs, cfg, actions, seg, n_max, max_strides
     n_a = actions.shape[0]
     for k in range(n_max):
         j = k // seg
-        step_env(y, aux, flags, s, apex, obs, cfg, actions[j] if j < n_a else 0.0)
+        advance_interval(y, aux, flags, s, apex, cfg, actions[j] if j < n_a else 0.0)
         if s[S.NAPEX] > 0.0:
             t_step, t_apex = s[S.T], s[S.T_APEX]
             if s[S.STRIDES] >= max_strides:

@@ -286,13 +286,12 @@ def advance_rough(y, aux, flags, s, t_end, cfg, log, apex):
 
 
 @jit
-def step_env(y, aux, flags, s, apex, obs, cfg, action):
-    """One control interval of one robot: torque, integration, reward terms, observation.
-
-    ``action`` is the normalized torque (clipped here to [-1, 1]). Every apex passed on the
-    way ends a stride: its full state goes to ``apex`` (up to its capacity) and its cost to
-    the tracking term. Results go to ``s`` (columns ``S_*``) and ``obs``.
-    """
+def advance_interval(y, aux, flags, s, apex, cfg, action):
+    """The dynamics of one control interval of one robot: the torque held, integration to the
+    interval's end (every apex passed on the way ends a stride: its full state goes to
+    ``apex``, up to its capacity), status and time bookkeeping in ``s``. Returns (the clipped
+    action, the tracking cost of the apexes passed); `step_env` adds rewards and the
+    observation, the one stride map (`bound_env.stride_map`) needs only this."""
     a = min(max(action, -1.0), 1.0)
     tau = cfg[C.MAX_TORQUE] * a
     aux[P_TAU] = tau
@@ -326,7 +325,6 @@ def step_env(y, aux, flags, s, apex, obs, cfg, action):
         y[:] = y_start
         if status < FAIL_FIRST:
             status = F_NON_FINITE
-    alive, r_tracking, r_ctrl, reward = reward_terms(cfg, tracking, a, status >= FAIL_FIRST)
     s[S.T] = t
     s[S.H] = h
     s[S.STEPS] = steps
@@ -334,14 +332,28 @@ def step_env(y, aux, flags, s, apex, obs, cfg, action):
     s[S.NAPEX] = n_apex
     s[S.STATUS] = status
     s[S.TAU] = tau
+    s[S.PHASE] = phase_index(aux)
+    return a, tracking
+
+
+@jit
+def step_env(y, aux, flags, s, apex, obs, cfg, action):
+    """One control interval of one robot: torque, integration, reward terms, observation.
+
+    ``action`` is the normalized torque (clipped here to [-1, 1]). Every apex passed on the
+    way ends a stride: its full state goes to ``apex`` (up to its capacity) and its cost to
+    the tracking term. Results go to ``s`` (columns ``S_*``) and ``obs``.
+    """
+    a, tracking = advance_interval(y, aux, flags, s, apex, cfg, action)
+    status = s[S.STATUS]
+    alive, r_tracking, r_ctrl, reward = reward_terms(cfg, tracking, a, status >= FAIL_FIRST)
     s[S.ENERGY] = total_energy(y, aux)
     s[S.X] = y[0]
-    s[S.PHASE] = phase_index(aux)
     s[S.ALIVE] = alive
     s[S.TRACKING] = r_tracking
     s[S.CTRL] = r_ctrl
     s[S.REWARD] = reward
-    observe(y, aux, flags, t - s[S.T_APEX], cfg, obs)
+    observe(y, aux, flags, s[S.T] - s[S.T_APEX], cfg, obs)
 
 
 @jit
