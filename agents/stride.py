@@ -465,10 +465,7 @@ class StridePolicyController:
         """The profile planned at apex state z: torque on each sub-window [N m]."""
         return self.max_torque * (self.phi @ self.coefficients(z))
 
-    @staticmethod
-    def step_time(t_obs, t0):
-        """The time since the apex the profile is read at: the observed one."""
-        return t_obs
+    snaps_time = False  # the profile is read at the observed (float32) time since the apex
 
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
         self._taus = self.apex_torques(z)

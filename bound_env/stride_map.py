@@ -37,6 +37,7 @@ from .dynamics import jit
 from .events import APEX, F_NO_APEX, FAIL_FIRST
 from .params import Z_IN_Y
 from .task import (
+    C_MAX_TORQUE,
     DEFAULT_DT,
     DEFAULT_MAX_TORQUE,
     FAILURE_NAMES,
@@ -44,6 +45,8 @@ from .task import (
     PassiveBoundTask,
     S,
     advance_interval,
+    step_env,
+    strict_jit,
 )
 from .terrain import change_slope, set_slope
 
@@ -128,6 +131,47 @@ def open_loop(y, aux, flags, s, apex, obs, cfg, actions, seg, n_max, max_strides
         if s[S.STATUS] >= FAIL_FIRST:
             return 0, int(s[S.STRIDES]), t_step, t_apex, s[S.T]
     return -1, int(s[S.STRIDES]), t_step, t_apex, s[S.T]
+
+
+@strict_jit
+def profile_action(taus, edges, t, t0, snap, dt, max_torque):
+    """clip(average of the sub-window torques ``taus`` (on ``edges``, the last one held past
+    edges[-1]) over [t, t + dt] / max_torque, -1, 1): a stride controller's action on the
+    interval that starts t after its apex (with ``snap``: t snapped to the grid t0 + k dt), as
+    `bound_env.stride_task.TorqueBasis.average` computes it (compiled without fast-math, so
+    it rounds as NumPy does)."""
+    if snap:
+        t = t0 + dt * round((t - t0) / dt)
+    t1 = t + dt
+    n = taus.shape[0]
+    acc = 0.0
+    for j in range(n):
+        lo = min(max(edges[j], t), t1)
+        hi = min(max(edges[j + 1] if j < n - 1 else math.inf, t), t1)
+        acc += taus[j] * (hi - lo)
+    return min(max(acc / (t1 - t) / max_torque, -1.0), 1.0)
+
+
+@jit
+def to_next_apex(
+    Y, AUX, FLAGS, SS, APEXES, OBS, cfg, live, taus, t0, snap, edges, dt, i_time, n_max
+):
+    """Long episodes of a stride controller in the step env (rough terrain, MFPT): every live
+    robot i steps its own plan, the profile ``taus[i]`` it chose at its last apex, read at the
+    observed (float32) time since that apex (snapped to the grid ``t0[i]`` + k dt with
+    ``snap``), until an interval in which it passes an apex or fails (at most ``n_max``
+    intervals). The caller re-plans at the apex; robots are independent, so each one's
+    intervals are exactly those of stepping the whole batch one interval at a time."""
+    max_torque = cfg[C_MAX_TORQUE]
+    for i in range(Y.shape[0]):
+        if not live[i]:
+            continue
+        for _ in range(n_max):
+            t = np.float64(OBS[i, i_time])
+            a = profile_action(taus[i], edges, t, t0[i], snap, dt, max_torque)
+            step_env(Y[i], AUX[i], FLAGS[i], SS[i], APEXES[i], OBS[i], cfg, a)
+            if SS[i, S.NAPEX] > 0.0 or SS[i, S.STATUS] >= FAIL_FIRST:
+                break
 
 
 @jit

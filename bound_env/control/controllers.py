@@ -79,12 +79,11 @@ def interval_actions_of(basis: TorqueBasis, max_torque: float, U, times, dt: flo
 
 class StridePlans:
     """The stride plans of n robots under one stride controller, for loops that step many
-    robots through the step env at once (long episodes): each robot's profile, chosen at its
-    last apex (``apex``), and the actions every robot's own copy of the controller would
-    output now (``actions``, bit for bit, one vectorized call). The controller provides
-    ``apex_torques(z)`` (the profile it plans at z, as ``on_apex`` stores it),
-    ``step_time(t_obs, t0)`` (the time since the apex it evaluates the profile at), ``basis``,
-    ``max_torque`` and ``dt``."""
+    robots through the step env at once (long episodes, `bound_env.stride_map.to_next_apex`):
+    each robot's profile, chosen at its last apex (``apex``), and the time since that apex it
+    was announced at. The controller provides ``apex_torques(z)`` (the profile it plans at z,
+    as ``on_apex`` stores it), ``snaps_time`` (whether it reads its profile at the observed
+    time or snaps it to the apex's interval grid), ``basis``, ``max_torque`` and ``dt``."""
 
     def __init__(self, controller, n: int):
         self.ctrl = controller
@@ -94,13 +93,6 @@ class StridePlans:
     def apex(self, i: int, z, time_since_apex: float = 0.0) -> None:
         self.taus[i] = self.ctrl.apex_torques(np.asarray(z, dtype=float))
         self.t0[i] = time_since_apex
-
-    def actions(self, t_obs) -> np.ndarray:
-        """Each robot's action for the observed times since its apex (float32 values)."""
-        c = self.ctrl
-        t = c.step_time(np.asarray(t_obs, dtype=float), self.t0)
-        avg = interval_averages(c.basis, self.taus, t[:, None], c.dt)[:, 0]
-        return np.clip(avg / c.max_torque, -1.0, 1.0)
 
 
 def notify_apex(controller, obs, info) -> None:
@@ -164,10 +156,7 @@ class StrideFeedback:
         """The profile planned at apex state z: torque on each sub-window [N m]."""
         return self.basis.torques(self.coefficients(z), self.max_torque)
 
-    @staticmethod
-    def step_time(t_obs, t0):
-        """The time since the apex the profile is read at: the observed one."""
-        return t_obs
+    snaps_time = False  # the profile is read at the observed (float32) time since the apex
 
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
         self._taus = self.apex_torques(z)

@@ -247,9 +247,7 @@ class MPCController:
         """The profile planned at apex state z: torque on each sub-window [N m]."""
         return self.basis.torques(self.coefficients(z), self.max_torque)
 
-    def step_time(self, t_obs, t0):
-        """The observed (float32) time snapped to the grid t0 + k dt of the apex's intervals."""
-        return t0 + self.dt * np.round((t_obs - t0) / self.dt)
+    snaps_time = True  # the observed time is snapped to the apex's interval grid (__call__)
 
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
         self._u = self.coefficients(z)

@@ -11,7 +11,14 @@ import numpy as np
 
 from ...control.controllers import StridePlans
 from ...events import PHASES
-from ...stride_map import EVAL_RTOL, RETURN_TOL, StrideMap, Strides, max_intervals
+from ...stride_map import (
+    EVAL_RTOL,
+    RETURN_TOL,
+    StrideMap,
+    Strides,
+    max_intervals,
+    to_next_apex,
+)
 from ...task import FAILURE_NAMES
 from .budget import DEFAULT_SEED, Budget
 
@@ -272,7 +279,8 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
         task.draw_slope_noise(b, i, rngs[i])
     on_apex = getattr(ctrl, "on_apex", None)
     batched = callable(getattr(ctrl, "batch", None)) and on_apex is None
-    # a stride controller: every robot's plan in one array (the same actions as its copies)
+    # a stride controller: every robot's plan in one array, stepped by a compiled loop from
+    # apex to apex (the same intervals and actions as its copies, bit for bit)
     plans = None
     if not batched and callable(getattr(ctrl, "apex_torques", None)):
         plans = StridePlans(ctrl, n)
@@ -290,16 +298,22 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
         fell[i] = 1
         name = FAILURE_NAMES[int(b.s[i, S_STATUS])]
         failures[name] = failures.get(name, 0) + 1
+    n_max = max_intervals(task.dt)
     while live.any():
-        if batched:
-            b.actions[:] = ctrl.batch(b.obs)
-        elif plans is not None:
-            b.actions[live] = plans.actions(b.obs[:, loop.i_since_apex])[live]
+        if plans is not None:  # every live robot to its next apex (or fall), compiled
+            to_next_apex(
+                b.y, b.aux, b.flags, b.s, b.apex, b.obs, task.cfg, live, plans.taus,
+                plans.t0, bool(ctrl.snaps_time), ctrl.basis.edges, ctrl.dt,
+                loop.i_since_apex, n_max,
+            )  # fmt: skip
         else:
-            for i in np.flatnonzero(live):
-                b.actions[i] = copies[i](b.obs[i])
-        b.active[:] = live
-        task.step(b)
+            if batched:
+                b.actions[:] = ctrl.batch(b.obs)
+            else:
+                for i in np.flatnonzero(live):
+                    b.actions[i] = copies[i](b.obs[i])
+            b.active[:] = live
+            task.step(b)
         s = b.s
         apex = live & (s[:, S_NAPEX] > 0)
         for i in np.flatnonzero(apex):
