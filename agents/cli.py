@@ -326,14 +326,11 @@ def _policy_label(policy: str) -> str:
 
 
 def _write_json(path: Path, data) -> Path:
-    """Write JSON atomically (temp name, then rename), creating the folder."""
-    import os
+    """Write JSON atomically (`bound_env.cache.atomic_write`), creating the folder."""
+    from bound_env.cache import atomic_write
 
     out_dir(path.parent)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
-    return path
+    return atomic_write(path, json.dumps(data, indent=2) + "\n")
 
 
 def cmd_train(args) -> int:

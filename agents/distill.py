@@ -525,15 +525,21 @@ def check_export(export, force: bool) -> None:
 
 
 def export_folder(src: Path, dest) -> Path:
-    """Copy a policy folder to ``dest`` whole: a copy beside it, then a rename."""
+    """Copy a policy folder to ``dest`` whole: a copy beside it under a name of its own (a
+    folder: `bound_env.cache.atomic_path` writes files), then a rename; removed on failure."""
     import shutil
+    import tempfile
 
     dest = Path(dest)
-    tmp = dest.with_name(dest.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    shutil.copytree(src, tmp)
-    shutil.rmtree(dest, ignore_errors=True)
-    tmp.rename(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent))
+    try:
+        shutil.copytree(src, tmp, dirs_exist_ok=True)  # and src's mode (mkdtemp's is 0700)
+        shutil.rmtree(dest, ignore_errors=True)
+        tmp.rename(dest)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     return dest
 
 

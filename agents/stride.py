@@ -593,11 +593,11 @@ def write_base(run_dir: Path, venv) -> None:
     # the worker process (the parent then sees EOFError).
     if not venv.has_attr("base"):
         return
+    from bound_env.cache import atomic_write
+
     bases = venv.get_attr("base")
     if bases and bases[0] is not None:
-        tmp = Path(run_dir) / (BASE_FILE + ".tmp")
-        tmp.write_text(json.dumps(bases[0].to_json(), indent=2) + "\n")
-        tmp.replace(Path(run_dir) / BASE_FILE)
+        atomic_write(Path(run_dir) / BASE_FILE, json.dumps(bases[0].to_json(), indent=2) + "\n")
 
 
 # --------------------------------------------------------------------------------------------
