@@ -46,6 +46,8 @@ from bound_env.fast import EVENT_CAPACITY, event_log, recorder
 from bound_env.stride import state_from_z, z_from_state
 from bound_env.stride_task import NO_APEX_TIME
 
+from .mlp import mlp_forward
+
 POLICY_FILE = "choice.npz"  # the student's weights and library, in a policy folder
 VALIDATION_SEED = 777  # validation directions of every design choice (test set: 12345)
 
@@ -75,16 +77,6 @@ class DistillConfig:
 # --------------------------------------------------------------------------------------------
 
 
-def _forward(layers, x: np.ndarray) -> np.ndarray:
-    """The MLP: tanh hidden layers, linear output (rows of x)."""
-    h = x
-    for k, (W, b) in enumerate(layers):
-        h = h @ W.T + b
-        if k < len(layers) - 1:
-            h = np.tanh(h)
-    return h
-
-
 @dataclass
 class ChoicePolicyController(MPCController):
     """The distilled student (module docstring): the MPC's protocol, its plan a library row."""
@@ -94,7 +86,7 @@ class ChoicePolicyController(MPCController):
 
     def logits(self, z) -> np.ndarray:
         x = (np.atleast_2d(z) - self.z_ref) / self.scales
-        return _forward(self.layers, x)
+        return mlp_forward(self.layers, x, "Tanh")  # tanh hidden layers, linear output
 
     def plan(self, z) -> np.ndarray:
         z = np.asarray(z, dtype=float)

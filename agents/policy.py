@@ -13,7 +13,6 @@ torch in the worker processes of `agents.margins`.
 from __future__ import annotations
 
 import hashlib
-import math
 import pickle
 import sys
 from collections.abc import Callable
@@ -22,11 +21,12 @@ from functools import partial
 from importlib import resources
 from pathlib import Path
 
-import numba as nb
 import numpy as np
 import yaml
 
 from bound_env.resources import controllers_dir
+
+from .mlp import extract_actor, mlp_forward
 
 # Environment keyword arguments that shape the dynamics, the observation or the action; the
 # evaluation environment takes these from the policy's run config (reward weights and start
@@ -39,12 +39,6 @@ DYNAMICS_KWARGS = (
     "apex_scales",
     "exclude_current_positions_from_observation",
 )
-_ACTIVATIONS = {
-    "Tanh": np.tanh,
-    "ReLU": lambda x: np.maximum(x, 0.0),
-    "ELU": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
-    "Identity": lambda x: x,
-}
 
 
 @dataclass
@@ -94,19 +88,13 @@ class MLPController:
         )
 
     def __call__(self, obs: np.ndarray) -> float:
-        act = _ACTIVATIONS[self.activation]
-        x = self.normalize(obs)
-        for W, b in self.layers[:-1]:
-            x = act(W @ x + b)
-        W, b = self.layers[-1]
-        return float(np.clip((W @ x + b)[0], -1.0, 1.0))
+        out = mlp_forward(self.layers, self.normalize(obs), self.activation)
+        return float(np.clip(out[0], -1.0, 1.0))
 
     def batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions for a batch of observations (one row each), as ``__call__`` row by row (to
-        rounding). Each row is computed alone, in a fixed order, without BLAS threads, and tanh
-        element by element (NumPy's vectorized tanh rounds differently in and after its SIMD
-        blocks): a row's action depends neither on the other rows nor on the machine's load."""
-        act = _tanh_elements if self.activation == "Tanh" else _ACTIVATIONS[self.activation]
+        rounding). Each row is computed alone (`mlp_forward` with ``exact_rows``): a row's
+        action depends neither on the other rows nor on the machine's load."""
         x = np.asarray(obs, dtype=np.float64)
         if self.obs_index is not None:
             x = x[:, self.obs_index]
@@ -116,10 +104,8 @@ class MLPController:
                 -self.clip_obs,
                 self.clip_obs,
             )
-        for W, b in self.layers[:-1]:
-            x = act(_affine_rows(x, W, b))
-        W, b = self.layers[-1]
-        return np.clip(_affine_rows(x, W, b)[:, 0], -1.0, 1.0)
+        out = mlp_forward(self.layers, x, self.activation, exact_rows=True)
+        return np.clip(out[:, 0], -1.0, 1.0)
 
     def fingerprint(self) -> str:
         h = hashlib.sha256()
@@ -135,30 +121,6 @@ class MLPController:
         # the activation and the normalization constants change the actions too
         h.update(repr((self.activation, self.epsilon, self.clip_obs)).encode())
         return h.hexdigest()[:16]
-
-
-@nb.njit(cache=True)
-def _tanh_elements(x):
-    """tanh of each element by the same scalar routine, wherever it sits in the array."""
-    out = np.empty_like(x)
-    flat_in, flat_out = x.ravel(), out.ravel()
-    for i in range(flat_in.size):
-        flat_out[i] = math.tanh(flat_in[i])
-    return out
-
-
-@nb.njit(cache=True)
-def _affine_rows(x, W, b):
-    """x @ W.T + b, one row at a time, each sum in index order (no fast-math: a vectorized
-    sum would depend on the row's alignment in memory), so row i depends on x[i] only."""
-    out = np.empty((x.shape[0], W.shape[0]))
-    for i in range(x.shape[0]):
-        for j in range(W.shape[0]):
-            acc = b[j]
-            for k in range(W.shape[1]):
-                acc += W[j, k] * x[i, k]
-            out[i, j] = acc
-    return out
 
 
 # The shipped policies, package data of `agents` (``agents/policies/<name>/``), read with
@@ -559,7 +521,7 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
     for w in check_policy_files(files, section, force):
         print(f"warning: {w}", file=sys.stderr)
-    layers, activation = _extract_actor(model, model_path)
+    layers, activation = extract_actor(model, model_path)
     ctrl = MLPController(
         name=str(path),
         layers=layers,
@@ -623,29 +585,3 @@ def check_spaces(model, env_kwargs: dict, wrappers, model_path: Path) -> np.ndar
     if not isinstance(act, gym.spaces.Box) or act.shape != want_act.shape:
         raise ValueError(f"policy {model_path} acts in {act}, PassiveBound expects {want_act}")
     return index
-
-
-def _extract_actor(model, model_path: Path) -> tuple[list, str]:
-    """Hidden layers of ``mlp_extractor.policy_net`` plus ``action_net`` as NumPy arrays."""
-    from torch import nn
-
-    policy = model.policy
-    if type(policy.pi_features_extractor).__name__ != "FlattenExtractor":
-        raise ValueError(f"{model_path}: only MLP policies on a flat observation are supported")
-    layers, activation = [], "Identity"
-    for m in policy.mlp_extractor.policy_net:
-        if isinstance(m, nn.Linear):
-            layers.append(
-                (m.weight.detach().double().numpy().copy(), m.bias.detach().double().numpy().copy())
-            )
-        elif type(m).__name__ in _ACTIVATIONS:
-            activation = type(m).__name__
-        else:
-            raise ValueError(f"{model_path}: unsupported layer {m} in the policy network")
-    an = policy.action_net
-    layers.append(
-        (an.weight.detach().double().numpy().copy(), an.bias.detach().double().numpy().copy())
-    )
-    if getattr(policy, "squash_output", False):
-        raise ValueError(f"{model_path}: squashed (gSDE) policies are not supported")
-    return layers, activation

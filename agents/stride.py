@@ -45,6 +45,8 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from .mlp import extract_actor, mlp_forward
+
 STRIDE_ENV_ID = "PassiveBoundStride-v0"
 BASE_FILE = "base.json"
 # tolerance of the nominal stride that sets the basis' window edges in the step env: that of
@@ -416,13 +418,7 @@ class StridePolicyController:
         return TorqueBasis("policy", self.edges, self.phi)
 
     def _net(self, x) -> np.ndarray:
-        from .policy import _ACTIVATIONS
-
-        act = _ACTIVATIONS[self.activation]
-        for W, b in self.layers[:-1]:
-            x = act(W @ x + b)
-        W, b = self.layers[-1]
-        return W @ x + b
+        return mlp_forward(self.layers, x, self.activation)
 
     def residual(self, z) -> np.ndarray:
         """du = clip(mean action, -1, 1) at apex state z."""
@@ -515,7 +511,6 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
     from bound_env.stride_task import StrideTask
 
     from .policy import (
-        _extract_actor,
         check_gait,
         check_policy_files,
         find_policy_files,
@@ -557,7 +552,7 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
         if not base_path.is_file():
             raise FileNotFoundError(f"residual policy {path}: missing {base_path}")
         base = BaseGain.from_json(json.loads(base_path.read_text()))
-    layers, activation = _extract_actor(model, model_path)
+    layers, activation = extract_actor(model, model_path)
     ctrl = StridePolicyController(
         name=str(path),
         layers=layers,

@@ -261,10 +261,11 @@ class BasinValidationCallback(BaseCallback):
     def controller(self):
         import bound_env.task as task_mod
 
-        from .policy import DYNAMICS_KWARGS, MLPController, _extract_actor
+        from .mlp import extract_actor
+        from .policy import DYNAMICS_KWARGS, MLPController
         from .wrappers import observation_index
 
-        layers, activation = _extract_actor(self.model, Path("(training)"))
+        layers, activation = extract_actor(self.model, Path("(training)"))
         kwargs = {k: v for k, v in self.env_kwargs.items() if k in DYNAMICS_KWARGS}
         names = task_mod.PassiveBoundTask(
             **{k: v for k, v in kwargs.items() if k != "apex_scales"}
