@@ -463,7 +463,7 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
         raise FileNotFoundError(f"no model.zip in {run_dir}")
     best = run_dir / "best"
     src = best if source == "best" and (best / "model.zip").is_file() else run_dir
-    from .policy import check_policy_files, find_policy_files, write_fingerprint
+    from .policy_files import check_policy_files, find_policy_files, write_fingerprint
 
     files = find_policy_files(src)
     check_policy_files(files, {}, force=True)  # refuses statistics of another model

@@ -47,6 +47,7 @@ from bound_env.stride import state_from_z, z_from_state
 from bound_env.stride_task import NO_APEX_TIME
 
 from .mlp import mlp_forward
+from .policy_files import FINGERPRINT_FILE, file_sha256
 
 POLICY_FILE = "choice.npz"  # the student's weights and library, in a policy folder
 VALIDATION_SEED = 777  # validation directions of every design choice (test set: 12345)
@@ -147,9 +148,7 @@ FINGERPRINTED = (POLICY_FILE, "config.json")
 def write_choice_fingerprint(folder) -> Path:
     """``fingerprint.json`` of a choice policy folder: the sha256 of ``choice.npz`` and
     ``config.json`` (written atomically), checked by `check_choice_fingerprint`, as
-    `agents.policy.write_fingerprint` binds a PPO policy's files."""
-    from .policy import FINGERPRINT_FILE, file_sha256
-
+    `agents.policy_files.write_fingerprint` binds a PPO policy's files."""
     folder = Path(folder)
     data = {name: file_sha256(folder / name) for name in FINGERPRINTED}
     return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
@@ -160,8 +159,6 @@ def check_choice_fingerprint(folder, force: bool = False) -> list[str]:
     ``fingerprint.json`` (changed or cut short since the policy was saved, or files of two
     policies mixed); ``force`` evaluates it as it is, and the mismatch comes back as a
     warning. A folder without a fingerprint (saved before they were written) passes."""
-    from .policy import FINGERPRINT_FILE, file_sha256
-
     folder = Path(folder)
     fp = folder / FINGERPRINT_FILE
     if not fp.is_file():

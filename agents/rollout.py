@@ -27,14 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .policy import (
-    MLPController,
-    check_gait,
-    find_policy_files,
-    load_controller,
-    read_policy_section,
-    resolve_policy,
-)
+from .controllers import MLPController, check_gait
+from .policy import load_controller, resolve_policy
+from .policy_files import find_policy_files, read_policy_section
 
 ENV_ID = "PassiveBound-v0"  # the env class; the policy's env id only adds its registered kwargs
 

@@ -45,7 +45,9 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from .controllers import check_gait
 from .mlp import extract_actor, mlp_forward
+from .policy_files import check_policy_files, find_policy_files, read_policy_section
 
 STRIDE_ENV_ID = "PassiveBoundStride-v0"
 BASE_FILE = "base.json"
@@ -509,13 +511,6 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
     from stable_baselines3 import PPO
 
     from bound_env.stride_task import StrideTask
-
-    from .policy import (
-        check_gait,
-        check_policy_files,
-        find_policy_files,
-        read_policy_section,
-    )
 
     files = find_policy_files(path)
     model_path, vecnorm_path = files.model, files.vecnormalize

@@ -151,7 +151,7 @@ def make_vec(
 def save_policy(model, folder: Path) -> None:
     """Save ``model.zip``, its ``vecnormalize.pkl`` (when normalizing) and ``fingerprint.json``
     binding the two, each under a temporary name and then renamed; the fingerprint last."""
-    from .policy import write_fingerprint
+    from .policy_files import write_fingerprint
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -261,8 +261,9 @@ class BasinValidationCallback(BaseCallback):
     def controller(self):
         import bound_env.task as task_mod
 
+        from .controllers import MLPController
         from .mlp import extract_actor
-        from .policy import DYNAMICS_KWARGS, MLPController
+        from .policy_files import DYNAMICS_KWARGS
         from .wrappers import observation_index
 
         layers, activation = extract_actor(self.model, Path("(training)"))
@@ -483,7 +484,7 @@ def save_checkpoint(model, folder: Path, n: int) -> Path:
     """A checkpoint that is complete or absent: the model, then its VecNormalize statistics,
     each under a temporary name and renamed, then a manifest (sha256 of both) written last.
     `last_checkpoint` only takes checkpoints whose manifest matches their files."""
-    from .policy import file_sha256
+    from .policy_files import file_sha256
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -514,7 +515,7 @@ def save_checkpoint(model, folder: Path, n: int) -> Path:
 
 def _complete(zip_path: Path, pkl_path: Path, manifest: Path) -> bool:
     """Whether a checkpoint's manifest is readable and matches its files."""
-    from .policy import file_sha256
+    from .policy_files import file_sha256
 
     try:
         entry = json.loads(manifest.read_text())

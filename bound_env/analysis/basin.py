@@ -18,7 +18,7 @@ Two ways to run a batch of starts:
   their strides with the fast back-end's `bound_env.fast.advance` (the same call
   `bound_env.hybrid.simulate_stride` makes);
 - **a controller** with ``env_kwargs`` and ``batch(obs) -> actions`` (a trained policy,
-  `agents.policy.MLPController`) or the per-observation protocol of `agents.margins`
+  `agents.controllers.MLPController`) or the per-observation protocol of `agents.margins`
   (``__call__(obs)``, optional ``on_apex``; then one copy per robot): `controller_batch`,
   the native vector env's kernel (`bound_env.task.PassiveBoundTask.step`) with one
   controller call per control interval for the whole batch (Python runs once per interval,
