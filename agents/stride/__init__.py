@@ -45,9 +45,9 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from .controllers import check_gait
-from .mlp import extract_actor, mlp_forward
-from .policy_files import check_policy_files, find_policy_files, read_policy_section
+from ..controllers import check_gait
+from ..mlp import extract_actor, mlp_forward
+from ..policy_files import check_policy_files, find_policy_files, read_policy_section
 
 STRIDE_ENV_ID = "PassiveBoundStride-v0"
 BASE_FILE = "base.json"
@@ -495,7 +495,7 @@ class StridePolicyController:
 
 def wrapper_kwargs(env_wrappers, name: str) -> dict | None:
     """The kwargs of the ``env_wrapper`` entry whose class is ``name`` (None if absent)."""
-    from .config import _entries
+    from ..config import _entries
 
     for path, kw in _entries(env_wrappers):
         if path.rsplit(".", 1)[-1] == name:
@@ -675,30 +675,3 @@ def r50_of(sizes, p) -> float:
             f = (p[i - 1] - 0.5) / (p[i - 1] - p[i])
             return float(sizes[i - 1] + f * (sizes[i] - sizes[i - 1]))
     return float(sizes[-1])
-
-
-def main(argv=None) -> int:
-    """``python -m agents.stride POLICY [POLICY ...]``: the validation curve as JSON lines."""
-    import argparse
-    import sys
-
-    from .policy import load_controller
-
-    p = argparse.ArgumentParser(prog="python -m agents.stride", description=main.__doc__)
-    p.add_argument("policies", nargs="+", help="passive, lqr, a spec .yaml or a policy dir")
-    p.add_argument("--n-dirs", type=int, default=64)
-    p.add_argument("--seed", type=int, default=VALIDATION_SEED)
-    args = p.parse_args(argv)
-    for path in args.policies:
-        try:
-            ctrl = load_controller(path)
-        except (FileNotFoundError, ValueError) as e:
-            print(f"error: {e}", file=sys.stderr)
-            return 2
-        r = stride_curve(ctrl, n_dirs=args.n_dirs, seed=args.seed)
-        print(json.dumps({"policy": str(path), **r}), flush=True)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
