@@ -16,19 +16,9 @@ from bound_env.cli_args import (
     say,
     strict_json,
 )
-from bound_env.resources import controllers_dir
 
-# the classical controllers by name: the specs in configs/controllers/ (a cheap glob: the help
-# is built on every start of bound-env)
-_CONTROLLER_NAMES = ", ".join(sorted(p.stem for p in controllers_dir().glob("*.yaml")))
-POLICY_HELP = (
-    "'passive', a shipped policy ('default': the learned controller chosen on validation, "
-    "'ppo-v1', 'literal-cycle', 'finetuned/s0' .. 's2', 'distilled/s0' .. 's2', "
-    "'ppo-v1-final/s0' .. 's2', 'stride-residual/s0' .. 's2'), a "
-    "classical controller (" + _CONTROLLER_NAMES + ": "
-    "bound_env.control, or a controller spec .yaml), or a path: a run/policy folder, a "
-    "model .zip, an rl-zoo3 run folder"
-)
+from .policy_args import POLICY_HELP, policy_label
+
 SEED_MAX = 2**32 - 1  # NumPy's and Gymnasium's seeds are unsigned 32-bit integers
 BUDGET_HELP = (
     "margins budget (agents.margins.BUDGETS): test (a smoke test), quick (32 random "
@@ -308,7 +298,7 @@ def cmd_rollout(args) -> int:
         video=args.video,
         force=args.force,
     )
-    out = Path(args.out) if args.out else Path("out") / "rollout" / _policy_label(args.policy)
+    out = Path(args.out) if args.out else Path("out") / "rollout" / policy_label(args.policy)
     path = _write_json(out / "summary.json", r)
     if args.json:
         print(strict_json(r))
@@ -316,13 +306,6 @@ def cmd_rollout(args) -> int:
         print(summary_text(r))
     say(args, f"wrote {path}" + (f" and the video {r['video']}" if r.get("video") else ""))
     return 0
-
-
-def _policy_label(policy: str) -> str:
-    """A folder name for a policy given by name or path."""
-    from .policy import policy_names
-
-    return policy if policy in policy_names() else Path(policy).resolve().name
 
 
 def _write_json(path: Path, data) -> Path:
@@ -489,7 +472,7 @@ def cmd_margins(args) -> int:
     from .margins import compute_margins, summary_text
     from .policy import load_controller
 
-    name = _policy_label(args.policy)
+    name = policy_label(args.policy)
     if args.seed != 12345:  # a held-out set: not over the test set's outputs
         name += f"-seed{args.seed}"
     out = out_dir(args.out or Path("out") / "margins" / name)
