@@ -495,9 +495,9 @@ class StridePolicyController:
 
 def wrapper_kwargs(env_wrappers, name: str) -> dict | None:
     """The kwargs of the ``env_wrapper`` entry whose class is ``name`` (None if absent)."""
-    from ..config import _entries
+    from ..config import class_entries
 
-    for path, kw in _entries(env_wrappers):
+    for path, kw in class_entries(env_wrappers):
         if path.rsplit(".", 1)[-1] == name:
             return dict(kw)
     return None
