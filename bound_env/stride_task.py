@@ -50,7 +50,7 @@ from .events import APEX, F_NO_APEX, N_FLAGS, TIME_UP, failure_name
 from .fast import EVENT_CAPACITY, Options, advance, event_log, recorder
 from .params import P_TAU, Gait, load_gait
 from .stride import DEFAULT_T_MAX, simulate_stride, state_from_z, z_from_state
-from .task import DEFAULT_RESET_NOISE_SCALE, PassiveBoundTask, _number
+from .task import DEFAULT_RESET_NOISE_SCALE, PassiveBoundTask, check_number
 from .terrain import change_slope, set_slope
 
 BASES = ("windows", "phases", "hats")
@@ -309,10 +309,10 @@ class StrideTask:
         self.z_ref = self.step_task.z_ref
         self.apex_scales = self.step_task.apex_scales
         self.max_torque = self.step_task.max_torque
-        self.alive_reward = _number("alive_reward", alive_reward, 0.0)
-        self.tracking_cost_weight = _number("tracking_cost_weight", tracking_cost_weight, 0.0)
-        self.ctrl_cost_weight = _number("ctrl_cost_weight", ctrl_cost_weight, 0.0)
-        self.rtol = _number("rtol", rtol, 0.0, strict=True)
+        self.alive_reward = check_number("alive_reward", alive_reward, 0.0)
+        self.tracking_cost_weight = check_number("tracking_cost_weight", tracking_cost_weight, 0.0)
+        self.ctrl_cost_weight = check_number("ctrl_cost_weight", ctrl_cost_weight, 0.0)
+        self.rtol = check_number("rtol", rtol, 0.0, strict=True)
         # the nominal stride is the gait file's (without overrides), so that the basis, like
         # z*, is the same for every override of the same gait
         nominal = nominal_stride(load_gait(gait), rtol=self.rtol)
