@@ -1,7 +1,9 @@
-"""Layering of the package, read from the source with `ast`: imports point down only.
+"""Layering of the packages, read from the source with `ast`: imports point down only.
 
 Every import counts, also those inside functions (deferred imports) and string imports through
-``importlib.import_module`` / ``__import__``.
+``importlib.import_module`` / ``__import__``. Neither `bound_env` nor `agents` has an import
+cycle, `bound_env` never imports `agents`, and no module imports another one's private
+(underscore) name.
 """
 
 import ast
@@ -10,32 +12,45 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGE = ROOT / "bound_env"
+PACKAGES = ("bound_env", "agents")
+# Modules that still import private names: they are being moved into
+# bound_env/analysis/margins/ elsewhere (tested apart, as an expected failure, until then).
+BEING_MOVED = ("agents.margins", "agents.compare")
 
 
-def _modules() -> dict[str, tuple[Path, bool]]:
-    """Dotted module name -> (file, is a package ``__init__``)."""
+def _modules(*packages: str) -> dict[str, tuple[Path, bool]]:
+    """Dotted module name -> (file, is a package ``__init__``), of ``packages`` (default:
+    `bound_env`)."""
     mods = {}
-    for f in sorted(PACKAGE.rglob("*.py")):
+    files = [f for p in packages or ("bound_env",) for f in sorted((ROOT / p).rglob("*.py"))]
+    for f in files:
         parts = list(f.relative_to(ROOT).with_suffix("").parts)
         is_pkg = parts[-1] == "__init__"
         mods[".".join(parts[:-1] if is_pkg else parts)] = (f, is_pkg)
     return mods
 
 
+def _from_module(mod: str, is_pkg: bool, node: ast.ImportFrom) -> str:
+    """The absolute module of ``from X import ...`` in ``mod``."""
+    if not node.level:
+        return node.module
+    base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _tree(path: Path) -> ast.AST:
+    return ast.parse(path.read_text(), filename=str(path))
+
+
 def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
     """Every dotted name ``mod`` imports, absolute, including ``from X import submodule``."""
     names = set()
-    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+    for node in ast.walk(_tree(path)):
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = mod.split(".") if is_pkg else mod.split(".")[:-1]
-                base = base[: len(base) - (node.level - 1)]
-                module = ".".join(base + ([node.module] if node.module else []))
-            else:
-                module = node.module
+            module = _from_module(mod, is_pkg, node)
             names.add(module)
             names.update(f"{module}.{a.name}" for a in node.names)
         elif isinstance(node, ast.Call):
@@ -48,8 +63,30 @@ def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
     return names
 
 
-def _graph():
-    mods = _modules()
+def _private_imports(mod: str, tree: ast.AST, is_pkg: bool, mods) -> list[str]:
+    """``from X import _name`` in ``mod``, X another module of ``mods`` and ``_name`` not a
+    module (a package may import its own private submodules, e.g. ``_dop853``)."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            module = _from_module(mod, is_pkg, node)
+            if module not in mods or module == mod:
+                continue
+            for a in node.names:
+                private = a.name.startswith("_") and not a.name.startswith("__")
+                if private and f"{module}.{a.name}" not in mods:
+                    found.append(f"line {node.lineno}: from {module} import {a.name}")
+    return found
+
+
+def _all_private_imports() -> dict[str, list[str]]:
+    mods = _modules(*PACKAGES)
+    found = {m: _private_imports(m, _tree(f), is_pkg, mods) for m, (f, is_pkg) in mods.items()}
+    return {m: v for m, v in found.items() if v}
+
+
+def _graph(*packages: str):
+    mods = _modules(*packages)
     imports = {m: _imported_names(m, *mods[m]) for m in mods}
     edges = {m: sorted(n for n in imports[m] if n in mods and n != m) for m in mods}
     return mods, imports, edges
@@ -94,6 +131,24 @@ def test_the_walker_sees_deferred_and_string_imports():
     assert "bound_env.params" in edges["bound_env.dynamics"]
     assert _cycles({"a": ["b"], "b": ["c"], "c": ["a"], "d": ["a"]}) == [["a", "b", "c"]]
     assert _cycles({"a": ["b"], "b": []}) == []
+    # agents: relative imports from a package and from its __main__, deferred ones included
+    _, imports, edges = _graph("agents")
+    assert "agents.policy" in edges["agents.stride.__main__"]
+    assert "agents.stride" in edges["agents.policy"]  # inside load_controller
+    assert "agents.config" in edges["agents.stride"]  # ``from ..config import`` in a function
+
+
+def test_the_walker_sees_private_imports():
+    mods = {"p": None, "p.a": None, "p.b": None, "p._c": None}
+    code = (
+        "from .b import _x, y\n"
+        "from . import _c\n"  # a private submodule of the package: allowed
+        "from .a import _own\n"  # its own name
+        "def f():\n    from p.b import _z\n"
+        "from numpy import _private_but_not_ours\n"
+    )
+    found = _private_imports("p.a", ast.parse(code), False, mods)
+    assert found == ["line 1: from p.b import _x", "line 5: from p.b import _z"]
 
 
 def test_nothing_in_bound_env_imports_agents():
@@ -105,9 +160,26 @@ def test_nothing_in_bound_env_imports_agents():
     assert {m: v for m, v in offenders.items() if v} == {}
 
 
-def test_no_import_cycle_inside_bound_env():
-    _, _, edges = _graph()
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_import_cycle(package):
+    _, _, edges = _graph(package)
     assert _cycles(edges) == []
+
+
+def test_no_private_name_is_imported_across_modules():
+    """A name another module needs is public; ``_name`` stays in its module."""
+    found = _all_private_imports()
+    assert {m: v for m, v in found.items() if m not in BEING_MOVED} == {}
+
+
+@pytest.mark.xfail(
+    strict=False,
+    reason="agents/margins.py (from bound_env.task import _Z_IDX) and agents/compare.py are "
+    "being moved into bound_env/analysis/margins/ on another branch",
+)
+def test_no_private_name_is_imported_by_margins_and_compare():
+    found = _all_private_imports()
+    assert {m: v for m, v in found.items() if m in BEING_MOVED} == {}
 
 
 @pytest.mark.parametrize(
