@@ -156,7 +156,7 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
         return load_choice_policy(path, gait=gait, force=force)
     files = find_policy_files(path)
     if files.config is not None and read_policy_section(files)[1] == "PassiveBoundStride-v0":
-        from .stride import load_stride_policy  # a stride-level policy (agents/stride/)
+        from .stride import load_stride_policy  # a stride-level policy (agents/stride.py)
 
         return load_stride_policy(path, gait=gait, force=force)
     model_path, vecnorm_path = files.model, files.vecnormalize

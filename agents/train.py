@@ -798,7 +798,7 @@ def train(
     )
     from .stride import write_base
 
-    write_base(run_dir, venv)  # a residual stride policy's base controller (agents/stride/)
+    write_base(run_dir, venv)  # a residual stride policy's base controller (agents/stride.py)
     eval_env = make_vec(env_id, spec, 1, seed + 10_000, "dummy")
     callbacks, curriculum_end = [], math.nan
     for cls, kwargs in spec.callbacks:

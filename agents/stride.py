@@ -45,9 +45,9 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from ..controllers import check_gait
-from ..mlp import extract_actor, mlp_forward
-from ..policy_files import check_policy_files, find_policy_files, read_policy_section
+from .controllers import check_gait
+from .mlp import extract_actor, mlp_forward
+from .policy_files import check_policy_files, find_policy_files, read_policy_section
 
 STRIDE_ENV_ID = "PassiveBoundStride-v0"
 BASE_FILE = "base.json"
@@ -495,7 +495,7 @@ class StridePolicyController:
 
 def wrapper_kwargs(env_wrappers, name: str) -> dict | None:
     """The kwargs of the ``env_wrapper`` entry whose class is ``name`` (None if absent)."""
-    from ..config import class_entries
+    from .config import class_entries
 
     for path, kw in class_entries(env_wrappers):
         if path.rsplit(".", 1)[-1] == name:
@@ -675,3 +675,33 @@ def r50_of(sizes, p) -> float:
             f = (p[i - 1] - 0.5) / (p[i - 1] - p[i])
             return float(sizes[i - 1] + f * (sizes[i] - sizes[i - 1]))
     return float(sizes[-1])
+
+
+def main(argv=None, *, load_controller) -> int:
+    """``python -m agents.stride POLICY [POLICY ...]``: the validation curve as JSON lines."""
+    # load_controller: `agents.policy.load_controller`, given by the script block below
+    import argparse
+
+    p = argparse.ArgumentParser(prog="python -m agents.stride", description=main.__doc__)
+    p.add_argument("policies", nargs="+", help="passive, lqr, a spec .yaml or a policy dir")
+    p.add_argument("--n-dirs", type=int, default=64)
+    p.add_argument("--seed", type=int, default=VALIDATION_SEED)
+    args = p.parse_args(argv)
+    for path in args.policies:
+        try:
+            ctrl = load_controller(path)
+        except (FileNotFoundError, ValueError) as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        r = stride_curve(ctrl, n_dirs=args.n_dirs, seed=args.seed)
+        print(json.dumps({"policy": str(path), **r}), flush=True)
+    return 0
+
+
+# python -m agents.stride: the file runs as the module __main__ (never as agents.stride), which
+# takes `agents.policy.load_controller` from above (agents.policy loads stride policies with
+# `load_stride_policy`, so agents.stride itself never imports it)
+if __name__ == "__main__":
+    from agents.policy import load_controller
+
+    raise SystemExit(main(load_controller=load_controller))
