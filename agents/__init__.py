@@ -3,8 +3,9 @@
 - `agents.train`: training with Stable-Baselines3 PPO from rl-zoo3-style configs
   (``configs/ppo.yaml``), ``bound-env train``;
 - `agents.policy`: a trained policy (or the zero action) as a fast NumPy controller;
-- `agents.margins`: basin, Floquet multipliers, slope and stiffness windows, push recovery and
-  effort of a closed loop, ``bound-env margins``;
+- `agents.margins`: ``bound-env margins``, the front that loads a policy for
+  `bound_env.analysis.margins` (basin, Floquet multipliers, slope and stiffness windows, push
+  recovery and effort of a closed loop);
 - `agents.compare`: the passive vs learned table in ``docs/MARGINS.md``, ``bound-env compare``.
 
 ``PassiveBoundLiteral-v0`` (``PassiveBound-v0`` on the *literal* reading of Table II, started on

@@ -21,7 +21,7 @@ from .policy_args import POLICY_HELP, policy_label
 
 SEED_MAX = 2**32 - 1  # NumPy's and Gymnasium's seeds are unsigned 32-bit integers
 BUDGET_HELP = (
-    "margins budget (agents.margins.BUDGETS): test (a smoke test), quick (32 random "
+    "margins budget (bound_env.analysis.margins.BUDGETS): test (a smoke test), quick (32 random "
     "directions, seconds), standard or full (256 directions, minutes to hours; full: the finest "
     "curves)"
 )
@@ -34,7 +34,7 @@ def _add_sample_seed(p, number) -> None:
     p.add_argument(
         "--seed",
         type=number(int, 0, SEED_MAX),
-        default=12345,  # agents.margins.DEFAULT_SEED
+        default=12345,  # bound_env.analysis.margins.DEFAULT_SEED
         help="picks the random directions, rough-terrain runs, push trials and MFPT robots "
         "(default: %(default)s, the test set of docs/MARGINS.md; any other seed is a "
         "held-out validation set)",
@@ -469,7 +469,9 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
 
 
 def cmd_margins(args) -> int:
-    from .margins import compute_margins, summary_text
+    from bound_env.analysis.margins import summary_text
+
+    from .margins import compute_margins  # the front: the core, with the policy's sources
     from .policy import load_controller
 
     name = policy_label(args.policy)

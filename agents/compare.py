@@ -1,8 +1,9 @@
 """Passive vs learned margins side by side: ``docs/MARGINS.md`` (``bound-env compare``).
 
-Runs `agents.margins.compute_margins` for the passive gait and for each shipped policy (results
-cached under ``out/margins/<label>/``, so a second run only rewrites the page), then writes the
-table and the plots (``docs/margins_*.png``) and copies each policy's training curve.
+Runs `agents.margins.compute_margins` (the front of `bound_env.analysis.margins`) for the
+passive gait and for each shipped policy (results cached under ``out/margins/<label>/``, so a
+second run only rewrites the page), then writes the table and the plots
+(``docs/margins_*.png``) and copies each policy's training curve.
 
 Every column is scored on the same random samples (``--seed``), so two columns are compared
 *paired* (`paired_comparisons`, `bound_env.analysis.paired`): each column against the
@@ -20,12 +21,13 @@ import math
 import shutil
 from pathlib import Path
 
+from bound_env.analysis.margins import DEFAULT_SEED, Z_LABELS, check_seed, plot_margins
+from bound_env.analysis.margins.stats import t_interval
 from bound_env.cache import atomic_write
 from bound_env.parallel import open_pool
 
-from .margins import DEFAULT_SEED, Z_LABELS, check_seed, compute_margins, plot_margins
+from .margins import compute_margins
 from .policy import SHIPPED_DIR
-from .stats import t_interval
 
 POLICIES_DIR = SHIPPED_DIR
 ROOT = Path(__file__).resolve().parent.parent
@@ -137,9 +139,10 @@ def compare(
 ) -> Path:
     """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path.
 
-    ``seed`` picks the random samples of every column (`agents.margins.sample_seeds`): the
-    default is the test set; another seed's results go under ``out/seed-<seed>/``. The paired
-    comparisons go to ``paired.json`` beside the page.
+    ``seed`` picks the random samples of every column
+    (`bound_env.analysis.margins.sample_seeds`): the default is the test set; another seed's
+    results go under ``out/seed-<seed>/``. The paired comparisons go to ``paired.json`` beside
+    the page.
 
     An entry is (label, policies, gait); an old-style (label, policy, gait) is accepted. Each
     policy of an entry is one seed of the same recipe: the page reports per measure the mean
@@ -545,7 +548,7 @@ def basin_maps(docs: Path) -> str:
 def render_markdown(
     groups, plots, curves, budget, note: str = "", pairs=None, maps: str = ""
 ) -> str:
-    from .margins import BUDGETS
+    from bound_env.analysis.margins import BUDGETS
 
     labels = [g["label"] for g in groups]
     base = groups[0]
@@ -713,7 +716,7 @@ first-passage time** (MFPT, Byl & Tedrake 2009, "Metastable walking machines") i
 expected number of strides before a fall (JSON `mfpt`, `mfpt_sigma_100_deg`); σ50 (JSON
 `terrain_sigma50_deg`) is the older survival-over-a-fixed-horizon yardstick.
 
-Every column is measured on the same yardsticks by `bound-env margins` (agents/margins.py):
+Every column is measured on the same yardsticks by `bound-env margins` (bound_env/analysis/margins):
 the closed-loop apex-to-apex map, each stride an episode started at an apex with
 `reset(options={{"apex_state": z}})` so the control intervals restart at the apex,
 integrator tolerance {settings["rtol"]:g}, "returned" = max-abs apex error below
@@ -889,6 +892,6 @@ def _rel(p: str) -> str:
 def _unit(direction: str | None) -> str:
     if not direction:
         return ""
-    from .margins import Z_UNITS
+    from bound_env.analysis.margins import Z_UNITS
 
     return Z_UNITS[Z_LABELS.index(direction[:-1])]

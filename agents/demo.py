@@ -2,7 +2,7 @@
 robot falls and the shipped ``default`` controller brings the gait back to its cycle.
 
 **The start** is z* + r |z*| xi with xi = ``random_directions(DEMO_DIRECTIONS,
-DEMO_SEED)[DEMO_INDEX]`` (`agents.margins.random_directions`, max |xi_i| = 1) and r =
+DEMO_SEED)[DEMO_INDEX]`` (`bound_env.analysis.margins.random_directions`, max |xi_i| = 1) and r =
 ``DEMO_SIZE``, chosen on the *validation* directions (seed 777), never on the test set's (seed
 12345): at r = 0.2 it is the first of the 16 directions of seed 777 from which the passive gait
 falls and both shipped distilled seeds (``distilled/s0``, the current ``default``, and
@@ -13,9 +13,9 @@ shipped after the choice, too); they return from the same direction at r = 0.15 
 well, so the choice is not on a knife's edge.
 ``tests/test_demo.py`` checks that passive falls and ``default`` returns from it.
 
-**The runs** are those of the margins (`agents.margins.ClosedLoop.run`, the closed-loop apex
-map at the evaluation tolerance): *returned* means within 1e-4 (SI) of z* within
-``DEMO_STRIDES`` strides. ``bound_env`` never imports ``agents`` (tests/test_layers.py):
+**The runs** are those of the margins (`bound_env.analysis.margins.ClosedLoop.run`, the
+closed-loop apex map at the evaluation tolerance): *returned* means within 1e-4 (SI) of z*
+within ``DEMO_STRIDES`` strides. ``bound_env`` never imports ``agents`` (tests/test_layers.py):
 `agents.cli.register` adds `demo_comparison` to `bound_env.render_cli`'s demo parts when
 ``bound-env`` builds its parser (the ``bound_env.commands`` entry point).
 
@@ -48,9 +48,8 @@ FRAME_STEPS = 2  # control intervals per frame (50 frames per simulated second a
 
 def demo_start(gait="default") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(z0, z*, xi): the perturbed start of the comparison (module docstring), SI."""
+    from bound_env.analysis.margins import random_directions
     from bound_env.params import load_gait
-
-    from .margins import random_directions
 
     z_star = np.asarray(load_gait(gait).z0, dtype=float)
     xi = random_directions(DEMO_DIRECTIONS, DEMO_SEED)[DEMO_INDEX]
@@ -115,7 +114,7 @@ class _Recorded:
 def _run(controller, gait, z0, z_star, show_after: int = 0) -> dict:
     """`ClosedLoop.run` of ``controller`` from z0, its env recorded; then, if it returned,
     ``show_after`` more strides on the cycle (recorded, not counted)."""
-    from .margins import ClosedLoop
+    from bound_env.analysis.margins import ClosedLoop
 
     loop = ClosedLoop(controller, gait)
     rec = _Recorded(loop.env)

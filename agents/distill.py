@@ -40,11 +40,8 @@ import numpy as np
 
 from bound_env.cache import atomic_write
 from bound_env.control import load_controller as load_classical
-from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library, simulate_profile
-from bound_env.events import APEX
-from bound_env.fast import EVENT_CAPACITY, event_log, recorder
-from bound_env.stride import state_from_z, z_from_state
-from bound_env.stride_task import NO_APEX_TIME
+from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library
+from bound_env.stride_map import EVAL_RTOL, StrideMap
 
 from .mlp import mlp_forward
 from .policy_files import FINGERPRINT_FILE, file_sha256
@@ -263,19 +260,15 @@ def good_rows(outcome, strides, scores) -> np.ndarray | None:
     return None
 
 
-def stride_of(expert: MPCController, z, u, log, rec):
-    """The planning model's next apex from z under coefficients u (None on a fall)."""
-    status, _, y = simulate_profile(
-        state_from_z(z),
-        expert._aux0,
-        expert._edges,
-        expert.interval_torques(u)[0],
-        expert.rtol,
-        NO_APEX_TIME,
-        log,
-        rec,
-    )
-    return z_from_state(y) if status == APEX else None
+def plant_of(ctrl: MPCController) -> StrideMap:
+    """The plant a stride controller acts on in training: the one stride map
+    (`bound_env.stride_map`) at the evaluation tolerance, as `margins` measures it."""
+    return StrideMap(ctrl.gait, None, ctrl.dt, ctrl.max_torque, EVAL_RTOL)
+
+
+def stride_of(ctrl: MPCController, plant: StrideMap, z, u):
+    """The next apex from z under the coefficients u on ``plant`` (None on a fall)."""
+    return plant.map(z, ctrl.interval_actions(u)[0])
 
 
 def sample_starts(rng, n: int, z_ref, r_max: float, axis_prob: float) -> np.ndarray:
@@ -289,8 +282,7 @@ def sample_starts(rng, n: int, z_ref, r_max: float, axis_prob: float) -> np.ndar
 class Labeller:
     def __init__(self, expert: MPCController, rows: np.ndarray):
         self.expert, self.rows = expert, rows
-        self.log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
-        self.rec = recorder(0, 0.0)
+        self.plant = plant_of(expert)
 
     def past_safe(self, z) -> bool:
         e = self.expert
@@ -316,7 +308,7 @@ class Labeller:
             if good is not None:
                 out.append((z.copy(), good))
             u = choose(z, good, best, U)
-            z = stride_of(self.expert, z, u, self.log, self.rec)
+            z = stride_of(self.expert, self.plant, z, u)
             if z is None or not np.all(np.isfinite(z)):
                 return
 

@@ -1,8 +1,8 @@
 """PPO fine-tuning of a distilled stride controller (agents/distill.py).
 
-**The task** (`ChoiceStrideEnv`): one step = one stride of the planning model the expert and
-the student use, i.e. the step env's own interval torques simulated event-accurately from the
-apex (`bound_env.control.mpc`), so what is learned is what `margins` measures. The action is a
+**The task** (`ChoiceStrideEnv`): one step = one stride of the one stride map
+(`bound_env.stride_map`, the step env's own kernel at the evaluation tolerance 1e-10, as
+PassiveBoundStride-v1 and `margins`), so what is learned is what `margins` measures. The action is a
 row of the student's library (Discrete; row 0 the LQR's plan u_lqr(z)); the observation the
 normalized apex error x = (z - z*) / s. Episodes start past the safe radius at z* + r |z*| xi
 (r ~ U(0, ``r_max``), the distillation's start distribution). Reward: 1 per stride survived;
@@ -29,10 +29,15 @@ import gymnasium as gym
 import numpy as np
 
 from bound_env.cache import atomic_write
-from bound_env.fast import EVENT_CAPACITY, event_log, recorder
 
-from .distill import ChoicePolicyController, load_choice_policy, sample_starts, save_policy
-from .distill import stride_of as model_stride
+from .distill import (
+    ChoicePolicyController,
+    load_choice_policy,
+    plant_of,
+    sample_starts,
+    save_policy,
+    stride_of,
+)
 
 
 class ChoiceStrideEnv(gym.Env):
@@ -43,8 +48,7 @@ class ChoiceStrideEnv(gym.Env):
         self.r_max, self.axis_prob, self.horizon = float(r_max), float(axis_prob), int(horizon)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (6,), np.float32)
         self.action_space = gym.spaces.Discrete(len(policy.rows))
-        self._log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
-        self._rec = recorder(0, 0.0)
+        self.plant = plant_of(policy)
         self.z = policy.z_ref.copy()
         self.k = 0
 
@@ -66,7 +70,7 @@ class ChoiceStrideEnv(gym.Env):
     def step(self, action):
         a = int(action)
         u = self.pol.lqr.coefficients(self.z) if a == 0 else self.pol.rows[a]
-        z1 = model_stride(self.pol, self.z, u, self._log, self._rec)
+        z1 = stride_of(self.pol, self.plant, self.z, u)
         self.k += 1
         if z1 is None or not np.all(np.isfinite(z1)):
             return self._obs(), 0.0, True, False, {"fell": True}

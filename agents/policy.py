@@ -10,8 +10,8 @@ arguments it was trained with: ``max_torque``, ``dt``, ...; `agents.policy_files
 ``clip(action_net(policy_net(normalize(obs))), -1, 1)``, exactly what
 ``model.predict(obs, deterministic=True)`` returns after ``VecNormalize.normalize_obs``, but
 evaluated with NumPy in float64 (~10 us instead of ~150 us per call), picklable, and free of
-torch in the worker processes of `agents.margins`. A distilled student (``choice.npz``) is
-loaded by `agents.distill`, a stride-level policy by `agents.stride`.
+torch in the worker processes of the margins (`bound_env.analysis.margins`). A distilled
+student (``choice.npz``) is loaded by `agents.distill`, a stride-level policy by `agents.stride`.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bound_env import STRIDE_ENV_IDS
 from bound_env.resources import controllers_dir
 
 from .controllers import MLPController, ZeroController, check_gait, same_gait  # noqa: F401 - re-exported
@@ -155,7 +156,7 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
 
         return load_choice_policy(path, gait=gait, force=force)
     files = find_policy_files(path)
-    if files.config is not None and read_policy_section(files)[1] == "PassiveBoundStride-v0":
+    if files.config is not None and read_policy_section(files)[1] in STRIDE_ENV_IDS:
         from .stride import load_stride_policy  # a stride-level policy (agents/stride.py)
 
         return load_stride_policy(path, gait=gait, force=force)

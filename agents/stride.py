@@ -1,14 +1,15 @@
 """Learned stride-level spine control: residual RL on top of the stride LQR.
 
-The policy acts once per stride on `PassiveBoundStride-v0` (one step = one apex-to-apex
+The policy acts once per stride on `PassiveBoundStride-v1` (one step = one apex-to-apex
 stride; its action is the K coefficients u of the stride's spine-torque profile,
 `bound_env.stride_task`). Three rl-zoo3 ``env_wrapper`` entries (innermost first) turn that
 env into the training task of ``configs/ppo-stride.yaml``:
 
 - `DirectionStarts`: every episode starts at z* + r |z*| xi, the yardstick's own perturbation
-  (`agents.margins`: r relative to |z*_i|, xi uniform on the 6-sphere scaled to max |xi_i| = 1,
-  or one axis), with r ~ U(0, ``r_max``). ``r_max`` is set well past the LQR's r50 (~0.15)
-  on purpose: many starts are unviable, and a fall that comes later is still better.
+  (`bound_env.analysis.margins`: r relative to |z*_i|, xi uniform on the 6-sphere scaled to
+  max |xi_i| = 1, or one axis), with r ~ U(0, ``r_max``). ``r_max`` is set well past the
+  LQR's r50 (~0.15) on purpose: many starts are unviable, and a fall that comes later is still
+  better.
 - `StrideControl`: the observation becomes the relative apex error x = (z - z*) / |z*|, and
   the action a residual du on a classical base controller: u = clip(u_base(z) +
   ``residual_scale`` du, -1, 1), with u_base the LQR of ``configs/controllers/<base>.yaml``.
@@ -24,10 +25,10 @@ env into the training task of ``configs/ppo-stride.yaml``:
 deterministic residual policy starts *exactly* as its base controller.
 
 `StridePolicyController` runs a trained stride policy inside the step env (`PassiveBound-v0`)
-with the protocol of `agents.margins.ClosedLoop`: at every apex (``on_apex``) it picks the
-coefficients u, and each control interval outputs the interval average of the profile's
-torque, as `bound_env.control.StrideFeedback` does. Inference is NumPy (no torch in margins'
-workers); the base gain is read from the policy's own ``base.json`` (written at training
+with the protocol of `bound_env.analysis.margins.ClosedLoop`: at every apex (``on_apex``) it
+picks the coefficients u, and each control interval outputs the interval average of the
+profile's torque, as `bound_env.control.StrideFeedback` does. Inference is NumPy (no torch in
+margins' workers); the base gain is read from the policy's own ``base.json`` (written at training
 time), so a later change of ``configs/controllers/lqr.yaml`` does not change a trained policy.
 """
 
@@ -45,11 +46,13 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+# policies trained before v1 (agents/policies/stride-residual) name v0: they load, and act on v1
+from bound_env import STRIDE_ENV_ID, STRIDE_ENV_IDS
+
 from .controllers import check_gait
 from .mlp import extract_actor, mlp_forward
 from .policy_files import check_policy_files, find_policy_files, read_policy_section
 
-STRIDE_ENV_ID = "PassiveBoundStride-v0"
 BASE_FILE = "base.json"
 # tolerance of the nominal stride that sets the basis' window edges in the step env: that of
 # `bound_env.control.load_controller`, so a zero residual plays out exactly as the LQR there
@@ -64,13 +67,13 @@ BASIS_RTOL = 1e-12  # the base controller of a residual policy, beside its model
 def _stride_env(env: gym.Env):
     u = env.unwrapped
     if not hasattr(u, "task") or not hasattr(u.task, "sim"):
-        raise ValueError(f"{type(env).__name__}: needs a PassiveBoundStride-v0 environment")
+        raise ValueError(f"{type(env).__name__}: needs a PassiveBoundStride-v1 environment")
     return u
 
 
 def sample_direction(rng: np.random.Generator, axis_prob: float) -> np.ndarray:
     """xi: one axis (either sign) with probability ``axis_prob``, else uniform on the 6-sphere
-    scaled to max |xi_i| = 1 (`agents.margins.random_directions`)."""
+    scaled to max |xi_i| = 1 (`bound_env.analysis.margins.random_directions`)."""
     if rng.random() < axis_prob:
         xi = np.zeros(6)
         xi[rng.integers(6)] = rng.choice((-1.0, 1.0))
@@ -445,7 +448,7 @@ class StridePolicyController:
         return np.clip(u0 + self.residual_scale * self.residual(z), -1.0, 1.0)
 
     def stride_action(self, z) -> np.ndarray:
-        """The action of PassiveBoundStride-v0 at apex state z."""
+        """The action of PassiveBoundStride-v1 at apex state z."""
         return self.coefficients(z)
 
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
@@ -515,7 +518,7 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
     files = find_policy_files(path)
     model_path, vecnorm_path = files.model, files.vecnormalize
     section, env_id, seed = read_policy_section(files)
-    if env_id != STRIDE_ENV_ID:
+    if env_id not in STRIDE_ENV_IDS:
         raise ValueError(f"policy {path} was trained on {env_id}, not {STRIDE_ENV_ID}")
     for w in check_policy_files(files, section, force):
         print(f"warning: {w}", file=sys.stderr)
@@ -609,12 +612,12 @@ def stride_curve(
 ) -> dict:
     """Return probability of a stride-level controller (``stride_action(z)``; a controller
     without it is passive) against the relative start size r, on the *stride* map of
-    PassiveBoundStride-v0 (exact profiles, rtol 1e-10), from z* + r |z*| xi with ``n_dirs``
+    PassiveBoundStride-v1 (the one stride map, rtol 1e-10), from z* + r |z*| xi with ``n_dirs``
     directions of seed ``seed`` (disjoint from margins' seed-12345 directions), around the
     closed loop's own cycle z_cl (``settle`` strides from z*; as margins, starts at
     z_cl + r |z*| xi). Returned: within ``tol`` (SI, max-abs) of z_cl in ``strides`` strides
     without a fall. ``effort``: mean |tau| over a stride of the cycle [N m].
-    A validation curve, cheaper than `agents.margins` and not a substitute for it."""
+    A validation curve, cheaper than `bound_env.analysis.margins` and no substitute for it."""
     from bound_env.stride_task import StrideTask
 
     task = StrideTask(gait=gait, basis="windows", K=getattr(getattr(ctrl, "basis", None), "K", 4))

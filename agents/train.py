@@ -207,7 +207,7 @@ class BasinValidationCallback(BaseCallback):
     """Keep the checkpoint with the widest basin on a *validation* set of directions.
 
     Every ``eval_freq`` timesteps the current deterministic policy (with the training
-    ``VecNormalize`` statistics) is put in the closed loop of `agents.margins`: its
+    ``VecNormalize`` statistics) is put in the closed loop of the margins: its
     closed-loop fixed point is found, then, along each of ``n_directions`` random directions
     (seed ``direction_seed``, drawn like the margins' random-direction curve but from another
     seed, so disjoint from the test set: neither the 12 axis directions of the basin nor the
@@ -243,7 +243,7 @@ class BasinValidationCallback(BaseCallback):
 
     def validation_directions(self) -> np.ndarray:
         """The validation perturbation directions (rows; units of |z*_i|, max |u_i| = 1)."""
-        from .margins import random_directions
+        from bound_env.analysis.margins import random_directions
 
         if self.directions is not None:
             out = np.zeros((len(self.directions), 6))
@@ -286,10 +286,9 @@ class BasinValidationCallback(BaseCallback):
         return ctrl
 
     def score(self, ctrl) -> float:
+        from bound_env.analysis.margins import BASIN_HI, BASIN_LO, ClosedLoop, fd_steps
         from bound_env.analysis.numerics import bisect_threshold, map_fixed_point
         from bound_env.params import load_gait
-
-        from .margins import BASIN_HI, BASIN_LO, ClosedLoop, fd_steps
 
         gait = self.env_kwargs.get("gait", "default")
         loop = ClosedLoop(ctrl, gait)

@@ -8,8 +8,9 @@ Importing the package registers these Gymnasium environments:
 - ``PassiveBoundLiteral-v0``: the same classes on the *literal* reading of Table II, started on
   that reading's periodic (passively unstable) gait, ``gait="literal-cycle"``; its own id lets
   rl-zoo3-style configs key hyperparameters by it;
-- ``PassiveBoundStride-v0``: the stride-level `bound_env.stride_env.PassiveBoundStrideEnv`
-  (one step = one stride).
+- ``PassiveBoundStride-v1``: the stride-level `bound_env.stride_env.PassiveBoundStrideEnv`
+  (one step = one stride of the step env, through the one stride map `bound_env.stride_map`;
+  v0, on exact window edges, is no longer registered: Gymnasium names v1 when v0 is asked).
 
 ::
 
@@ -30,13 +31,16 @@ configure_numba_cache()  # before any compiled module is imported (see its docst
 ENV_ID = "PassiveBound-v0"
 LITERAL_ENV_ID = "PassiveBoundLiteral-v0"
 MAX_EPISODE_STEPS = 3000  # time limit: 30 s at the default dt = 0.01 s, ~76 passive strides
-STRIDE_ENV_ID = "PassiveBoundStride-v0"
+STRIDE_ENV_ID = "PassiveBoundStride-v1"
+# ids that name the stride env in a trained policy's config: v0 (no longer registered) too
+STRIDE_ENV_IDS = (STRIDE_ENV_ID, "PassiveBoundStride-v0")
 MAX_STRIDE_EPISODE_STEPS = 100  # time limit of the stride env: 100 strides
 # kwargs of the two control-interval envs (PassiveBoundEnv) registered under their own ids.
 ENV_KWARGS = {ENV_ID: {}, LITERAL_ENV_ID: {"gait": "literal-cycle"}}
 # No reward_threshold in the specs: the return mixes an alive bonus (+1 per step) with a
 # tracking cost whose size depends on the start noise and the apex scales (env kwargs), so no
-# single return means "solved"; policies are judged by their stability margins (agents.margins).
+# single return means "solved"; policies are judged by their stability margins
+# (bound_env.analysis.margins).
 
 
 def _register() -> None:

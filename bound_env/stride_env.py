@@ -1,7 +1,7 @@
-"""PassiveBoundStride-v0: the stride-level Gymnasium environment (one step = one stride).
+"""PassiveBoundStride-v1: the stride-level Gymnasium environment (one step = one stride).
 
-A thin adapter around `bound_env.stride_task.StrideTask`, which simulates one apex-to-apex
-stride under a spine-torque profile with the compiled hybrid simulator.
+A thin adapter around `bound_env.stride_task.StrideTask`: one step is a macro-step of the
+plant, the step env PassiveBound-v0, through the one stride map `bound_env.stride_map`.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from .stride_task import (
     DEFAULT_STRIDE_RTOL,
     StrideTask,
 )
-from .task import DEFAULT_RESET_NOISE_SCALE
+from .task import DEFAULT_DT, DEFAULT_RESET_NOISE_SCALE
 
 # Observation bounds of the apex state z = [y_g, th1, th2, xdot_g, th1dot, th2dot] (SI), as the
 # step env's (`bound_env.task`): far outside anything a running robot reaches.
@@ -54,11 +54,14 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
     event-based, stride-to-stride control (Poincare-map LQR, deadbeat control): the
     classical controllers of `bound_env.control` act here.
 
-    Zero action is exactly the passive Poincare map: one call of the same compiled
-    integrator as `bound_env.stride.simulate_stride` with the same tolerance, so ``apex_z``
-    equals its z1 (50 zero-action strides from z* stay within 1e-9 of z*). A non-zero
-    profile is applied event-accurately: the integrator stops at each window edge, the
-    torque is a parameter of the equations, contacts and the apex are located exactly.
+    **The plant is the step env.** One step is a macro-step of `PassiveBound-v0`: the
+    profile is applied on the step env's control grid, interval k = [k dt, (k + 1) dt] from
+    the apex holding the profile's average over it (dt = 10 ms), through the one stride map
+    of the project (`bound_env.stride_map`, the step env's own compiled kernel). So a stride
+    here is bit-identical to the stride of a `PassiveBound-v0` episode started at the apex
+    and stepped with those interval torques, and the stride controllers are designed,
+    planned, trained and measured on this same map. Zero action is the passive Poincare map
+    up to the integrator tolerance (50 zero-action strides from z* stay within 1e-9 of z*).
 
     ## Action Space
 
@@ -139,7 +142,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
     import gymnasium as gym
     import bound_env
     gym.register_envs(bound_env)
-    env = gym.make("PassiveBoundStride-v0", basis="windows", K=4, max_torque=80.0)
+    env = gym.make("PassiveBoundStride-v1", basis="windows", K=4, max_torque=80.0)
     ```
 
     | Parameter | Type | Default | Description |
@@ -155,6 +158,8 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
     | `ctrl_cost_weight` | **float** | `0.1` | weight of mean(u^2) |
     | `apex_scales` | **6 floats** | as `PassiveBound-v0` | unit of apex deviation (SI) |
     | `rtol` | **float** | `1e-10` | integrator tolerance (relative and absolute) |
+    | `slope_noise_deg` | **float** | `0.0` | rough terrain: sigma of the slope at each apex [deg] |
+    | `dt` | **float** | `0.01` | control grid of the plant, the step env's interval [s] |
 
     (1) z* and the basis (the nominal stride) stay the gait file's. (2) The saturation of the
     learned policies (`agents/policies/default`).
@@ -165,9 +170,16 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
 
     ## Version History
 
-    * v0: Initial version. `slope_noise_deg` (rough terrain, as in `PassiveBound-v0`: the
-      slope becomes alpha + sigma xi_k at every apex reached) added later with default 0,
-      which leaves every result bit-identical.
+    * v1: The plant is the step env: the profile acts through its interval averages on the
+      step env's 10 ms grid (the one stride map, `bound_env.stride_map`), as in `margins`,
+      the MPC, distillation and fine-tuning. New argument `dt`.
+    * v0: Initial version: the profile was applied on exact window edges of the nominal
+      period (the integrator stopped at each edge), a different map from the step env's grid
+      (a one-switch bang-bang profile landed up to 0.057 normalized apex error apart). No
+      longer registered: `gym.make("PassiveBoundStride-v0")` raises Gymnasium's
+      `DeprecatedEnv` naming v1. `slope_noise_deg` (rough terrain, as in `PassiveBound-v0`:
+      the slope becomes alpha + sigma xi_k at every apex reached) was added to v0 with
+      default 0.
     """
 
     metadata = {"render_modes": []}
@@ -186,6 +198,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         apex_scales=None,
         rtol: float = DEFAULT_STRIDE_RTOL,
         slope_noise_deg: float = 0.0,
+        dt: float = DEFAULT_DT,
     ):
         kwargs = dict(
             gait=gait,
@@ -200,6 +213,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
             apex_scales=apex_scales,
             rtol=rtol,
             slope_noise_deg=slope_noise_deg,
+            dt=dt,
         )
         utils.EzPickle.__init__(self, **kwargs)
         self.task = StrideTask(**kwargs)
@@ -257,7 +271,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
                 self.np_random.standard_normal()
             )
             slope = (self._alpha, alpha)
-        out = self.task.sim.run_torques(self._z, taus, slope)
+        out = self.task.sim.run(self._z, u, slope)
         if slope is not None and out.z1 is not None:
             self._alpha = slope[1]
         failed = out.z1 is None

@@ -28,14 +28,15 @@ sub-window, so the torque on sub-window j is max_torque * (phi @ u)[j].
 torque holds until the apex (or until `NO_APEX_TIME`, when the stride fails with ``no_apex``).
 A stride shorter than T simply never reaches the later windows.
 
-Event-accurate application
---------------------------
-The compiled simulator (`bound_env.fast.advance`) integrates with the torque as an entry of the
-parameter vector (``aux[P_TAU]``). `run_profile` advances it piecewise: to each sub-window edge
-with that window's torque, stopping at the apex, so contacts and the apex are located on the
-integrator's dense output and a torque change never falls inside an integrator step.
-Consecutive sub-windows with equal torque are merged first, so zero action is a single call,
-the same one `bound_env.stride.simulate_stride` makes: zero action is exactly the passive map.
+The plant: the step env's control grid
+--------------------------------------
+A profile acts on the robot as the step env (PassiveBound-v0) would apply it: interval k of
+the control grid, [k dt, (k + 1) dt] from the apex (dt = 10 ms by default), holds the
+profile's average over that interval, so each interval delivers the profile's impulse
+exactly. The stride itself is `bound_env.stride_map`, the one stride map of the project
+(the step env's own compiled kernel, event-accurate), so the stride env, the classical
+designs, the MPC, distillation, fine-tuning and the margins all see the same map. Zero action
+is the passive Poincare map up to the integrator tolerance.
 """
 
 from __future__ import annotations
@@ -45,20 +46,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dynamics import jit, make_aux
-from .events import APEX, F_NO_APEX, N_FLAGS, TIME_UP, failure_name
-from .fast import EVENT_CAPACITY, Options, advance, event_log, recorder
-from .params import P_TAU, Gait, load_gait
-from .stride import DEFAULT_T_MAX, simulate_stride, state_from_z, z_from_state
-from .task import DEFAULT_RESET_NOISE_SCALE, PassiveBoundTask, check_number
-from .terrain import change_slope, set_slope
+from .params import Gait, load_gait
+from .stride import DEFAULT_T_MAX, simulate_stride
+from .stride_map import EVAL_RTOL, StrideMap, interval_weights
+from .task import DEFAULT_DT, DEFAULT_RESET_NOISE_SCALE, PassiveBoundTask, check_number
 
 BASES = ("windows", "phases", "hats")
 DEFAULT_BASIS = "windows"
 DEFAULT_K = 4  # basis functions of the default "windows" basis
 HAT_SUBWINDOWS = 8  # sub-windows per knot interval of the "hats" basis
 MAX_K = 64  # more basis functions than this is certainly a mistake
-DEFAULT_STRIDE_RTOL = 1e-10  # integrator tolerance (relative and absolute), as simulate_stride
+DEFAULT_STRIDE_RTOL = EVAL_RTOL  # integrator tolerance (relative and absolute)
 DEFAULT_STRIDE_MAX_TORQUE = 80.0  # [N m], the saturation of the learned policies
 NO_APEX_TIME = DEFAULT_T_MAX  # a stride without an apex within this time fails: 2 s
 DEFAULT_CTRL_COST_WEIGHT = 0.1  # per stride, times mean(u^2)
@@ -153,50 +151,6 @@ def make_basis(name: str, K: int | None, period: float, phase_durations=None) ->
     return TorqueBasis(name, edges, phi)
 
 
-@jit
-def run_profile(
-    y,
-    aux,
-    flags,
-    t_edges,
-    taus,
-    rtol,
-    atol,
-    t_max,
-    log,
-    rec,
-):
-    """Advance from an apex (t = 0) to the next apex with torque taus[j] on [t_edges[j],
-    t_edges[j + 1]) and the last torque held until ``t_max``.
-
-    ``y``, ``aux`` and ``flags`` are updated in place. Returns (status, t, impulse) with
-    impulse = integral of |tau| dt [N m s] over the stride.
-    """
-    t = 0.0
-    h = 0.0
-    opts = Options(rtol, atol, True)
-    impulse = 0.0
-    status = TIME_UP
-    n = taus.shape[0]
-    for j in range(n):
-        t_end = t_edges[j + 1] if j < n - 1 else t_max
-        aux[P_TAU] = taus[j]
-        status, t_new, h = advance(y, aux, flags, t, t_end, h, opts, log, rec)
-        impulse += abs(taus[j]) * (t_new - t)
-        t = t_new
-        if status != TIME_UP:
-            break
-    if status == TIME_UP:
-        status = F_NO_APEX
-    return status, t, impulse
-
-
-def merge_windows(edges: np.ndarray, taus: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Drop sub-window edges between equal torques (zero action becomes one window)."""
-    keep = np.flatnonzero(np.diff(taus) != 0.0) + 1
-    return np.concatenate([[0.0], edges[keep], [edges[-1]]]), taus[np.concatenate([[0], keep])]
-
-
 @dataclass
 class StrideOutcome:
     """One controlled stride."""
@@ -209,62 +163,47 @@ class StrideOutcome:
 
 
 class StrideSimulator:
-    """The controlled stride map z1 = P(z, u) for one parameter set (no Gymnasium)."""
+    """The controlled stride map z1 = P(z, u) of a torque basis: the profile's interval
+    averages on the step env's control grid (`bound_env.stride_map.interval_weights`), through
+    the one stride map (`bound_env.stride_map.StrideMap`). No Gymnasium."""
 
-    def __init__(
-        self,
-        params,
-        basis: TorqueBasis,
-        max_torque: float,
-        rtol: float = DEFAULT_STRIDE_RTOL,
-        t_max: float = NO_APEX_TIME,
-    ):
-        self.params = params
+    def __init__(self, stride_map: StrideMap, basis: TorqueBasis):
+        self.stride_map = stride_map
         self.basis = basis
-        self.max_torque = float(max_torque)
-        self.rtol = float(rtol)
-        self.t_max = float(t_max)
-        self._aux0 = make_aux(params.to_array())
-        self._log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
-        self._rec = recorder(0, 0.0)
+        self.params = stride_map.params
+        self.max_torque = stride_map.max_torque
+        self.rtol = stride_map.rtol
+        self.dt = stride_map.dt
+        self.W = interval_weights(basis.edges, basis.phi, self.dt)  # a = W u
+        self.W_sub = interval_weights(basis.edges, np.eye(len(basis.edges) - 1), self.dt)
 
-    def run(self, z, u) -> StrideOutcome:
-        """One stride from apex state z (SI) with coefficients u (clipped to [-1, 1])."""
-        return self.run_torques(z, self.basis.torques(u, self.max_torque))
+    def actions(self, U) -> np.ndarray:
+        """Interval actions (n, n_intervals) of coefficient rows U (clipped to [-1, 1])."""
+        return np.clip(np.atleast_2d(np.asarray(U, dtype=float)), -1.0, 1.0) @ self.W.T
 
-    def run_torques(self, z, taus, slope: tuple | None = None) -> StrideOutcome:
-        """One stride with the sub-window torques ``taus`` [N m] (any values).
+    def run(self, z, u, slope: tuple | None = None) -> StrideOutcome:
+        """One stride from apex state z (SI) with coefficients u (clipped to [-1, 1]).
 
         ``slope`` = (alpha_from, alpha_to) [rad], rough terrain: z is an apex state in the
         frame of a ground at alpha_from, which tilts to alpha_to at that apex
         (`bound_env.terrain.change_slope`); the stride runs on alpha_to. None: the
         parameters' slope, unchanged."""
-        y = state_from_z(np.asarray(z, dtype=float).reshape(6))
-        aux = self._aux0.copy()
-        if slope is not None:
-            set_slope(aux, slope[0])
-            change_slope(y, aux, slope[1] - slope[0])
-        flags = np.zeros(N_FLAGS, dtype=np.bool_)
-        edges, taus = merge_windows(self.basis.edges, np.asarray(taus, dtype=float))
-        status, t, impulse = run_profile(
-            y,
-            aux,
-            flags,
-            edges,
-            taus,
-            self.rtol,
-            self.rtol,
-            self.t_max,
-            self._log,
-            self._rec,
-        )
-        ok = status == APEX
+        return self._one(z, self.actions(u)[0], slope)
+
+    def run_torques(self, z, taus, slope: tuple | None = None) -> StrideOutcome:
+        """One stride with the sub-window torques ``taus`` [N m] (as `run`)."""
+        a = self.W_sub @ np.asarray(taus, dtype=float) / self.max_torque
+        return self._one(z, a, slope)
+
+    def _one(self, z, a, slope) -> StrideOutcome:
+        z = np.asarray(z, dtype=float).reshape(6)
+        r = self.stride_map.run(z[None], a[None], slopes=None if slope is None else [slope])
         return StrideOutcome(
-            z1=z_from_state(y) if ok else None,
-            failure=None if ok else failure_name(status),
-            period=float(t),
-            effort=float(impulse / t) if t > 0.0 else 0.0,
-            y_end=y,
+            z1=r.z1[0].copy() if r.ok[0] else None,
+            failure=r.failure(0),
+            period=float(r.period[0]),
+            effort=float(r.effort[0]),
+            y_end=r.y_end[0].copy(),
         )
 
     def map(self, z, u) -> np.ndarray | None:
@@ -290,10 +229,12 @@ class StrideTask:
         apex_scales=None,
         rtol: float = DEFAULT_STRIDE_RTOL,
         slope_noise_deg: float = 0.0,
+        dt: float = DEFAULT_DT,
     ):
         self.step_task = PassiveBoundTask(
             gait=gait,
             gait_overrides=gait_overrides,
+            dt=dt,
             max_torque=max_torque,
             reset_noise_scale=reset_noise_scale,
             alive_reward=alive_reward,
@@ -317,7 +258,9 @@ class StrideTask:
         # z*, is the same for every override of the same gait
         nominal = nominal_stride(load_gait(gait), rtol=self.rtol)
         self.basis = make_basis(basis, K, nominal.t_end, nominal.durations)
-        self.sim = StrideSimulator(self.params, self.basis, self.max_torque, self.rtol)
+        self.dt = self.step_task.dt
+        stride_map = StrideMap(gait, gait_overrides, self.dt, self.max_torque, self.rtol)
+        self.sim = StrideSimulator(stride_map, self.basis)
 
     @property
     def K(self) -> int:

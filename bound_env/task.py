@@ -46,7 +46,7 @@ from .events import (
 from .fast import EV_APEXES, EV_LOGGED, Options, advance, event_log, recorder
 from .layout import Layout
 from .params import P_ALPHA, P_GB, P_GF, P_LB, P_LF, P_TAU, Z_IN_Y, Z_NAMES, Gait, load_gait
-from .stride import DEFAULT_T_MAX, state_from_z
+from .stride import DEFAULT_T_MAX
 from .terrain import change_slope
 
 # ---------------------------------------------------------------------------------------------
@@ -345,6 +345,31 @@ def step_env(y, aux, flags, s, apex, obs, cfg, action):
 
 
 @jit
+def reset_at_apex(y, aux, flags, s, obs, aux0, z, cfg):
+    """Put one robot at the apex state z (x_g = 0, both legs in flight, t = 0), with the
+    parameters ``aux0``; an impossible start gets its failure status (it fails at the first
+    step)."""
+    y[:] = 0.0
+    for i in range(6):
+        y[_Z_IDX[i]] = z[i]
+    aux[:] = aux0
+    start_at_state(y, aux, flags, s, obs, cfg)
+
+
+@jit
+def start_at_state(y, aux, flags, s, obs, cfg):
+    """Start one robot (t = 0, both legs in flight) at the full state y with the parameters
+    in ``aux``, as set by the caller (`reset_at_apex`, or a slope change at the apex)."""
+    flags[:] = False
+    s[:] = 0.0
+    s[S.STATUS] = start_status(y, aux)  # an impossible start fails at the first step
+    s[S.ENERGY] = total_energy(y, aux)
+    s[S.X] = y[0]
+    s[S.PHASE] = 0  # df
+    observe(y, aux, flags, 0.0, cfg, obs)
+
+
+@jit
 def step_batch(Y, AUX, FLAGS, S, APEX, OBS, cfg, actions, active):
     """`step_env` for every robot i with ``active[i]``, one after the other."""
     for i in range(Y.shape[0]):
@@ -602,17 +627,13 @@ class PassiveBoundTask:
 
     def reset_robot(self, b: Batch, i: int, z: np.ndarray) -> None:
         """Put robot i at the apex state z (x_g = 0, both legs in flight, t = 0)."""
-        y = state_from_z(z)
-        b.y[i] = y
-        b.aux[i] = self._aux0
-        b.flags[i] = False
-        s = b.s[i]
-        s[:] = 0.0
-        s[S.STATUS] = start_status(y, b.aux[i])  # an impossible start fails at the first step
-        s[S.ENERGY] = total_energy(y, b.aux[i])
-        s[S.X] = y[0]
-        s[S.PHASE] = 0  # df
-        observe(y, b.aux[i], b.flags[i], 0.0, self.cfg, b.obs[i])
+        z = np.asarray(z, dtype=float).reshape(6)
+        reset_at_apex(b.y[i], b.aux[i], b.flags[i], b.s[i], b.obs[i], self._aux0, z, self.cfg)
+
+    def restart_robot(self, b: Batch, i: int) -> None:
+        """Start robot i again at t = 0 from its full state and parameters as they are (after
+        the caller changed them: a slope change, parameter overrides)."""
+        start_at_state(b.y[i], b.aux[i], b.flags[i], b.s[i], b.obs[i], self.cfg)
 
     def draw_slope_noise(self, b: Batch, i: int, rng: np.random.Generator) -> None:
         """Rough terrain only (``slope_noise_deg > 0``): fresh standard normal draws xi for

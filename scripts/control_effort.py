@@ -5,9 +5,9 @@
 For each controller: its closed-loop cycle z_cl (as `bound-env margins` finds it), the mean
 |tau| over one stride of that cycle (on-cycle effort), and the recovery effort: the
 time-averaged |tau| over the first `STRIDES` strides after a perturbation z_cl + r |z*| u,
-for `N_DIRS` random directions u (`agents.margins.random_directions`, scaled to max |u_i| = 1)
-at each relative size r in `SIZES`, with the fraction of those runs that returned
-(max-abs apex error < 1e-4 within 100 strides). Writes ``effort.csv`` and ``effort.json``.
+for `N_DIRS` random directions u (`bound_env.analysis.margins.random_directions`, scaled to
+max |u_i| = 1) at each relative size r in `SIZES`, with the fraction of those runs that
+returned (max-abs apex error < 1e-4 within 100 strides). Writes ``effort.csv`` and ``effort.json``.
 """
 
 from __future__ import annotations
@@ -21,14 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.margins import (
-    RETURN_TOL,
-    ClosedLoop,
-    fd_steps,
-    find_fixed_point,
-    random_directions,
-)
 from agents.policy import load_controller
+from bound_env.analysis.margins import RETURN_TOL, ClosedLoop, fd_steps, random_directions
+from bound_env.analysis.numerics import map_fixed_point
 from bound_env.cache import atomic_write
 from bound_env.params import load_gait
 
@@ -66,7 +61,7 @@ def main(argv=None) -> int:
     for policy in args.policy or DEFAULT_POLICIES:
         ctrl = load_controller(policy, gait="default")
         loop = ClosedLoop(ctrl)
-        z_cl, res, _ = find_fixed_point(loop.map, z_star, fd_steps(z_star))
+        z_cl, res, _ = map_fixed_point(loop.map, z_star, fd_steps(z_star))
         cyc = loop.stride(z_cl)
         row = {
             "policy": policy,

@@ -11,16 +11,15 @@ import numpy as np
 import pytest
 
 from agents.config import DEFAULT_CONFIG, apply_sets, load_hyperparams, parse_set, preprocess
-from agents.margins import (
-    BUDGETS,
+from agents.margins import compute_margins
+from agents.policy import MLPController, ZeroController, load_controller
+from bound_env.analysis.margins import BUDGETS, random_directions
+from bound_env.analysis.numerics import (
     bisect_threshold,
-    central_jacobian,
-    compute_margins,
-    find_fixed_point,
-    random_directions,
+    fd_jacobian,
+    map_fixed_point,
     sorted_eigenvalues,
 )
-from agents.policy import MLPController, ZeroController, load_controller
 
 # the shipped PPO policy (the `default` controller is a distilled choice policy: test_distill)
 SHIPPED = Path(__file__).resolve().parent.parent / "agents" / "policies" / "ppo-v1"
@@ -133,10 +132,10 @@ def test_multipliers_of_a_linear_map():
     def f(z):
         return A @ z + b
 
-    z, res, jac = find_fixed_point(f, z_fix + 0.3, np.full(6, 1e-4), settle=3, newton_iters=5)
+    z, res, jac = map_fixed_point(f, z_fix + 0.3, np.full(6, 1e-4), settle=3, newton_iters=5)
     assert res < 1e-10
     assert np.allclose(z, z_fix, atol=1e-9)
-    assert np.allclose(central_jacobian(f, z, np.full(6, 1e-3)), A, atol=1e-9)
+    assert np.allclose(fd_jacobian(f, z, np.full(6, 1e-3), one_sided=False), A, atol=1e-9)
     lam = sorted_eigenvalues(jac)
     want = np.array([0.9 * np.exp(0.7j), 0.9 * np.exp(-0.7j), 0.5, -0.3, 0.1, 0.05])
     assert np.allclose(lam, want, atol=1e-8)

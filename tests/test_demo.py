@@ -21,8 +21,8 @@ from agents.demo import (
     demo_start,
     table_lines,
 )
-from agents.margins import DEFAULT_SEED, ClosedLoop, random_directions
 from agents.policy import ZeroController, load_controller
+from bound_env.analysis.margins import DEFAULT_SEED, ClosedLoop, random_directions
 
 
 def test_the_start_is_a_validation_direction_not_the_test_set():

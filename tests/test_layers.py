@@ -6,19 +6,19 @@ only when the file is executed as a script (``python -m``), as the module ``__ma
 when the module is imported: its imports belong to a node of their own, ``<module> as
 __main__``, that imports the module (nothing imports a script). Neither `bound_env` nor
 `agents` has an import cycle, `bound_env` never imports `agents`, and no module imports
-another one's private (underscore) name.
+another one's private (underscore) name. One check runs a command instead of reading
+imports: the classical margins path (``bound-env margins --policy lqr``) never loads torch.
 """
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("bound_env", "agents")
-# Modules that still import private names: they are being moved into
-# bound_env/analysis/margins/ elsewhere (tested apart, as an expected failure, until then).
-BEING_MOVED = ("agents.margins", "agents.compare")
 SCRIPT = " as __main__"  # the node of a module's ``if __name__ == "__main__":`` block
 
 
@@ -198,18 +198,44 @@ def test_no_import_cycle(package):
 
 def test_no_private_name_is_imported_across_modules():
     """A name another module needs is public; ``_name`` stays in its module."""
-    found = _all_private_imports()
-    assert {m: v for m, v in found.items() if m not in BEING_MOVED} == {}
+    assert _all_private_imports() == {}
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="agents/margins.py (from bound_env.task import _Z_IDX) and agents/compare.py are "
-    "being moved into bound_env/analysis/margins/ on another branch",
-)
-def test_no_private_name_is_imported_by_margins_and_compare():
-    found = _all_private_imports()
-    assert {m: v for m, v in found.items() if m in BEING_MOVED} == {}
+# Runs ``bound-env margins`` in a fresh interpreter up to the point where the work starts (the
+# first batch of tasks, `run_tasks`), then reports which heavy modules are loaded.
+_UP_TO_THE_TASKS = """
+import sys
+
+from bound_env.analysis.margins import run
+
+
+def stop(*args, **kwargs):
+    heavy = sorted(m for m in ("torch", "stable_baselines3") if m in sys.modules)
+    print("reached the tasks; heavy modules:", heavy)
+    raise SystemExit(0)
+
+
+run.run_tasks = stop
+from bound_env.cli import main
+
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("policy", ["lqr", "passive"])
+def test_classical_margins_never_import_torch(policy, tmp_path):
+    """The command line, the agents front, the controller (`bound_env.control` for lqr), the
+    cycle scale and the cache key: everything ``margins`` loads before its first task."""
+    argv = ["margins", "--policy", policy, "--budget", "test", "--workers", "1", "--no-cache"]
+    res = subprocess.run(
+        [sys.executable, "-c", _UP_TO_THE_TASKS, *argv, "--out", str(tmp_path / "m")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 0, res.stderr
+    assert "reached the tasks; heavy modules: []" in res.stdout, res.stdout + res.stderr
 
 
 @pytest.mark.parametrize(

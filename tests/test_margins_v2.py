@@ -9,20 +9,26 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agents import margins
 from agents.compare import parse_entry
-from agents.margins import (
+from agents.margins import as_controller
+from agents.policy import ZeroController
+from agents.train import VALIDATION_SEED, BasinValidationCallback
+from bound_env.analysis import margins
+from bound_env.analysis.margins import (
     BUDGETS,
     CURVE_SEED,
     Setup,
-    bisect_threshold,
     random_directions,
     run_task,
     setup_key,
 )
-from agents.policy import ZeroController
-from agents.stats import crossing_on_grid, t_interval, threshold_on_grid, wilson_interval
-from agents.train import VALIDATION_SEED, BasinValidationCallback
+from bound_env.analysis.margins.stats import (
+    crossing_on_grid,
+    t_interval,
+    threshold_on_grid,
+    wilson_interval,
+)
+from bound_env.analysis.numerics import bisect_threshold
 
 
 def test_bisection_grows_past_one_to_a_known_basin_of_five():
@@ -107,12 +113,12 @@ class Proportional:
 
 def test_any_controller_with_the_protocol_runs_in_the_loop():
     ctrl = Proportional()
-    assert margins.as_controller(ctrl) is ctrl
+    assert as_controller(ctrl) is ctrl
     loop = margins.ClosedLoop(ctrl, "default")
     ok, n, failure = loop.run(loop.env.z_ref, loop.env.z_ref, 3)
     assert failure is None and ctrl.apexes == 3
     with pytest.raises(ValueError, match="controller"):
-        margins.as_controller(object())
+        as_controller(object())
 
 
 def test_passive_theta1_basin_is_no_longer_capped_at_one():

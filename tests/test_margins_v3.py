@@ -12,22 +12,22 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, chi2, lognorm
 
-from agents import margins
-from agents.margins import (
+from agents.margins import as_controller, policy_sources
+from agents.policy import MLPController, ZeroController
+from bound_env.analysis import margins
+from bound_env.analysis.margins import (
     BUDGETS,
     CURVE_SEED,
     DEFAULT_SEED,
     ClosedLoop,
     Setup,
-    as_controller,
     random_directions,
     rough_episodes,
     run_task,
     sample_seeds,
     setup_key,
 )
-from agents.policy import MLPController, ZeroController
-from agents.stats import crossing_on_grid, mfpt_crossing, mfpt_estimate
+from bound_env.analysis.margins.stats import crossing_on_grid, mfpt_crossing, mfpt_estimate
 from bound_env.analysis.paired import (
     bootstrap_delta_x50,
     compare_paired,
@@ -221,7 +221,7 @@ def test_identical_columns_differ_by_nothing():
     assert not compare_paired(sizes, x, x, n_boot=300)["stands_out"]
 
 
-def test_crossing_is_the_grid_crossing_of_agents_stats():
+def test_crossing_is_the_grid_crossing_of_the_margins_stats():
     rng = np.random.default_rng(5)
     xs = [0.01, 0.02, 0.05, 0.1, 0.2, 0.5]
     rates = np.sort(rng.random((200, 6)), axis=1)[:, ::-1]
@@ -359,14 +359,28 @@ def test_cache_key_has_every_ingredient(tmp_path, monkeypatch):
 
 
 def test_cache_key_follows_the_source(tmp_path, monkeypatch):
-    files = margins.source_files()
+    from bound_env.analysis.margins import run as margins_run
+
+    files = margins_run.source_files()
     names = {str(f) for f in files}
     import bound_env
 
     pkg = Path(bound_env.__file__).resolve().parent
-    assert {str(p) for p in pkg.rglob("*.py")} <= names  # every simulator / task source
-    assert any(f.name == "margins.py" and f.parent.name == "agents" for f in files)
-    assert any(f.name == "policy.py" for f in files)
+    assert {str(p) for p in pkg.rglob("*.py")} == names  # the core hashes its own sources
+    assert any(f.name == "run.py" and f.parent.name == "margins" for f in files)
+    c = ZeroController()
+    q = BUDGETS["quick"]
+    k0 = setup_key(c, "default", q)
+    # the files of a controller's code outside bound_env/ (the agents front names them)
+    extra = policy_sources(c)
+    assert {f.name for f in extra} == {"policy.py", "stride.py", "distill.py"}
+    assert all(f.is_file() and f.parent.name == "agents" for f in extra)
+    own = tmp_path / "own.py"
+    own.write_text("GAIN = 1\n")
+    k_own = setup_key(c, "default", q, extra_sources=[own])
+    assert k_own != k0
+    own.write_text("GAIN = 2\n")
+    assert setup_key(c, "default", q, extra_sources=[own]) != k_own
     # a copy of the sources; editing the simulator's integrator changes the key
     copies = []
     for f in files:
@@ -375,12 +389,11 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
         if not dst.exists():
             shutil.copyfile(f, dst)
         copies.append(dst)
-    monkeypatch.setattr(margins, "source_files", lambda: copies)
-    c = ZeroController()
-    k0 = setup_key(c, "default", BUDGETS["quick"])
+    monkeypatch.setattr(margins_run, "source_files", lambda extra=(): copies + list(extra))
+    k0 = setup_key(c, "default", q)
     fast = tmp_path / "bound_env" / "fast.py"
     fast.write_text(fast.read_text() + "\n# a change\n")
-    assert setup_key(c, "default", BUDGETS["quick"]) != k0
+    assert setup_key(c, "default", q) != k0
 
 
 def test_cache_key_follows_controller_spec_and_policy_weights(tmp_path):
@@ -390,8 +403,17 @@ def test_cache_key_follows_controller_spec_and_policy_weights(tmp_path):
     spec = tmp_path / "lqr2.yaml"
     shutil.copyfile(CONTROLLERS_DIR / "lqr.yaml", spec)
     k_spec = setup_key(load_classical(spec), "default", q)
-    spec.write_text(spec.read_text().replace("R: 0.1", "R: 0.2"))
+    assert policy_sources(load_classical(spec)) == []  # bound_env's: hashed by the core
+    text = spec.read_text()
+    # the shipped spec stores its gain: a changed gain changes the key
+    spec.write_text(text.replace("- [9.33", "- [9.34", 1))
     assert setup_key(load_classical(spec), "default", q) != k_spec
+    # without the stored gain the spec is designed from Q, R: a changed R changes the key
+    designed = text[: text.index("\ngain:")] + "\n"
+    spec.write_text(designed)
+    k_designed = setup_key(load_classical(spec), "default", q)
+    spec.write_text(designed.replace("R: 0.1", "R: 0.2"))
+    assert setup_key(load_classical(spec), "default", q) != k_designed
     rng = np.random.default_rng(0)
     layers = [(rng.normal(size=(4, 3)), rng.normal(size=4)), (rng.normal(size=(1, 4)), np.zeros(1))]
     mlp = MLPController("m", layers, "Tanh", env_kwargs={"max_torque": 80.0})

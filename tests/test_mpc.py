@@ -8,7 +8,7 @@ import pytest
 
 import bound_env
 from bound_env.control import load_controller, load_spec
-from bound_env.control.mpc import FELL, RETURNED, interval_weights
+from bound_env.control.mpc import FELL, RETURNED
 
 gym.register_envs(bound_env)
 
@@ -40,22 +40,22 @@ def step_env_stride(ctrl, z):
     return None
 
 
-def test_interval_torques_are_the_step_envs(mpc):
-    """The planning model's torque on each control interval equals what the controller
+def test_interval_actions_are_the_step_envs(mpc):
+    """The planning model's action on each control interval equals what the controller
     outputs there in the step env (the interval average of its profile)."""
     rng = np.random.default_rng(0)
     u = rng.uniform(-1, 1, mpc.basis.K)
-    taus = mpc.interval_torques(u)[0]
+    a = mpc.interval_actions(u)[0]
     mpc._u = u
     dt = mpc.dt
-    for k in range(len(taus) + 3):
+    for k in range(len(a) + 3):
         out = mpc_output(mpc, k * dt)
-        assert out == pytest.approx(taus[min(k, len(taus) - 1)] / mpc.max_torque, abs=1e-12)
+        assert out == pytest.approx(a[min(k, len(a) - 1)], abs=1e-12)
     # the impulse over the nominal stride is the profile's
-    W, edges = interval_weights(mpc.basis.edges, mpc.basis.phi, dt)
     T = mpc.basis.period
-    widths = np.minimum(edges[1:-1], T) - edges[:-2]
-    impulse = np.dot(mpc.interval_torques(u)[0][:-1], widths)
+    t = dt * np.arange(len(a))
+    widths = np.minimum(t[1:], T) - t[:-1]
+    impulse = mpc.max_torque * np.dot(a[:-1], widths)
     assert impulse == pytest.approx(
         np.dot(mpc.basis.torques(u, mpc.max_torque), np.diff(mpc.basis.edges)), rel=1e-12
     )
@@ -103,34 +103,23 @@ def test_a_plan_holds_in_the_step_env(mpc):
         assert z1 is not None
         # the model's own first stride, replayed alone
         pred = predicted_apex(mpc, z, u)
-        np.testing.assert_allclose(z1, pred, atol=1e-8)  # both at rtol 1e-10 (seen: 1.4e-9)
+        np.testing.assert_allclose(z1, pred, rtol=0, atol=1e-9)  # the same map, at rtol 1e-10
         rescued += out_mpc[0] == RETURNED and out_lqr[0] != RETURNED
     assert rescued > 0
 
 
 def predicted_apex(ctrl, z, u):
-    from bound_env.control.mpc import simulate_profile
-    from bound_env.fast import EVENT_CAPACITY, event_log, recorder
-    from bound_env.stride import state_from_z, z_from_state
-    from bound_env.stride_task import NO_APEX_TIME
+    """The planning model's first stride at the evaluation tolerance."""
+    from bound_env.stride_map import EVAL_RTOL, StrideMap
 
-    status, _, y = simulate_profile(
-        state_from_z(z),
-        ctrl._aux0,
-        ctrl._edges,
-        ctrl.interval_torques(u)[0],
-        1e-10,
-        NO_APEX_TIME,
-        event_log(EVENT_CAPACITY, np.empty((1, 8))),
-        recorder(0, 0.0),
-    )
-    return z_from_state(y)
+    plant = StrideMap(ctrl.gait, None, ctrl.dt, ctrl.max_torque, EVAL_RTOL)
+    return plant.map(z, ctrl.interval_actions(u)[0])
 
 
 def test_the_mpc_rescues_more_than_the_lqr_in_the_step_env(mpc):
     """Closed loops in the step env from 12 validation starts at r = 0.25: the MPC returns
     from at least as many, and from some the LQR loses."""
-    from agents.margins import ClosedLoop
+    from bound_env.analysis.margins import ClosedLoop
 
     lqr = mpc.lqr
     wins = {}
@@ -164,7 +153,7 @@ def test_bad_mpc_specs_are_refused(tmp_path, text, message):
 
 
 def test_decision_summary_of_the_curve():
-    from agents.margins import decision_summary
+    from bound_env.analysis.margins import decision_summary
 
     curve = [
         {"size": 0.1, "decision_seconds": [0.001, 0.003]},

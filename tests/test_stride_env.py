@@ -1,6 +1,6 @@
-"""Tests of PassiveBoundStride-v0: zero action is the passive Poincare map, the torque profile is
-applied event-accurately (checked against the reference back-end), bases, rewards, failures,
-arguments, seeding and both env checkers."""
+"""Tests of PassiveBoundStride-v1: a step is the step env's stride (bit for bit), zero action is
+the passive Poincare map, the profile's interval torques match the reference back-end, bases,
+rewards, failures, arguments, seeding and both env checkers."""
 
 import warnings
 
@@ -25,7 +25,7 @@ from bound_env.stride_task import make_basis
 from bound_env.task import APEX_SCALES
 
 gym.register_envs(bound_env)
-ENV_ID = "PassiveBoundStride-v0"
+ENV_ID = "PassiveBoundStride-v1"
 GAIT = load_gait("default")
 Z_STAR = GAIT.z0
 
@@ -34,7 +34,21 @@ def make(**kw):
     return gym.make(ENV_ID, **kw)
 
 
-def test_zero_action_is_exactly_the_passive_poincare_map():
+def step_env_stride(z, a, **kw):
+    """The stride of a PassiveBound-v0 episode started at the apex z, interval k stepped with
+    the action a[min(k, len - 1)]: (apex_z, failure)."""
+    env = gym.make("PassiveBound-v0", max_torque=80.0, rtol=1e-10, **kw).unwrapped
+    env.reset(options={"apex_state": z})
+    for k in range(300):
+        _, _, terminated, _, info = env.step(np.array([a[min(k, len(a) - 1)]]))
+        if "apex_z" in info:
+            return info["apex_z"], None
+        if terminated:
+            return None, info["failure"]
+    return None, "no_apex"
+
+
+def test_zero_action_is_the_passive_poincare_map():
     env = make(reset_noise_scale=0.0)
     obs, info = env.reset(seed=0)
     np.testing.assert_array_equal(info["start_z"], Z_STAR)
@@ -43,9 +57,14 @@ def test_zero_action_is_exactly_the_passive_poincare_map():
     _, reward, terminated, _, info = env.step(np.zeros(4, np.float32))
     ref = simulate_stride(z, GAIT.params, rtol=1e-10, atol=1e-10)
     assert not terminated and ref.failure is None
-    np.testing.assert_allclose(info["apex_z"], ref.z1, rtol=0, atol=1e-12)
-    assert info["period"] == pytest.approx(ref.t_end, abs=1e-12)
+    # the step env's grid (the integrator stops every 10 ms) and the one-call passive stride:
+    # the same map up to the integrator tolerance (rtol = atol = 1e-10; seen: 2e-10 relative,
+    # 8e-11 absolute)
+    np.testing.assert_allclose(info["apex_z"], ref.z1, rtol=1e-9, atol=1e-9)
+    assert info["period"] == pytest.approx(ref.t_end, abs=1e-9)
     assert info["effort"] == 0.0 and info["reward_ctrl"] == 0.0
+    # exactly the step env's stride
+    np.testing.assert_array_equal(info["apex_z"], step_env_stride(z, [0.0])[0])
     # and through the reference back-end (solve_ivp), to the integrator tolerance
     slow = simulate_stride(z, GAIT.params, backend="reference")
     np.testing.assert_allclose(info["apex_z"], slow.z1, rtol=0, atol=1e-7)
@@ -69,16 +88,16 @@ def test_fifty_zero_action_strides_stay_on_the_cycle():
     np.testing.assert_array_equal(obs, Z_STAR.astype(np.float32))
 
 
-def reference_profile(z, edges, taus, params):
-    """The same profile with the reference back-end (solve_ivp): one call per window, the last
-    torque held until the apex."""
+def reference_profile(z, dt, taus, params):
+    """The same interval torques with the reference back-end (solve_ivp): one call per
+    control interval, the last torque held until the apex."""
     y = state_from_z(z)
     aux = make_aux(params.to_array())
     flags = np.zeros(N_FLAGS, dtype=np.bool_)
     t = 0.0
     for j, tau in enumerate(taus):
         aux[P_TAU] = tau
-        t_end = edges[j + 1] if j < len(taus) - 1 else 2.0
+        t_end = (j + 1) * dt if j < len(taus) - 1 else 2.0
         status, t, y, _, _ = simulate_reference(y, aux, flags, t0=t, t_end=t_end)
         if status != TIME_UP:
             break
@@ -87,9 +106,10 @@ def reference_profile(z, edges, taus, params):
 
 
 @pytest.mark.parametrize("basis", ["windows", "phases", "hats"])
-def test_profile_is_applied_event_accurately(basis):
-    """A profile whose window edges fall inside stance phases, on a stride longer than the
-    nominal one (so the last window holds past T), matches the reference back-end."""
+def test_a_stride_is_the_step_envs_stride(basis):
+    """One step is the step env's stride with the profile's interval averages (bit for bit),
+    also on a stride longer than the nominal one (the last window holds past T), and it
+    matches the reference back-end on the same interval torques."""
     env = make(basis=basis, K=None if basis == "phases" else 4).unwrapped
     z = Z_STAR + np.array([0.01, 0.0, 0.0, -0.03, 0.0, 0.0])  # higher, slower: a longer stride
     env.reset(options={"apex_state": z})
@@ -97,17 +117,20 @@ def test_profile_is_applied_event_accurately(basis):
     _, _, terminated, _, info = env.step(u)
     assert not terminated
     assert info["period"] > env.basis.period  # past the nominal period
-    taus = env.basis.torques(u.astype(float), 80.0)
-    np.testing.assert_array_equal(info["tau_windows"], taus)
-    z_ref, t_ref = reference_profile(z, env.basis.edges, taus, GAIT.params)
+    np.testing.assert_array_equal(info["tau_windows"], env.basis.torques(u.astype(float), 80.0))
+    a = env.task.sim.actions(u.astype(float))[0]  # interval averages, normalized
+    np.testing.assert_array_equal(info["apex_z"], step_env_stride(z, a)[0])
+    z_ref, t_ref = reference_profile(z, env.task.dt, 80.0 * a, GAIT.params)
     np.testing.assert_allclose(info["apex_z"], z_ref, rtol=0, atol=2e-7)
     assert info["period"] == pytest.approx(t_ref, abs=1e-9)
     # the profile changed the stride: it is not the passive map
     passive = simulate_stride(z, GAIT.params).z1
     assert np.max(np.abs(info["apex_z"] - passive)) > 1e-3
-    # effort = time average of |tau| over the stride
-    dt = np.diff(np.append(env.basis.edges[:-1], info["period"]))
-    assert info["effort"] == pytest.approx(np.dot(np.abs(taus), dt) / info["period"], rel=1e-9)
+    # effort = time average of |tau| over the stride, interval by interval
+    n = int(np.ceil(info["period"] / env.task.dt))
+    t = np.minimum(env.task.dt * np.arange(n + 1), info["period"])
+    taus = 80.0 * np.abs(a[np.minimum(np.arange(n), len(a) - 1)])
+    assert info["effort"] == pytest.approx(np.dot(taus, np.diff(t)) / info["period"], rel=1e-9)
 
 
 def test_equal_profiles_on_different_grids_give_the_same_stride():
@@ -123,9 +146,12 @@ def test_equal_profiles_on_different_grids_give_the_same_stride():
     np.testing.assert_allclose(
         apex([0.25, 0.25, -0.5, -0.5], K=4), apex([0.25, -0.5], K=2), rtol=0, atol=1e-8
     )
-    const = simulate_stride(z, GAIT.params, tau=0.25 * 80.0).z1
-    np.testing.assert_array_equal(apex([0.25] * 3, K=3), const)
+    const = step_env_stride(z, [0.25])[0]
+    # (the interval weights of 3 windows sum to 1 up to round-off: the same map to 1e-9)
+    np.testing.assert_allclose(apex([0.25] * 3, K=3), const, rtol=0, atol=1e-9)
     np.testing.assert_allclose(apex([0.25] * 5, basis="hats", K=5), const, rtol=0, atol=1e-8)
+    passive = simulate_stride(z, GAIT.params, tau=0.25 * 80.0).z1  # one call, constant torque
+    np.testing.assert_allclose(const, passive, rtol=1e-9, atol=1e-9)
 
 
 def test_bases():
@@ -209,7 +235,9 @@ def test_seeding_noise_and_overrides():
     np.testing.assert_array_equal(over.z_ref, Z_STAR)
     over.reset(seed=0)
     z1 = over.step(np.zeros(4))[4]["apex_z"]
-    np.testing.assert_array_equal(z1, simulate_stride(Z_STAR, over.params).z1)
+    step_z1 = step_env_stride(Z_STAR, [0.0], gait_overrides={"alpha_deg": 2.0})[0]
+    np.testing.assert_array_equal(z1, step_z1)
+    np.testing.assert_allclose(z1, simulate_stride(Z_STAR, over.params).z1, rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.parametrize("kw", [{}, {"basis": "phases"}, {"basis": "hats", "K": 6}])

@@ -69,7 +69,7 @@ def test_config_parses_and_wraps_the_stride_env():
 
 
 def test_zero_residual_reproduces_the_lqr_exactly(zero_run):
-    from agents.margins import ClosedLoop
+    from bound_env.analysis.margins import ClosedLoop
     from bound_env.control import load_controller as load_classical
 
     lqr = load_classical("lqr")
@@ -120,7 +120,7 @@ def test_numpy_controller_matches_the_network_and_the_wrapper(zero_run, tmp_path
         want = env.coefficients(z, np.clip(act, -1, 1))
         np.testing.assert_allclose(ctrl.stride_action(z), want, atol=1e-6)
     # and it acts in the step env: a torque within the saturation, a stride to the next apex
-    from agents.margins import ClosedLoop
+    from bound_env.analysis.margins import ClosedLoop
 
     out = ClosedLoop(ctrl).stride(ctrl.z_ref)
     assert out.failure is None or isinstance(out.failure, str)
@@ -175,8 +175,8 @@ def test_yardstick_reward_contraction_and_early_falls_cost_more():
 @pytest.mark.slow
 def test_training_smoke_run_exports_a_policy_that_acts(tmp_path):
     from agents.cli import export_policy
-    from agents.margins import ClosedLoop
     from agents.train import train
+    from bound_env.analysis.margins import ClosedLoop
 
     run = train(
         config=CONFIG,

@@ -147,12 +147,12 @@ def test_stride_env_slope_noise():
             slopes.append(env.alpha_deg)
         return np.array(out), slopes
 
-    plain = gym.make("PassiveBoundStride-v0", reset_noise_scale=0.0).unwrapped
-    zero = gym.make("PassiveBoundStride-v0", reset_noise_scale=0.0, slope_noise_deg=0.0).unwrapped
+    plain = gym.make("PassiveBoundStride-v1", reset_noise_scale=0.0).unwrapped
+    zero = gym.make("PassiveBoundStride-v1", reset_noise_scale=0.0, slope_noise_deg=0.0).unwrapped
     a, _ = apexes(plain, 5)
     b, _ = apexes(zero, 5)
     assert len(a) == 5 and np.array_equal(a, b)  # bit-identical without noise
-    rough = gym.make("PassiveBoundStride-v0", reset_noise_scale=0.0, slope_noise_deg=0.2).unwrapped
+    rough = gym.make("PassiveBoundStride-v1", reset_noise_scale=0.0, slope_noise_deg=0.2).unwrapped
     c, slopes = apexes(rough, 5, seed=4)
     d, slopes2 = apexes(rough, 5, seed=4)
     nominal = math.degrees(rough.params.alpha)

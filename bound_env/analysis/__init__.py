@@ -18,7 +18,9 @@ Modules, read top to bottom:
   (Figs. 3-4).
 - `sweeps`: e_max against alpha and kc the paper's way, stability windows (Figs. 7-8).
 - `numerics`: finite-difference Jacobian, Newton, fixed points of a map, eigenvalue sort,
-  bisection, on any map ``f(z) -> z | None`` (the agents' margins use them too).
+  bisection, on any map ``f(z) -> z | None`` (the margins use them too).
+- `margins` (a package): stability margins of a closed loop with any controller (basin,
+  ceiling, basin stability, rough terrain and MFPT, windows, push; ``bound-env margins``).
 - `paired`: paired comparisons of two closed loops scored on the same random samples
   (exact McNemar / sign test, bootstrap of the difference of r50; `bound-env compare`).
 - `reproduce` (a package; `reproduce_report` is its old name for the figures and report):

@@ -7,7 +7,7 @@ two of `Z_NAMES`) and holding the other four at z*, and iterates the apex-to-ape
 start ends as one of
 
 - ``returned``: the max-abs apex error to the cycle fell below ``tol`` (SI; 1e-4, as in
-  `agents.margins`); ``strides`` = strides taken to get there;
+  `bound_env.analysis.margins`); ``strides`` = strides taken to get there;
 - ``fell``: a stride failed; ``reason`` = its `bound_env.hybrid` failure, ``phase`` = the
   stance condition it failed in, ``strides`` = the stride that failed;
 - ``undecided``: neither within ``max_strides`` (= ``strides``).
@@ -18,13 +18,13 @@ Two ways to run a batch of starts:
   their strides with the fast back-end's `bound_env.fast.advance` (the same call
   `bound_env.hybrid.simulate_stride` makes);
 - **a controller** with ``env_kwargs`` and ``batch(obs) -> actions`` (a trained policy,
-  `agents.controllers.MLPController`) or the per-observation protocol of `agents.margins`
-  (``__call__(obs)``, optional ``on_apex``; then one copy per robot): `controller_batch`,
-  the native vector env's kernel (`bound_env.task.PassiveBoundTask.step`) with one
-  controller call per control interval for the whole batch (Python runs once per interval,
-  and once per stride for a robot's restart). Each stride restarts the control intervals at
-  its apex (the robot is reset at the apex it reached), so the closed-loop apex map is the
-  one `agents.margins` measures.
+  `agents.controllers.MLPController`) or the per-observation protocol of
+  `bound_env.analysis.margins` (``__call__(obs)``, optional ``on_apex``; then one copy per
+  robot): `controller_batch`, the native vector env's kernel
+  (`bound_env.task.PassiveBoundTask.step`) with one controller call per control interval for
+  the whole batch (Python runs once per interval, and once per stride for a robot's restart).
+  Each stride restarts the control intervals at its apex (the robot is reset at the apex it
+  reached), so the closed-loop apex map is the one `bound_env.analysis.margins` measures.
 
 The grid is cut into chunks of ``chunk`` starts (row-major), one task each, through any
 executor (`bound_env.parallel`). A chunk's result depends only on its starts, so the map is
@@ -52,9 +52,8 @@ from ..events import phase_index as _phase_index
 from ..fast import EVENT_CAPACITY, Options, advance, event_log, recorder
 from ..params import Z_IN_Y, Z_NAMES, Z_PAPER_UNITS, load_gait, z_to_paper, z_to_si
 from ..stride import DEFAULT_T_MAX
+from ..stride_map import EVAL_RTOL, RETURN_TOL, max_intervals
 
-RETURN_TOL = 1e-4  # "returned": max-abs apex error to the cycle below this (SI), as margins
-EVAL_RTOL = 1e-10  # integrator tolerance, as agents.margins
 DEFAULT_STRIDES = 100  # strides allowed to return (margins' quick budget)
 DEFAULT_GRID = 64
 # Bounds of the command line (a grid of 10^5 per axis grew by 40 MB/s with no output, as sweep's
@@ -160,7 +159,7 @@ def controller_batch(
 ) -> dict:
     """Iterate the closed-loop apex map of ``controller`` from each row of ``Z`` (SI); the
     same outputs as `passive_batch`, as a dict of arrays."""
-    from ..task import NO_APEX_TIME, S_NAPEX, S_PHASE, S_STATUS
+    from ..task import S_NAPEX, S_PHASE, S_STATUS
 
     task = _task_for(controller, gait, rtol)
     Z = np.asarray(Z, dtype=float)
@@ -174,7 +173,7 @@ def controller_batch(
     live = np.ones(n, dtype=np.bool_)
     stride = np.zeros(n, dtype=np.int64)  # strides completed
     steps = np.zeros(n, dtype=np.int64)  # control intervals in the current stride
-    max_steps = int(math.ceil(NO_APEX_TIME / task.dt)) + 2
+    max_steps = max_intervals(task.dt)
     zi = np.array(Z_IN_Y)
     while live.any():
         b.actions[:] = act(b.obs, live)

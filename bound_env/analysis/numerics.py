@@ -8,7 +8,7 @@ what it does with such a point. Nothing in this module knows about strides or pa
   globalised by backtracking on ||F||: the fixed points of the Poincare map with free
   parameters and pins (`bound_env.analysis.fixed_point`) and the continuation correctors.
 - `map_fixed_point`: a fixed point of f by plain iteration, then Newton steps on
-  f(z) - z kept while the residual falls (the closed-loop maps of `agents.margins`, where
+  f(z) - z kept while the residual falls (the closed-loop maps of `margins`, where
   one map evaluation is an episode and the map may be rough).
 - `sorted_eigenvalues`: largest modulus first.
 - `bisect_threshold`: the largest s at which a yes/no test still holds.
@@ -297,7 +297,7 @@ def bisect_threshold(
     growing ``hi`` while ok(hi) holds, for an uncapped basin) belong here as keyword
     arguments whose defaults keep this behaviour.
 
-    With ``grow`` (the uncapped basin of `agents.margins`), an ``ok(hi)`` does not stop the
+    With ``grow`` (the uncapped basin of `margins`), an ``ok(hi)`` does not stop the
     search: the bracket grows by doubling from the last success (2 hi, 4 hi, ..., never
     beyond ``cap``) until ok fails, then bisects between the last success and the first
     failure; (cap, True) if ok still holds at ``cap``.

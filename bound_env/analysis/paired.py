@@ -1,9 +1,9 @@
 """Paired comparisons of two closed loops measured on the same random samples.
 
-`agents.margins` scores every controller on the same random directions (one ``--seed``), so a
-comparison of two columns is *paired*: direction d gives both an outcome (returned: 1, not:
-0) at each size r. The direction-sampling error then largely cancels in the difference, and
-the tests below use it:
+`bound_env.analysis.margins` scores every controller on the same random directions (one
+``--seed``), so a comparison of two columns is *paired*: direction d gives both an outcome
+(returned: 1, not: 0) at each size r. The direction-sampling error then largely cancels in the
+difference, and the tests below use it:
 
 - `sign_test`: the exact two-sided sign test of paired differences (zeros, the concordant
   pairs, dropped): under "no difference" the number of positive differences among the
@@ -14,7 +14,8 @@ the tests below use it:
   directions. A column with several seeds contributes, per direction, the mean of its seeds'
   outcomes (with one seed on each side this is exactly McNemar's test).
 - `crossing`: where a success curve first falls below 1/2, interpolated linearly in log r
-  (``r50``; vectorized, the same definition as `agents.stats.crossing_on_grid`).
+  (``r50``; vectorized, the same definition as
+  `bound_env.analysis.margins.stats.crossing_on_grid`).
 - `bootstrap_delta_x50`: the difference of the two columns' r50 (each the mean over its
   seeds of the per-seed r50) with a percentile bootstrap interval that resamples the
   directions (the same resample for both columns: paired) and, independently for each

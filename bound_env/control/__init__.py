@@ -2,12 +2,12 @@
 
 They live in `bound_env` rather than `agents` because they are part of the model's analysis:
 they need the simulator and its linearization (NumPy, SciPy), never torch or
-Stable-Baselines3, and `bound_env` must not import `agents`. The agents' tools (margins,
-compare) find them by name through `load_controller`.
+Stable-Baselines3, and `bound_env` must not import `agents`. The tools that take a controller
+by name (``bound-env margins``, compare, rollout) find them through `load_controller`.
 
     from bound_env.control import load_controller
     ctrl = load_controller("lqr")            # configs/controllers/lqr.yaml, or a path
-    u = ctrl.stride_action(z)                # PassiveBoundStride-v0 action at apex state z
+    u = ctrl.stride_action(z)                # PassiveBoundStride-v1 action at apex state z
 
 In the step env (PassiveBound-v0, unwrapped observation) a loop calls
 ``notify_apex(ctrl, obs, info)`` after ``reset`` and after every ``step``, and ``ctrl(obs)``

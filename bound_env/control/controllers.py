@@ -1,6 +1,6 @@
 """Classical spine controllers: stride-to-stride feedback (LQR, deadbeat) and extra damping.
 
-Protocol (what `agents.margins.ClosedLoop` and any other loop over the *unwrapped*
+Protocol (what `bound_env.analysis.margins.ClosedLoop` and any other loop over the *unwrapped*
 PassiveBound-v0 env use):
 
 - ``__call__(obs) -> float``: the normalized action of the next control interval;
@@ -16,7 +16,7 @@ torque constant over each control interval [t, t + dt] (t since the apex); the c
 outputs the **interval average** of tau(t) there, so each interval delivers the profile's
 impulse exactly and the step-env closed loop stays close to the stride-env one (the torque is
 only redistributed within the intervals that straddle a window edge). In the stride env
-(`PassiveBoundStride-v0`) the same controller acts through ``stride_action(z)``.
+(`PassiveBoundStride-v1`) the same controller acts through ``stride_action(z)``.
 """
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ class StrideFeedback:
 
     @property
     def stride_env_kwargs(self) -> dict:
-        """Keyword arguments of PassiveBoundStride-v0 with the same basis and saturation."""
+        """Keyword arguments of PassiveBoundStride-v1 with the same basis and saturation."""
         return {
             "gait": self.gait,
             "basis": self.basis.name,
@@ -86,7 +86,7 @@ class StrideFeedback:
         return np.clip(-(self.gain @ dz), -1.0, 1.0)
 
     def stride_action(self, z) -> np.ndarray:
-        """The action of PassiveBoundStride-v0 at apex state z."""
+        """The action of PassiveBoundStride-v1 at apex state z."""
         return self.coefficients(z)
 
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:

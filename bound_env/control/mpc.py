@@ -16,19 +16,17 @@ A candidate's score puts a **return** first (the normalized error falls to ``saf
 sooner is better), then **survival** of the whole horizon (a smaller final error is better),
 then the **progress** of a fall (strides and the fraction of a stride survived).
 
-The model is the step env's own torque: PassiveBound-v0 holds the torque over each control
-interval [k dt, (k + 1) dt] from the apex, and a stride-level controller outputs the interval
-average of its profile there (`bound_env.control.controllers`). The candidates are simulated
-with exactly those interval torques (`bound_env.stride_task.run_profile`, event-accurate), so a
-plan holds in `margins`. Random candidates come from a generator seeded by the bytes of z:
-the controller is a deterministic function of the apex state. Every decision is timed
-(`decision_seconds`).
+The model is the plant itself: the one stride map (`bound_env.stride_map`), the step env's
+own kernel, which holds the profile's average over each control interval [k dt, (k + 1) dt]
+from the apex, as a stride-level controller outputs it (`bound_env.control.controllers`), at
+the planning tolerance ``rtol``. So a plan holds in `margins`. Random candidates come from a
+generator seeded by the bytes of z: the controller is a deterministic function of the apex
+state. Every decision is timed (`decision_seconds`).
 """
 
 from __future__ import annotations
 
 import hashlib
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -36,96 +34,72 @@ import numpy as np
 
 from ..dynamics import jit, make_aux
 from ..events import APEX, N_FLAGS
-from ..fast import EVENT_CAPACITY, event_log, recorder
 from ..params import Z_IN_Y
-from ..stride_task import NO_APEX_TIME, run_profile
+from ..stride_map import NO_KICK, StrideMap, interval_weights, stride
+from ..task import N_S, reset_at_apex
 from .controllers import OBS_TIME, OBS_Z, StrideFeedback
 
 _Z_IDX = np.array(Z_IN_Y, dtype=np.int64)
 RETURNED, SURVIVED, FELL = 2, 1, 0  # a candidate's outcome, best first
 
 
-def interval_weights(
-    edges: np.ndarray, phi: np.ndarray, dt: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """(W, t_edges): the interval averages of a basis over [k dt, (k + 1) dt] from the apex,
-    tau_k = max_torque * (W @ u)_k, for every interval that starts before the nominal period T;
-    the last window's value holds past T (as in the step env and the stride env)."""
-    T = float(edges[-1])
-    n = int(math.ceil(T / dt - 1e-12))
-    t_edges = dt * np.arange(n + 1, dtype=float)
-    W = np.zeros((n + 1, phi.shape[0]))  # on sub-windows, then mapped through phi
-    hi_win = np.append(edges[1:-1], math.inf)
-    for k in range(n):
-        lo, hi = t_edges[k], t_edges[k + 1]
-        W[k] = np.clip(np.minimum(hi_win, hi) - np.maximum(edges[:-1], lo), 0.0, None) / dt
-    W[n, -1] = 1.0  # from n dt on: the last sub-window's value, held until the apex
-    return W @ phi, np.append(t_edges, math.inf)  # (the last edge is never reached)
-
-
-@jit
-def simulate_profile(y0, aux0, edges, taus, rtol, t_max, log, rec):
-    """One stride from the full state y0 with interval torques ``taus`` on ``edges``."""
-    y = y0.copy()
-    aux = aux0.copy()
-    flags = np.zeros(N_FLAGS, dtype=np.bool_)
-    status, t, _ = run_profile(y, aux, flags, edges, taus, rtol, rtol, t_max, log, rec)
-    return status, t, y
-
-
 @jit
 def rollouts(
-    z0, cand, aux0, edges, W, G, z_ref, scales, max_torque, horizon, safe, period, rtol, t_max
+    z0, cand, aux0, cfg, n_obs, n_apex, W, G, z_ref, scales, horizon, safe, period, n_max
 ):
-    """Every candidate's first stride (interval torques ``cand[c]``) from the apex z0, then
-    the LQR u = clip(-G (z - z*), -1, 1) for up to ``horizon`` strides.
+    """Every candidate's first stride (interval actions ``cand[c]``) from the apex z0, then
+    the LQR u = clip(-G (z - z*), -1, 1) (interval actions W u) for up to ``horizon``
+    strides, each a stride of the one stride map (`bound_env.stride_map.stride`) with the
+    task constants ``cfg``.
 
     Returns (outcome, strides, error, progress) per candidate: `RETURNED` when the normalized
     error max|(z - z*) / s| reached ``safe`` (``strides`` strides after z0), else `SURVIVED`
     (``error``: the final normalized error) or `FELL` (``progress``: strides completed plus
     the fraction of a nominal ``period`` survived in the last one)."""
     n_c = cand.shape[0]
-    log = event_log(EVENT_CAPACITY, np.empty((1, 8)))
-    rec = recorder(0, 0.0)
+    y = np.zeros(8)
+    aux = aux0.copy()
+    flags = np.zeros(N_FLAGS, dtype=np.bool_)
+    s = np.zeros(N_S)
+    apex = np.zeros((n_apex, 8))
+    obs = np.zeros(n_obs, dtype=np.float32)
+    z = np.empty(6)
     outcome = np.zeros(n_c, dtype=np.int64)
     strides = np.zeros(n_c, dtype=np.int64)
     error = np.full(n_c, np.inf)
     progress = np.zeros(n_c)
     for c in range(n_c):
-        y0 = np.zeros(8)
-        for i in range(6):
-            y0[_Z_IDX[i]] = z0[i]
-        taus = cand[c].copy()
-        for s in range(horizon + 1):
-            status, t, y = simulate_profile(y0, aux0, edges, taus, rtol, t_max, log, rec)
+        z[:] = z0
+        a = cand[c].copy()
+        for k in range(horizon + 1):
+            reset_at_apex(y, aux, flags, s, obs, aux0, z, cfg)
+            status, t, _, _ = stride(y, aux, flags, s, apex, obs, cfg, a, NO_KICK, 0, 0.0, n_max)
             if status != APEX:
                 outcome[c] = FELL
-                progress[c] = s + min(t / period, 1.0)
+                progress[c] = k + min(t / period, 1.0)
                 break
-            strides[c] = s + 1
+            strides[c] = k + 1
             e = 0.0
             dz = np.empty(6)
             for i in range(6):
-                dz[i] = y[_Z_IDX[i]] - z_ref[i]
+                z[i] = apex[0, _Z_IDX[i]]
+                dz[i] = z[i] - z_ref[i]
                 e = max(e, abs(dz[i]) / scales[i])
             error[c] = e
             if not np.isfinite(e):
                 outcome[c] = FELL
-                progress[c] = s + 1.0
+                progress[c] = k + 1.0
                 break
             if e <= safe:
                 outcome[c] = RETURNED
                 break
-            if s == horizon:
+            if k == horizon:
                 outcome[c] = SURVIVED
                 break
             u = -(G @ dz)
-            for k in range(u.shape[0]):
-                u[k] = min(1.0, max(-1.0, u[k]))
-            taus = max_torque * (W @ u)
-            y0 = np.zeros(8)
-            for i in range(6):
-                y0[_Z_IDX[i]] = y[_Z_IDX[i]]
+            for j in range(u.shape[0]):
+                u[j] = min(1.0, max(-1.0, u[j]))
+            a = W @ u
     return outcome, strides, error, progress
 
 
@@ -176,9 +150,10 @@ class MPCController:
 
     def __post_init__(self):
         b = self.lqr.basis
-        W, edges = interval_weights(b.edges, b.phi, self.lqr.dt)
-        self._W, self._edges = W, edges
+        self._W = interval_weights(b.edges, b.phi, self.lqr.dt)
         self._aux0 = make_aux(self.params.to_array())
+        # the planning model: the one stride map at the planning tolerance
+        self.model = StrideMap(self.gait, None, self.dt, self.max_torque, self.rtol)
         from ..task import APEX_SCALES
 
         self.scales = np.asarray(APEX_SCALES, dtype=float)
@@ -194,27 +169,28 @@ class MPCController:
     env_kwargs = property(lambda self: self.lqr.env_kwargs)
     stride_env_kwargs = property(lambda self: self.lqr.stride_env_kwargs)
 
-    def interval_torques(self, U) -> np.ndarray:
-        """Rows of coefficients -> the step env's interval torques [N m]."""
-        return self.max_torque * (np.atleast_2d(U) @ self._W.T)
+    def interval_actions(self, U) -> np.ndarray:
+        """Rows of coefficients -> the step env's interval actions (normalized torques)."""
+        return np.atleast_2d(U) @ self._W.T
 
     def evaluate(self, z, U):
         """`rollouts` of the coefficient rows U from the apex z: (scores, outcome, strides)."""
+        task = self.model.task
         out = rollouts(
             np.asarray(z, dtype=float),
-            self.interval_torques(U),
+            self.interval_actions(U),
             self._aux0,
-            self._edges,
+            task.cfg,
+            task.obs_dim,
+            task.apex_capacity,
             self._W,
             self.lqr.gain,
             self.z_ref,
             self.scales,
-            self.max_torque,
             self.horizon,
             self.safe,
             self.basis.period,
-            self.rtol,
-            NO_APEX_TIME,
+            self.model.n_max,
         )
         return scores(*out, self.horizon), out[0], out[1]
 

@@ -1,0 +1,290 @@
+"""The closed loop: a controller in the loop of one PassiveBound environment, its apex-to-apex
+map (`ClosedLoop`), kicks, batched rough-terrain runs, and the per-worker `Setup` of a margins
+evaluation with its cache of loops (`loop_for`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...stride_map import EVAL_RTOL, RETURN_TOL, max_intervals
+from .budget import DEFAULT_SEED, Budget
+
+ENV_ID = "PassiveBound-v0"
+PROFILE_SEG = 5  # ceiling search: control intervals per piece of a torque profile
+PROFILE_SPAN = 1.3  # ceiling search: the profile covers 1.3 x the strides' nominal duration
+
+
+@dataclass
+class StrideOut:
+    """One stride of the closed-loop map."""
+
+    z1: np.ndarray | None
+    failure: str | None
+    effort: float = math.nan  # time-averaged |tau| [N m]
+    period: float = math.nan  # [s]
+    steps: int = 0  # control intervals started
+    phase: str | None = None  # stance condition at the end (at the failure)
+
+
+class ClosedLoop:
+    """A controller in the loop of one PassiveBound environment (no wrappers).
+
+    ``stride(z)`` is the closed-loop apex map (see the package docstring); ``kick`` adds
+    ``delta`` to one entry of the simulator state just before control interval ``step``.
+    """
+
+    def __init__(
+        self,
+        controller,
+        gait: str = "default",
+        gait_overrides: dict | None = None,
+        env_extra: dict | None = None,
+    ):
+        import gymnasium as gym
+
+        import bound_env
+
+        gym.register_envs(bound_env)
+        kwargs = dict(getattr(controller, "env_kwargs", None) or {})
+        kwargs.update(env_extra or {})
+        kwargs["gait"] = gait
+        overrides = {**(kwargs.get("gait_overrides") or {}), **(gait_overrides or {})}
+        kwargs["gait_overrides"] = overrides or None
+        kwargs["rtol"] = EVAL_RTOL
+        kwargs["reset_noise_scale"] = 0.0
+        self.env = gym.make(ENV_ID, **kwargs).unwrapped
+        self.controller = controller
+        self.max_torque = float(self.env.task.max_torque)
+        self.dt = float(self.env.task.dt)
+        self.max_steps = max_intervals(self.dt)
+        self.i_since_apex = list(self.env.task.obs_names).index("time_since_apex")
+        self.on_apex = getattr(controller, "on_apex", None)
+        self.last_phase: str | None = None  # stance condition at the end of the last `run`
+
+    def stride(self, z, kick: tuple | None = None) -> StrideOut:
+        env, ctrl = self.env, self.controller
+        z = np.asarray(z, dtype=float)
+        obs, info = env.reset(options={"apex_state": z})
+        if info["failure"] is not None:
+            return StrideOut(None, info["failure"], phase="df")
+        if self.on_apex is not None:
+            self.on_apex(z, 0.0)
+        t_prev, impulse = 0.0, 0.0
+        for k in range(self.max_steps):
+            if kick is not None and k == kick[0]:
+                apply_kick(env, kick[1], kick[2])
+            obs, _, terminated, _, info = env.step(np.array([ctrl(obs)]))
+            tau = abs(info["tau"])
+            if "apex_z" in info:
+                t_apex = info["time"] - float(obs[self.i_since_apex])
+                impulse += tau * max(0.0, t_apex - t_prev)
+                return StrideOut(
+                    np.array(info["apex_z"], dtype=float), None, impulse / t_apex, t_apex, k + 1
+                )
+            impulse += tau * (info["time"] - t_prev)
+            t_prev = info["time"]
+            if terminated:
+                return StrideOut(None, info["failure"], steps=k + 1, phase=info["phase"])
+        return StrideOut(None, "no_apex", steps=self.max_steps, phase=info["phase"])
+
+    def map(self, z) -> np.ndarray | None:
+        return self.stride(z).z1
+
+    def run(
+        self, z0, z_target, max_strides: int, kick: tuple | None = None, survive_only: bool = False
+    ) -> tuple[bool, int, str | None]:
+        """Iterate the map from z0 (the first stride kicked if ``kick``). Returns (success,
+        strides, failure): success = returned within RETURN_TOL of ``z_target`` within
+        ``max_strides`` (or, with ``survive_only``, did not fall in ``max_strides``)."""
+        z = np.asarray(z0, dtype=float)
+        self.last_phase = None
+        for n in range(1, max_strides + 1):
+            out = self.stride(z, kick if n == 1 else None)
+            if out.z1 is None:
+                self.last_phase = out.phase
+                return False, n, out.failure
+            z = out.z1
+            if not np.all(np.isfinite(z)):
+                return False, n, "non_finite"
+            if not survive_only and np.max(np.abs(z - z_target)) < RETURN_TOL:
+                return True, n, None
+        return survive_only, max_strides, None
+
+    def episode(self, z0, max_strides: int, seed: int | None = None) -> tuple:
+        """One long episode from the apex state z0 (env seed ``seed``: with
+        ``slope_noise_deg`` it fixes the terrain). Returns (survived ``max_strides`` strides,
+        strides completed, failure)."""
+        env, ctrl = self.env, self.controller
+        z0 = np.asarray(z0, dtype=float)
+        obs, info = env.reset(seed=seed, options={"apex_state": z0})
+        if info["failure"] is not None:
+            return False, 0, info["failure"]
+        if self.on_apex is not None:
+            self.on_apex(z0, 0.0)
+        while True:
+            obs, _, terminated, _, info = env.step(np.array([ctrl(obs)]))
+            if terminated:
+                self.last_phase = info["phase"]
+                return False, info["stride"], info["failure"]
+            if "apex_z" in info:
+                if info["stride"] >= max_strides:
+                    return True, info["stride"], None
+                if self.on_apex is not None:
+                    self.on_apex(np.array(info["apex_z"]), float(obs[self.i_since_apex]))
+
+    def profile(self, z0, actions, max_strides: int, seg: int = PROFILE_SEG) -> tuple:
+        """Open loop: the normalized torques ``actions[j]`` held over control intervals
+        [j seg, (j + 1) seg) from the apex state z0, zero after the last piece. Returns
+        (strides completed >= max_strides, progress score, failure, phase, strides) with
+        score = strides completed + the fraction of a nominal stride survived since."""
+        env = self.env
+        obs, info = env.reset(options={"apex_state": np.asarray(z0, dtype=float)})
+        if info["failure"] is not None:
+            return False, 0.0, info["failure"], "df", 0
+        n_act = len(actions)
+        t_apex = 0.0
+        for k in range(self.max_steps * max_strides):
+            a = actions[k // seg] if k // seg < n_act else 0.0
+            obs, _, terminated, _, info = env.step(np.array([a]))
+            if "apex_z" in info:
+                t_apex = info["time"] - float(obs[self.i_since_apex])
+                if info["stride"] >= max_strides:
+                    return True, float(info["stride"]), None, None, info["stride"]
+            if terminated:
+                frac = min(0.99, (info["time"] - t_apex) / max(self.period_hint, 1e-3))
+                return (
+                    False,
+                    info["stride"] + frac,
+                    info["failure"],
+                    info["phase"],
+                    info["stride"],
+                )
+        return False, float(info["stride"]), "no_apex", info["phase"], info["stride"]
+
+    period_hint = 0.39  # s, nominal stride duration for the profile score (set by the tasks)
+
+
+def apply_kick(env, index: int, delta: float) -> None:
+    """Add ``delta`` to velocity entry ``index`` (4..7) of the simulator state y between two
+    control intervals (`bound_env.env.PassiveBoundEnv.kick`). The controller sees it in the
+    next observation (a push is sensed one control interval later, like a sampled sensor)."""
+    if not 4 <= index <= 7:
+        raise ValueError(f"a kick changes a velocity (state index 4..7), got index {index}")
+    d = np.zeros(4)
+    d[index - 4] = delta
+    env.kick(d)
+
+
+def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
+    """`ClosedLoop.episode` for many robots at once: robot k runs the episode of
+    ``loop.episode(z0, max_strides, seed=seeds[k])`` (the same task, hence ``loop``'s rough
+    terrain, and the same slope draws from its own env RNG), all advanced together by the
+    task's batch kernel, one controller call per control interval: ``batch(obs)`` for a
+    controller that has one (and no ``on_apex``), else one copy per robot called row by row
+    with ``on_apex`` at every apex, as the single env calls it (then bit-identical to
+    ``episode``). Returns {"strides": completed strides per robot, "fell": 0/1 per robot,
+    "failures": {reason: count}}."""
+    import copy
+
+    from gymnasium.utils import seeding
+
+    from bound_env.params import Z_IN_Y
+    from bound_env.task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_STRIDES
+
+    z_idx = np.array(Z_IN_Y)  # z = y[z_idx] at an apex (as the task reads info["apex_z"])
+
+    task, ctrl = loop.env.task, loop.controller
+    n = len(seeds)
+    z0 = task.check_apex_state(z0)
+    b = task.new_batch(n)
+    rngs = []
+    for i, sd in enumerate(seeds):
+        rngs.append(seeding.np_random(int(sd))[0])
+        task.reset_robot(b, i, z0)
+        task.draw_slope_noise(b, i, rngs[i])
+    on_apex = getattr(ctrl, "on_apex", None)
+    batched = callable(getattr(ctrl, "batch", None)) and on_apex is None
+    copies = None if batched else [copy.deepcopy(ctrl) for _ in range(n)]
+    if copies is not None and on_apex is not None:
+        for c in copies:
+            c.on_apex(z0.copy(), 0.0)
+    strides = np.zeros(n, dtype=np.int64)
+    fell = np.zeros(n, dtype=np.int64)
+    failures: dict = {}
+    live = b.s[:, S_STATUS] < FAIL_FIRST  # an invalid start fails at the reset (0 strides)
+    for i in np.flatnonzero(~live):
+        fell[i] = 1
+        name = FAILURE_NAMES[int(b.s[i, S_STATUS])]
+        failures[name] = failures.get(name, 0) + 1
+    while live.any():
+        if batched:
+            b.actions[:] = ctrl.batch(b.obs)
+        else:
+            for i in np.flatnonzero(live):
+                b.actions[i] = copies[i](b.obs[i])
+        b.active[:] = live
+        task.step(b)
+        s = b.s
+        apex = live & (s[:, S_NAPEX] > 0)
+        for i in np.flatnonzero(apex):
+            task.draw_slope_noise(b, i, rngs[i])
+        failed = live & (s[:, S_STATUS] >= FAIL_FIRST)
+        for i in np.flatnonzero(failed):
+            fell[i], strides[i] = 1, int(s[i, S_STRIDES])
+            name = FAILURE_NAMES[int(s[i, S_STATUS])]
+            failures[name] = failures.get(name, 0) + 1
+        live &= ~failed
+        for i in np.flatnonzero(apex & live):
+            strides[i] = int(s[i, S_STRIDES])
+            if strides[i] >= max_strides:
+                live[i] = False
+            elif copies is not None and on_apex is not None:
+                napex = int(s[i, S_NAPEX])
+                z1 = b.apex[i, min(napex, b.apex.shape[1]) - 1][z_idx]
+                copies[i].on_apex(np.array(z1, dtype=float), float(b.obs[i, loop.i_since_apex]))
+    return {"strides": strides.tolist(), "fell": fell.tolist(), "failures": failures}
+
+
+# --------------------------------------------------------------------------------------------
+# Tasks (run in worker processes)
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Setup:
+    """Everything a worker needs; picklable."""
+
+    controller: object
+    gait: str
+    budget: Budget
+    z_star: np.ndarray
+    z_cl: np.ndarray | None = None
+    cycle_steps: int = 0
+    key: str = ""
+    period: float = math.nan  # closed-loop stride period [s]
+    seed: int = DEFAULT_SEED  # --seed: the random directions, terrain and push samples
+
+
+_LOOPS: dict = {}
+
+
+def loop_for(
+    setup: Setup, overrides: dict | None = None, env_extra: dict | None = None
+) -> ClosedLoop:
+    """The `ClosedLoop` of ``setup`` (with gait ``overrides`` and extra env arguments), built
+    once per worker process and kept (the store is emptied past 64 loops)."""
+    k = (
+        setup.key,
+        tuple(sorted((overrides or {}).items())),
+        tuple(sorted((env_extra or {}).items())),
+    )
+    if k not in _LOOPS:
+        if len(_LOOPS) > 64:
+            _LOOPS.clear()
+        _LOOPS[k] = ClosedLoop(setup.controller, setup.gait, overrides, env_extra)
+        if math.isfinite(setup.period):
+            _LOOPS[k].period_hint = setup.period
+    return _LOOPS[k]

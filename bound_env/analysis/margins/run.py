@@ -1,0 +1,299 @@
+"""Running a margins evaluation: the task table (`TASKS`, `run_task`, run in worker processes),
+the task cache's keys (`setup_key`: `SETTINGS`, the gait file, the controller's fingerprint and
+`source_hash`) and the core entry `compute_margins`, which takes a loaded controller."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+from bound_env.cache import TaskCache, settings_hash
+from bound_env.parallel import TasksFailed, open_pool, run_tasks
+
+from .assemble import assemble, controller_name
+from .basin import BASIN_CAP, BASIN_HI, BASIN_LO, task_basin
+from .budget import (
+    CURVE_SEED,
+    DEFAULT_SEED,
+    MFPT_CHUNK,
+    MFPT_SEED,
+    PUSH_SEED,
+    TERRAIN_SEED,
+    WINDOW_SCAN,
+    Budget,
+    as_budget,
+    check_seed,
+    sample_seeds,
+)
+from .ceiling import CEILING_ES, task_ceiling
+from .closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TOL, Setup
+from .curve import task_curve
+from .cycle import FD_FLOOR, FD_REL, task_cycle
+from .push import task_push
+from .report import Z_LABELS, Z_UNITS, write_outputs
+from .terrain import task_mfpt, task_terrain
+from .windows import task_window
+
+CYCLE_RECORD_DT = 1e-3  # sampling of the passive stride for the cycle scale [s]
+
+
+TASKS = {
+    "cycle": task_cycle,
+    "basin": task_basin,
+    "curve": task_curve,
+    "window": task_window,
+    "push": task_push,
+    "ceiling": task_ceiling,
+    "terrain": task_terrain,
+    "mfpt": task_mfpt,
+}
+
+
+def run_task(setup: Setup, name: str, args: tuple) -> dict:
+    """Worker entry point: one named task."""
+    t0 = time.perf_counter()
+    try:
+        result = TASKS[name](setup, *args)
+    except RuntimeError as e:
+        result = {"error": str(e)}
+    result["seconds"] = time.perf_counter() - t0
+    return result
+
+
+# --------------------------------------------------------------------------------------------
+# Orchestration
+# --------------------------------------------------------------------------------------------
+
+
+def task_key(setup_key: str, name: str, args: tuple) -> str:
+    """Cache key of one task: the setup's settings hash, the task name and its arguments."""
+    return f"{setup_key}/{name}/{json.dumps(list(args))}"
+
+
+def _run_all(
+    executor, setup: Setup, jobs: list, cache: TaskCache, progress: bool, desc: str
+) -> dict:
+    """Run (name, args) jobs through the executor, using and filling the cache. A task that
+    raises is reported (key and arguments) without stopping the others; then `TasksFailed`."""
+    results, tasks = {}, {}
+    for name, args in jobs:
+        key = task_key(setup.key, name, args)
+        hit = cache.get(key)
+        if hit is not None:
+            results[(name, args)] = hit
+        else:
+            tasks[key] = (run_task, (setup, name, args), (name, args))
+
+    def keep(key, res):
+        if "error" not in res:
+            cache.put(key, res)
+
+    done, failures = run_tasks(
+        executor, tasks, progress and bool(tasks), desc, keep, done_before=len(results)
+    )
+    for key, res in done.items():
+        results[tasks[key][2]] = res
+    if failures:
+        raise TasksFailed(
+            failures,
+            len(jobs),
+            "; the others are cached: rerun to retry" if cache.path is not None else "",
+        )
+    return results
+
+
+# Every module setting that changes a result: part of each cache key (with the budget, the
+# seed, the gait file's contents, the controller's fingerprint and the source hash below).
+SETTINGS = {
+    "rtol": EVAL_RTOL,
+    "return_tol": RETURN_TOL,
+    "basin_lo": BASIN_LO,
+    "basin_hi": BASIN_HI,
+    "basin_cap": BASIN_CAP,
+    "fd_rel": FD_REL,
+    "fd_floor": FD_FLOOR.tolist(),
+    "curve_seed": CURVE_SEED,
+    "terrain_seed": TERRAIN_SEED,
+    "push_seed": PUSH_SEED,
+    "mfpt_seed": MFPT_SEED,
+    "mfpt_chunk": MFPT_CHUNK,
+    "profile_seg": PROFILE_SEG,
+    "profile_span": PROFILE_SPAN,
+    "ceiling_es": CEILING_ES,
+    "ceiling_rng": "default_rng([component, sign > 0, round(s * 1e9) % 2**32])",
+    "window_scan": WINDOW_SCAN,
+    "env_id": ENV_ID,
+    "cycle_record_dt": CYCLE_RECORD_DT,
+}
+
+
+def source_files(extra=()) -> list[Path]:
+    """Every .py file under bound_env/ (the simulator, the task, the classical controllers and
+    this package), then the ``extra`` files: the code of a controller that lives outside
+    bound_env/, named by the caller (`compute_margins`' ``extra_sources``)."""
+    pkg = Path(__file__).resolve().parents[2]  # bound_env/
+    return sorted(pkg.rglob("*.py")) + [Path(f) for f in extra]
+
+
+def source_hash(files=None) -> str:
+    """sha256 (16 hex digits) of the names and contents of ``files`` (default:
+    `source_files`): any change of the simulator, the task, the controllers or the margins
+    code gives a new cache key (no hand-kept version number)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for f in files if files is not None else source_files():
+        f = Path(f)
+        h.update(f"{f.parent.name}/{f.name}\0".encode())
+        h.update(f.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()[:16]
+
+
+def gait_key(gait) -> dict:
+    """The gait's name and the sha256 of its file's contents (a changed file, a new key)."""
+    import hashlib
+
+    from bound_env.params import resolve_gait_path
+
+    digest = hashlib.sha256(resolve_gait_path(gait).read_bytes()).hexdigest()
+    return {"name": str(gait), "file_sha256": digest}
+
+
+def setup_key(
+    controller, gait: str, budget: Budget, seed: int = DEFAULT_SEED, extra_sources=()
+) -> str:
+    """Cache key of one evaluation: the controller's fingerprint and env kwargs, the gait
+    (name and file contents), the budget, the seed, `SETTINGS` and the `source_hash` of
+    bound_env/ and ``extra_sources``."""
+    env_kwargs = getattr(controller, "env_kwargs", None) or {}
+    return settings_hash(
+        {
+            "controller": controller.fingerprint(),
+            "gait": gait_key(gait),
+            "budget": asdict(budget),
+            "seed": check_seed(seed),
+            "samples": sample_seeds(seed),
+            "settings": SETTINGS,
+            "source": source_hash(source_files(extra_sources)),
+            "env_kwargs": sorted((str(k), repr(v)) for k, v in env_kwargs.items()),
+        }
+    )
+
+
+def check_controller(controller):
+    """``controller`` if it has the controller protocol (``__call__`` and ``fingerprint()``,
+    see the package docstring), else ValueError. Names and paths are loaded by the caller."""
+    if callable(controller) and callable(getattr(controller, "fingerprint", None)):
+        return controller
+    raise ValueError(
+        f"the controller must be an object with __call__(obs) and fingerprint(), got "
+        f"{type(controller).__name__} (a name or a path is loaded first)"
+    )
+
+
+def cycle_scale(gait: str) -> np.ndarray:
+    """Peak-to-peak range of each apex component [y_g, th1, th2, xdot_g, th1dot, th2dot]
+    over one passive stride from the gait's z* (SI): the ``cycle`` yardstick."""
+    from bound_env.hybrid import simulate_stride
+    from bound_env.params import load_gait
+
+    g = load_gait(gait)
+    res = simulate_stride(
+        g.z0, g.params, backend="fast", rtol=EVAL_RTOL, atol=EVAL_RTOL, record_dt=CYCLE_RECORD_DT
+    )
+    tr = res.trajectory
+    full = np.hstack([tr.q, tr.qd])[:, [1, 2, 3, 4, 6, 7]]
+    return full.max(axis=0) - full.min(axis=0)
+
+
+def compute_margins(
+    controller,
+    budget: str | Budget = "quick",
+    gait: str = "default",
+    workers: int = 1,
+    executor=None,
+    out: str | Path | None = None,
+    progress: bool = False,
+    use_cache: bool = True,
+    scheduler: str | None = None,
+    seed: int = DEFAULT_SEED,
+    extra_sources=(),
+) -> dict:
+    """All margins of ``controller`` (an object with the controller protocol, package
+    docstring) as a JSON-able dict.
+
+    ``seed`` picks the random directions, the rough-terrain runs, the push trials and the
+    MFPT robots (`sample_seeds`): the default is the test set of docs/MARGINS.md, any other
+    a held-out (validation) set.
+    ``executor``: any `concurrent.futures.Executor`-like object; default: the one
+    `bound_env.parallel.open_pool` builds from ``scheduler`` and ``workers`` (a process pool
+    of ``workers`` processes, in-process when ``workers == 1``, or Dask). ``out``: directory
+    for the CSV/PNG outputs and the task cache. ``extra_sources``: files of the controller's
+    code outside bound_env/ (e.g. a learned policy's modules), hashed into the cache key with
+    bound_env/'s own sources (`setup_key`), so that a change of that code never returns a stale
+    result; the controller's ``fingerprint()`` covers its data (weights, gains, settings).
+    """
+    from bound_env.params import load_gait
+
+    budget = as_budget(budget)
+    if workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {workers}")
+    seed = check_seed(seed)
+    controller = check_controller(controller)
+    g = load_gait(gait)
+    z_star = np.asarray(g.z0, dtype=float)
+    scale = {
+        "names": list(Z_LABELS),
+        "units": list(Z_UNITS),
+        "zstar": np.abs(z_star).tolist(),
+        "cycle": cycle_scale(gait).tolist(),
+    }
+    out_dir = Path(out) if out is not None else None
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    cache = TaskCache(out_dir / "cache.jsonl" if (out_dir is not None and use_cache) else None)
+    setup = Setup(
+        controller=controller,
+        gait=gait,
+        budget=budget,
+        z_star=z_star,
+        key=setup_key(controller, gait, budget, seed, extra_sources),
+        seed=seed,
+    )
+    t0 = time.perf_counter()
+    with contextlib.ExitStack() as stack:
+        if executor is None:
+            executor = stack.enter_context(open_pool(scheduler, workers)).executor
+        cyc = _run_all(executor, setup, [("cycle", ())], cache, False, "cycle")[("cycle", ())]
+        if "error" in cyc:
+            raise RuntimeError(f"no closed-loop cycle: {cyc['error']}")
+        setup = replace(
+            setup,
+            z_cl=np.array(cyc["z_cl"]),
+            cycle_steps=int(cyc["cycle_steps"]),
+            period=float(cyc["period"]),
+        )
+        jobs = [("basin", (i, s)) for i in range(6) for s in (1, -1)]
+        jobs += [("ceiling", (i, s)) for i in range(6) for s in (1, -1)]
+        jobs += [("curve", (r,)) for r in budget.curve_sizes]
+        jobs += [("terrain", (v,)) for v in budget.terrain_sigmas]
+        chunks = range(math.ceil(budget.mfpt_robots / MFPT_CHUNK))
+        jobs += [("mfpt", (v, c)) for v in budget.mfpt_sigmas for c in chunks]
+        jobs += [("window", (k, s)) for k in ("alpha_deg", "kc") for s in (-1, 1)]
+        jobs += [("push", ("xdot", v, j)) for j, v in enumerate(budget.push_xdot)]
+        jobs += [("push", ("th1dot", v, j)) for j, v in enumerate(budget.push_th1dot)]
+        res = _run_all(
+            executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}"
+        )
+    result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
+    result["seconds"] = time.perf_counter() - t0
+    if out_dir is not None:
+        write_outputs(result, out_dir)
+    return result

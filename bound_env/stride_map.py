@@ -1,0 +1,253 @@
+"""The one stride map: a stride of the step env (PassiveBound-v0) from an apex state, batched.
+
+Everything in the project that advances a stride under a torque profile uses this module: the
+stride env (`PassiveBoundStride-v1`), the classical designs (`bound_env.control.design`), the
+MPC's planning model, distillation and fine-tuning, and the margins' closed loop of a stride
+controller. So a profile means the same thing everywhere, and a stride controller is measured
+on the map it was designed and trained on.
+
+The plant is the step env
+-------------------------
+A stride from the apex state z (eq. 17, t = 0 there) under the normalized **interval actions**
+a[0], a[1], ... is the step env's own zero-order hold: interval k, [k dt, (k + 1) dt], holds
+the torque tau_k = max_torque * clip(a_k, -1, 1), integrated event-accurately by the step
+env's compiled kernel (`bound_env.task.step_env`, the very function `PassiveBound-v0` steps),
+until the step in which the next apex is passed; the apex state is located on the
+integrator's dense output. The last action holds past the given ones. A stride-level profile
+tau(t) = max_torque sum_i u_i phi_i(t) enters as its **interval averages**
+a = W u (`interval_weights`), so each interval delivers the profile's impulse exactly.
+
+So a stride here is bit-identical to the stride of a PassiveBound-v0 episode started at z with
+``reset(options={"apex_state": z})`` and stepped with the same actions (tested), and zero
+action is the passive Poincare map P of eq. 18 up to the integrator tolerance.
+
+What it owns (one definition each): `EVAL_RTOL`, the integrator tolerance of every evaluation;
+`RETURN_TOL`, "returned to the cycle"; `max_intervals`, the step limit of one stride; and the
+failure names of the outcomes (`bound_env.task.FAILURE_NAMES`, from `bound_env.events`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .dynamics import jit
+from .events import APEX, F_NO_APEX, FAIL_FIRST
+from .params import Z_IN_Y
+from .task import (
+    DEFAULT_DT,
+    DEFAULT_MAX_TORQUE,
+    FAILURE_NAMES,
+    NO_APEX_TIME,
+    PassiveBoundTask,
+    S,
+    step_env,
+)
+from .terrain import change_slope, set_slope
+
+EVAL_RTOL = 1e-10  # integrator tolerance of every evaluation (relative and absolute)
+RETURN_TOL = 1e-4  # "returned to the cycle": max |z - z_target| below this (SI)
+NO_KICK = -1  # kick_step of a stride without a push
+_Z_IDX = np.array(Z_IN_Y, dtype=np.int64)
+
+
+def max_intervals(dt: float) -> int:
+    """The step limit of one stride: control intervals after which a stride without an apex
+    has certainly failed (`NO_APEX_TIME` plus two intervals)."""
+    return int(math.ceil(NO_APEX_TIME / dt)) + 2
+
+
+def interval_weights(edges: np.ndarray, phi: np.ndarray, dt: float) -> np.ndarray:
+    """W with a = W @ u: the interval averages over [k dt, (k + 1) dt] from the apex of the
+    basis ``phi`` (sub-windows on ``edges``, the last holding past edges[-1]), for every
+    interval that starts before the nominal period T, plus one last row, the last
+    sub-window's value, held until the apex."""
+    T = float(edges[-1])
+    n = int(math.ceil(T / dt - 1e-12))
+    t_edges = dt * np.arange(n + 1, dtype=float)
+    W = np.zeros((n + 1, phi.shape[0]))  # on sub-windows, then mapped through phi
+    hi_win = np.append(edges[1:-1], math.inf)
+    for k in range(n):
+        lo, hi = t_edges[k], t_edges[k + 1]
+        W[k] = np.clip(np.minimum(hi_win, hi) - np.maximum(edges[:-1], lo), 0.0, None) / dt
+    W[n, -1] = 1.0  # from n dt on: the last sub-window's value, held until the apex
+    return W @ phi
+
+
+@jit
+def stride(y, aux, flags, s, apex, obs, cfg, actions, kick_step, kick_index, kick_delta, n_max):
+    """One stride of the step env from the apex state in (y, aux, flags, s) (put there by
+    `bound_env.task.reset_at_apex`): interval k holds actions[min(k, len - 1)]; before interval
+    ``kick_step`` the velocity y[kick_index] gets ``kick_delta``. At most ``n_max`` intervals.
+
+    Returns (status, t, impulse, intervals): `APEX` with t the apex time, else the failure
+    code and the time reached; impulse = integral of |tau| dt up to t [N m s]. At an apex the
+    full state is ``apex[0]``; after a failure, ``y`` is the last state."""
+    if s[S.STATUS] >= FAIL_FIRST:  # an impossible start
+        return int(s[S.STATUS]), 0.0, 0.0, 0
+    n_a = actions.shape[0]
+    t_prev = 0.0
+    impulse = 0.0
+    for k in range(n_max):
+        if k == kick_step:
+            y[kick_index] += kick_delta
+        step_env(y, aux, flags, s, apex, obs, cfg, actions[min(k, n_a - 1)])
+        tau = abs(s[S.TAU])
+        if s[S.NAPEX] > 0.0:
+            t_apex = s[S.T_APEX]
+            impulse += tau * max(0.0, t_apex - t_prev)
+            return APEX, t_apex, impulse, k + 1
+        impulse += tau * (s[S.T] - t_prev)
+        t_prev = s[S.T]
+        if s[S.STATUS] >= FAIL_FIRST:
+            return int(s[S.STATUS]), s[S.T], impulse, k + 1
+    return F_NO_APEX, s[S.T], impulse, n_max
+
+
+@jit
+def strides(
+    Y, AUX, FLAGS, SS, APEXES, OBS, cfg, A, kick_step, kick_index, kick_delta, n_max, out
+):
+    """`stride` for every robot i of a batch (row i of each array); ``out[i]`` = (status, t,
+    impulse, intervals)."""
+    for i in range(Y.shape[0]):
+        st, t, imp, k = stride(
+            Y[i],
+            AUX[i],
+            FLAGS[i],
+            SS[i],
+            APEXES[i],
+            OBS[i],
+            cfg,
+            A[i],
+            kick_step[i],
+            kick_index[i],
+            kick_delta[i],
+            n_max,
+        )
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = st, t, imp, k
+
+
+@dataclass
+class Strides:
+    """The outcome of n strides (row i: robot i)."""
+
+    z1: np.ndarray  # (n, 6) next apex state (SI); NaN where the stride failed
+    status: np.ndarray  # (n,) int: APEX or a failure code (`bound_env.events`)
+    period: np.ndarray  # (n,) apex time [s] (time of the failure if one)
+    effort: np.ndarray  # (n,) mean |tau| over the stride [N m]
+    intervals: np.ndarray  # (n,) control intervals stepped
+    y_end: np.ndarray  # (n, 8) full state at the end (the apex, or the last state)
+    phase: np.ndarray  # (n,) stance condition index at the end (`bound_env.events.PHASES`)
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.status == APEX
+
+    def failure(self, i: int) -> str | None:
+        """The failure name of robot i's stride, None if it reached its apex."""
+        return None if self.status[i] == APEX else FAILURE_NAMES[int(self.status[i])]
+
+
+class StrideMap:
+    """z1 = P(z, a): strides of the step env of one task setting, batched (module docstring).
+
+    ``gait``, ``gait_overrides``, ``dt``, ``max_torque`` and ``rtol`` are PassiveBound-v0's
+    settings of the same name (``rtol`` defaults to `EVAL_RTOL`)."""
+
+    def __init__(
+        self,
+        gait="default",
+        gait_overrides: dict | None = None,
+        dt: float = DEFAULT_DT,
+        max_torque: float = DEFAULT_MAX_TORQUE,
+        rtol: float = EVAL_RTOL,
+    ):
+        self.task = PassiveBoundTask(
+            gait=gait,
+            gait_overrides=gait_overrides,
+            dt=dt,
+            max_torque=max_torque,
+            rtol=rtol,
+            reset_noise_scale=0.0,
+        )
+        self.dt = self.task.dt
+        self.max_torque = self.task.max_torque
+        self.rtol = float(rtol)
+        self.n_max = max_intervals(self.dt)
+        self._batches: dict = {}
+
+    @property
+    def params(self):
+        return self.task.params
+
+    @property
+    def z_ref(self) -> np.ndarray:
+        return self.task.z_ref
+
+    def _batch(self, n: int):
+        if n not in self._batches:
+            if len(self._batches) > 8:
+                self._batches.clear()
+            self._batches[n] = self.task.new_batch(n)
+        return self._batches[n]
+
+    def run(self, Z, A, *, aux=None, kicks=None, slopes=None) -> Strides:
+        """One stride from each apex state Z[i] (SI) with the interval actions A[i] (or one
+        row A for all), from the start.
+
+        ``aux``: per-robot parameter vectors (n, N_AUX) in place of the task's (parameter
+        overrides); ``kicks``: per robot (interval, state index 4..7, delta) or None, a push
+        added to that velocity before that interval; ``slopes``: per robot (alpha_from,
+        alpha_to) [rad] or None, rough terrain: Z[i] is an apex state on a ground at
+        alpha_from that tilts to alpha_to at that apex (`bound_env.terrain.change_slope`)."""
+        Z = np.atleast_2d(np.asarray(Z, dtype=float))
+        n = Z.shape[0]
+        A = np.asarray(A, dtype=float)
+        A = np.broadcast_to(A, (n, A.shape[-1])) if A.ndim == 1 else A
+        if Z.shape[1] != 6 or A.shape[0] != n:
+            raise ValueError(f"Z must be (n, 6) and A (n, K) or (K,), got {Z.shape}, {A.shape}")
+        b = self._batch(n)
+        for i in range(n):
+            self.task.reset_robot(b, i, Z[i])
+            if aux is not None:
+                b.aux[i] = aux[i]
+            if slopes is not None and slopes[i] is not None:
+                a0, a1 = slopes[i]
+                set_slope(b.aux[i], a0)
+                change_slope(b.y[i], b.aux[i], a1 - a0)
+            if aux is not None or (slopes is not None and slopes[i] is not None):
+                self.task.restart_robot(b, i)
+        ks = np.full(n, NO_KICK, dtype=np.int64)
+        ki = np.zeros(n, dtype=np.int64)
+        kd = np.zeros(n)
+        for i, kick in enumerate(kicks if kicks is not None else ()):
+            if kick is not None:
+                ks[i], ki[i], kd[i] = int(kick[0]), int(kick[1]), float(kick[2])
+        out = np.zeros((n, 4))
+        strides(
+            b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.task.cfg,
+            np.ascontiguousarray(A), ks, ki, kd, self.n_max, out,
+        )  # fmt: skip
+        status = out[:, 0].astype(np.int64)
+        ok = status == APEX
+        y_end = np.where(ok[:, None], b.apex[:, 0], b.y)
+        z1 = np.where(ok[:, None], y_end[:, _Z_IDX], np.nan)
+        t = out[:, 1]
+        effort = np.divide(out[:, 2], t, out=np.zeros(n), where=t > 0.0)
+        return Strides(
+            z1=z1,
+            status=status,
+            period=t,
+            effort=effort,
+            intervals=out[:, 3].astype(np.int64),
+            y_end=y_end,
+            phase=b.s[:, S.PHASE].astype(np.int64),
+        )
+
+    def map(self, z, a) -> np.ndarray | None:
+        """z1 of one stride from z with the interval actions a, None on a failure."""
+        r = self.run(np.asarray(z, dtype=float)[None], np.asarray(a, dtype=float)[None])
+        return r.z1[0] if r.ok[0] else None
