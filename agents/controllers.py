@@ -29,6 +29,10 @@ class ZeroController:
         """Actions for a batch of observations (one row each)."""
         return np.zeros(len(obs))
 
+    def interval_actions(self, Z) -> np.ndarray:
+        """Zero on every interval of every stride (the stride-controller protocol)."""
+        return np.zeros((len(np.atleast_2d(Z)), 1))
+
     def fingerprint(self) -> str:
         return "passive"
 

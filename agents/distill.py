@@ -268,7 +268,7 @@ def plant_of(ctrl: MPCController) -> StrideMap:
 
 def stride_of(ctrl: MPCController, plant: StrideMap, z, u):
     """The next apex from z under the coefficients u on ``plant`` (None on a fall)."""
-    return plant.map(z, ctrl.interval_actions(u)[0])
+    return plant.map(z, ctrl.profile_actions(u)[0])
 
 
 def sample_starts(rng, n: int, z_ref, r_max: float, axis_prob: float) -> np.ndarray:

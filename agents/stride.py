@@ -451,8 +451,25 @@ class StridePolicyController:
         """The action of PassiveBoundStride-v1 at apex state z."""
         return self.coefficients(z)
 
+    def interval_actions(self, Z) -> np.ndarray:
+        """The step env's actions of the strides from the apex states Z (the protocol of
+        `bound_env.control.controllers`)."""
+        from bound_env.control.controllers import interval_actions_of, observed_times
+
+        U = [self.coefficients(z) for z in np.atleast_2d(np.asarray(Z, dtype=float))]
+        return interval_actions_of(self.basis, self.max_torque, U, observed_times(self.dt), self.dt)
+
+    def apex_torques(self, z) -> np.ndarray:
+        """The profile planned at apex state z: torque on each sub-window [N m]."""
+        return self.max_torque * (self.phi @ self.coefficients(z))
+
+    @staticmethod
+    def step_time(t_obs, t0):
+        """The time since the apex the profile is read at: the observed one."""
+        return t_obs
+
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
-        self._taus = self.max_torque * (self.phi @ self.coefficients(z))
+        self._taus = self.apex_torques(z)
 
     def __call__(self, obs) -> float:
         from bound_env.control.controllers import OBS_TIME, OBS_Z

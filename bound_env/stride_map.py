@@ -107,6 +107,30 @@ def stride(y, aux, flags, s, apex, obs, cfg, actions, kick_step, kick_index, kic
 
 
 @jit
+def open_loop(y, aux, flags, s, apex, obs, cfg, actions, seg, n_max, max_strides):
+    """Open loop over whole strides from the apex state in (y, aux, flags, s), as one episode
+    of the step env: interval k holds actions[k // seg] (zero after the last), the control
+    grid running on across apexes. Stops when ``max_strides`` strides are completed, at a
+    failure, or after ``n_max`` intervals.
+
+    Returns (code, strides, t_step, t_apex, t): code 1 when ``max_strides`` were reached, 0
+    on a failure (status in ``s``), -1 after ``n_max`` intervals; t_step, t_apex: the end of
+    the interval in which the last apex was passed and that apex's time (0 before any)."""
+    t_step, t_apex = 0.0, 0.0
+    n_a = actions.shape[0]
+    for k in range(n_max):
+        j = k // seg
+        step_env(y, aux, flags, s, apex, obs, cfg, actions[j] if j < n_a else 0.0)
+        if s[S.NAPEX] > 0.0:
+            t_step, t_apex = s[S.T], s[S.T_APEX]
+            if s[S.STRIDES] >= max_strides:
+                return 1, int(s[S.STRIDES]), t_step, t_apex, s[S.T]
+        if s[S.STATUS] >= FAIL_FIRST:
+            return 0, int(s[S.STRIDES]), t_step, t_apex, s[S.T]
+    return -1, int(s[S.STRIDES]), t_step, t_apex, s[S.T]
+
+
+@jit
 def strides(
     Y, AUX, FLAGS, SS, APEXES, OBS, cfg, A, kick_step, kick_index, kick_delta, n_max, out
 ):
@@ -246,6 +270,20 @@ class StrideMap:
             y_end=y_end,
             phase=b.s[:, S.PHASE].astype(np.int64),
         )
+
+    def open_loop(self, z, actions, seg: int, max_strides: int) -> tuple:
+        """`open_loop` from the apex state z: (code, strides, t_step, t_apex, t, status,
+        phase index); code -2 for a start that is already impossible."""
+        b = self._batch(1)
+        self.task.reset_robot(b, 0, np.asarray(z, dtype=float))
+        s = b.s[0]
+        if s[S.STATUS] >= FAIL_FIRST:
+            return -2, 0, 0.0, 0.0, 0.0, int(s[S.STATUS]), 0
+        code, n, t_step, t_apex, t = open_loop(
+            b.y[0], b.aux[0], b.flags[0], s, b.apex[0], b.obs[0], self.task.cfg,
+            np.asarray(actions, dtype=float), int(seg), self.n_max * max_strides, max_strides,
+        )  # fmt: skip
+        return code, n, t_step, t_apex, t, int(s[S.STATUS]), int(s[S.PHASE])
 
     def map(self, z, a) -> np.ndarray | None:
         """z1 of one stride from z with the interval actions a, None on a failure."""

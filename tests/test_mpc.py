@@ -45,7 +45,7 @@ def test_interval_actions_are_the_step_envs(mpc):
     outputs there in the step env (the interval average of its profile)."""
     rng = np.random.default_rng(0)
     u = rng.uniform(-1, 1, mpc.basis.K)
-    a = mpc.interval_actions(u)[0]
+    a = mpc.profile_actions(u)[0]
     mpc._u = u
     dt = mpc.dt
     for k in range(len(a) + 3):
@@ -113,7 +113,7 @@ def predicted_apex(ctrl, z, u):
     from bound_env.stride_map import EVAL_RTOL, StrideMap
 
     plant = StrideMap(ctrl.gait, None, ctrl.dt, ctrl.max_torque, EVAL_RTOL)
-    return plant.map(z, ctrl.interval_actions(u)[0])
+    return plant.map(z, ctrl.profile_actions(u)[0])
 
 
 def test_the_mpc_rescues_more_than_the_lqr_in_the_step_env(mpc):

@@ -8,7 +8,12 @@ PassiveBound-v0 env use):
   every apex: after a reset onto an apex with 0.0, and after each step whose info has
   ``"apex_z"``, with the time elapsed since that apex at the end of the step [s];
 - ``fingerprint() -> str``, ``name``, ``env_kwargs`` (the env keyword arguments the controller
-  was designed for: gait, max_torque, dt).
+  was designed for: gait, max_torque, dt);
+- ``interval_actions(Z) -> A`` (a stride controller): for n apex states at once, the actions
+  ``__call__`` outputs on each control interval of the stride from each (after
+  ``on_apex(z, 0.0)``), bit for bit, for `bound_env.stride_map.max_intervals` intervals, so
+  that a closed loop can advance whole strides through the one stride map
+  (`bound_env.stride_map`) instead of one Python call per interval.
 
 A stride-level controller chooses the coefficients u = sat(-G (z - z*)) in ``on_apex`` and then
 outputs its torque profile tau(t) = max_torque * sum_i u_i phi_i(t). The step env holds the
@@ -26,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..stride_map import max_intervals
 from ..stride_task import TorqueBasis
 from ..task import OBS_NAMES
 
@@ -35,6 +41,66 @@ OBS_TH2DOT = OBS_NAMES[1:].index("theta2dot")
 OBS_Z = tuple(
     OBS_NAMES[1:].index(n) for n in ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
 )
+
+
+def observed_times(dt: float) -> np.ndarray:
+    """The time since the apex a stride controller reads on control interval k of a stride
+    (the observation's, rounded to float32), k < `max_intervals` (dt)."""
+    return np.float32(dt * np.arange(max_intervals(dt))).astype(float)
+
+
+def grid_times(dt: float) -> np.ndarray:
+    """The start k dt of control interval k of a stride (the MPC snaps the observed time
+    to it), k < `max_intervals` (dt)."""
+    return dt * np.arange(max_intervals(dt))
+
+
+def interval_averages(basis: TorqueBasis, taus, t0, dt: float) -> np.ndarray:
+    """basis.average(taus[i], t0[i, j], t0[i, j] + dt) for each row of ``taus`` (n, n_sub)
+    and each time of row i of ``t0`` (broadcast to (n, m)), bit for bit as the scalar path
+    (elementwise products, and at most two non-zero terms per interval for sub-windows wider
+    than dt, so the order of the sums cannot matter)."""
+    taus = np.atleast_2d(np.asarray(taus, dtype=float))
+    t0 = np.atleast_2d(np.asarray(t0, dtype=float))
+    t1 = t0 + dt
+    lo = np.clip(basis.edges[:-1], t0[..., None], t1[..., None])
+    hi = np.clip(np.append(basis.edges[1:-1], np.inf), t0[..., None], t1[..., None])
+    return (taus[:, None, :] * (hi - lo)).sum(axis=-1) / (t1 - t0)
+
+
+def interval_actions_of(basis: TorqueBasis, max_torque: float, U, times, dt: float) -> np.ndarray:
+    """(n, len(times)): clip(basis.average(tau_i, t, t + dt) / max_torque, -1, 1) for the
+    profile tau_i = basis.torques(U[i], max_torque) of each row of U and each t of ``times``,
+    bit for bit as a stride controller's ``__call__`` computes it (`interval_averages`)."""
+    taus = np.array([basis.torques(u, max_torque) for u in np.atleast_2d(U)])
+    avg = interval_averages(basis, taus, np.asarray(times, dtype=float)[None, :], dt)
+    return np.clip(avg / max_torque, -1.0, 1.0)
+
+
+class StridePlans:
+    """The stride plans of n robots under one stride controller, for loops that step many
+    robots through the step env at once (long episodes): each robot's profile, chosen at its
+    last apex (``apex``), and the actions every robot's own copy of the controller would
+    output now (``actions``, bit for bit, one vectorized call). The controller provides
+    ``apex_torques(z)`` (the profile it plans at z, as ``on_apex`` stores it),
+    ``step_time(t_obs, t0)`` (the time since the apex it evaluates the profile at), ``basis``,
+    ``max_torque`` and ``dt``."""
+
+    def __init__(self, controller, n: int):
+        self.ctrl = controller
+        self.taus = np.zeros((n, controller.basis.phi.shape[0]))
+        self.t0 = np.zeros(n)
+
+    def apex(self, i: int, z, time_since_apex: float = 0.0) -> None:
+        self.taus[i] = self.ctrl.apex_torques(np.asarray(z, dtype=float))
+        self.t0[i] = time_since_apex
+
+    def actions(self, t_obs) -> np.ndarray:
+        """Each robot's action for the observed times since its apex (float32 values)."""
+        c = self.ctrl
+        t = c.step_time(np.asarray(t_obs, dtype=float), self.t0)
+        avg = interval_averages(c.basis, self.taus, t[:, None], c.dt)[:, 0]
+        return np.clip(avg / c.max_torque, -1.0, 1.0)
 
 
 def notify_apex(controller, obs, info) -> None:
@@ -89,8 +155,22 @@ class StrideFeedback:
         """The action of PassiveBoundStride-v1 at apex state z."""
         return self.coefficients(z)
 
+    def interval_actions(self, Z) -> np.ndarray:
+        """The step env's actions of the strides from the apex states Z (module docstring)."""
+        U = [self.coefficients(z) for z in np.atleast_2d(Z)]
+        return interval_actions_of(self.basis, self.max_torque, U, observed_times(self.dt), self.dt)
+
+    def apex_torques(self, z) -> np.ndarray:
+        """The profile planned at apex state z: torque on each sub-window [N m]."""
+        return self.basis.torques(self.coefficients(z), self.max_torque)
+
+    @staticmethod
+    def step_time(t_obs, t0):
+        """The time since the apex the profile is read at: the observed one."""
+        return t_obs
+
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
-        self._taus = self.basis.torques(self.coefficients(z), self.max_torque)
+        self._taus = self.apex_torques(z)
 
     def __call__(self, obs) -> float:
         t = float(obs[OBS_TIME])

@@ -37,7 +37,13 @@ from ..events import APEX, N_FLAGS
 from ..params import Z_IN_Y
 from ..stride_map import NO_KICK, StrideMap, interval_weights, stride
 from ..task import N_S, reset_at_apex
-from .controllers import OBS_TIME, OBS_Z, StrideFeedback
+from .controllers import (
+    OBS_TIME,
+    OBS_Z,
+    StrideFeedback,
+    grid_times,
+    interval_actions_of,
+)
 
 _Z_IDX = np.array(Z_IN_Y, dtype=np.int64)
 RETURNED, SURVIVED, FELL = 2, 1, 0  # a candidate's outcome, best first
@@ -169,8 +175,9 @@ class MPCController:
     env_kwargs = property(lambda self: self.lqr.env_kwargs)
     stride_env_kwargs = property(lambda self: self.lqr.stride_env_kwargs)
 
-    def interval_actions(self, U) -> np.ndarray:
-        """Rows of coefficients -> the step env's interval actions (normalized torques)."""
+    def profile_actions(self, U) -> np.ndarray:
+        """Rows of coefficients -> their interval averages W u (the planning model's actions;
+        `interval_actions` is the step env's view of a stride, bit for bit)."""
         return np.atleast_2d(U) @ self._W.T
 
     def evaluate(self, z, U):
@@ -178,7 +185,7 @@ class MPCController:
         task = self.model.task
         out = rollouts(
             np.asarray(z, dtype=float),
-            self.interval_actions(U),
+            self.profile_actions(U),
             self._aux0,
             task.cfg,
             task.obs_dim,
@@ -229,6 +236,20 @@ class MPCController:
 
     def stride_action(self, z) -> np.ndarray:
         return self.coefficients(z)
+
+    def interval_actions(self, Z) -> np.ndarray:
+        """The step env's actions of the strides from the apex states Z: each plan's interval
+        averages on the grid k dt (the protocol of `bound_env.control.controllers`)."""
+        U = [self.coefficients(z) for z in np.atleast_2d(np.asarray(Z, dtype=float))]
+        return interval_actions_of(self.basis, self.max_torque, U, grid_times(self.dt), self.dt)
+
+    def apex_torques(self, z) -> np.ndarray:
+        """The profile planned at apex state z: torque on each sub-window [N m]."""
+        return self.basis.torques(self.coefficients(z), self.max_torque)
+
+    def step_time(self, t_obs, t0):
+        """The observed (float32) time snapped to the grid t0 + k dt of the apex's intervals."""
+        return t0 + self.dt * np.round((t_obs - t0) / self.dt)
 
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
         self._u = self.coefficients(z)

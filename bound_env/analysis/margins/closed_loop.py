@@ -9,12 +9,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...stride_map import EVAL_RTOL, RETURN_TOL, max_intervals
+from ...control.controllers import StridePlans
+from ...events import PHASES
+from ...stride_map import EVAL_RTOL, RETURN_TOL, StrideMap, Strides, max_intervals
+from ...task import FAILURE_NAMES
 from .budget import DEFAULT_SEED, Budget
 
 ENV_ID = "PassiveBound-v0"
 PROFILE_SEG = 5  # ceiling search: control intervals per piece of a torque profile
 PROFILE_SPAN = 1.3  # ceiling search: the profile covers 1.3 x the strides' nominal duration
+STRIDES = [0]  # strides advanced in this process (benchmarks/margins.py reads it)
 
 
 @dataclass
@@ -63,8 +67,39 @@ class ClosedLoop:
         self.i_since_apex = list(self.env.task.obs_names).index("time_since_apex")
         self.on_apex = getattr(controller, "on_apex", None)
         self.last_phase: str | None = None  # stance condition at the end of the last `run`
+        # a stride controller advances whole strides through the one stride map: the same
+        # strides as the env's loop below, bit for bit (its `interval_actions` are exactly
+        # what it outputs interval by interval), without a Python call per interval
+        self.plant = StrideMap(gait, overrides or None, self.dt, self.max_torque, EVAL_RTOL)
+        self.stride_map = None  # set for a stride controller on smooth ground
+        if callable(getattr(controller, "interval_actions", None)) and not kwargs.get(
+            "slope_noise_deg"
+        ):
+            self.stride_map = self.plant
+
+    def strides(self, Z, kicks=None) -> Strides:
+        """One closed-loop stride from each apex state Z[i] of a stride controller, through
+        the one stride map (``kicks[i]``: (interval, state index 4..7, delta) or None)."""
+        Z = np.atleast_2d(np.asarray(Z, dtype=float))
+        r = self.stride_map.run(Z, self.controller.interval_actions(Z), kicks=kicks)
+        STRIDES[0] += len(Z)
+        return r
 
     def stride(self, z, kick: tuple | None = None) -> StrideOut:
+        if self.stride_map is not None:
+            z = np.asarray(z, dtype=float)
+            if kick is not None and not 4 <= kick[1] <= 7:
+                raise ValueError(f"a kick changes a velocity (state index 4..7), got {kick[1]}")
+            r = self.strides(z[None], None if kick is None else [kick])
+            if r.ok[0]:
+                return StrideOut(
+                    r.z1[0].copy(), None, float(r.effort[0]), float(r.period[0]),
+                    int(r.intervals[0]),
+                )  # fmt: skip
+            return StrideOut(
+                None, r.failure(0), steps=int(r.intervals[0]), phase=PHASES[int(r.phase[0])]
+            )
+        STRIDES[0] += 1
         env, ctrl = self.env, self.controller
         z = np.asarray(z, dtype=float)
         obs, info = env.reset(options={"apex_state": z})
@@ -113,6 +148,43 @@ class ClosedLoop:
                 return True, n, None
         return survive_only, max_strides, None
 
+    def run_many(
+        self, Z0, z_target, max_strides: int, kicks=None
+    ) -> list[tuple[bool, int, str | None]]:
+        """`run` from each row of Z0 (``kicks[i]``: robot i's first-stride kick or None), all
+        robots advanced together, one batch of strides through the one stride map per stride
+        count for a stride controller (the same outcomes as `run` row by row: every robot's
+        strides are its own)."""
+        Z = np.array(np.atleast_2d(Z0), dtype=float)
+        kicks = list(kicks) if kicks is not None else [None] * len(Z)
+        if self.stride_map is None:
+            pairs = zip(Z, kicks, strict=True)
+            return [self.run(z, z_target, max_strides, kick=k) for z, k in pairs]
+        for k in kicks:
+            if k is not None and not 4 <= k[1] <= 7:
+                raise ValueError(f"a kick changes a velocity (state index 4..7), got {k[1]}")
+        out: list = [None] * len(Z)
+        live = np.arange(len(Z))
+        for n in range(1, max_strides + 1):
+            r = self.strides(Z[live], [kicks[i] for i in live] if n == 1 else None)
+            keep = []
+            for j, i in enumerate(live):
+                if not r.ok[j]:
+                    out[i] = (False, n, r.failure(j))
+                elif not np.all(np.isfinite(r.z1[j])):
+                    out[i] = (False, n, "non_finite")
+                elif np.max(np.abs(r.z1[j] - z_target)) < RETURN_TOL:
+                    out[i] = (True, n, None)
+                else:
+                    Z[i] = r.z1[j]
+                    keep.append(i)
+            live = np.array(keep, dtype=np.int64)
+            if not len(live):
+                break
+        for i in live:
+            out[i] = (False, max_strides, None)
+        return out
+
     def episode(self, z0, max_strides: int, seed: int | None = None) -> tuple:
         """One long episode from the apex state z0 (env seed ``seed``: with
         ``slope_noise_deg`` it fixes the terrain). Returns (survived ``max_strides`` strides,
@@ -128,9 +200,11 @@ class ClosedLoop:
             obs, _, terminated, _, info = env.step(np.array([ctrl(obs)]))
             if terminated:
                 self.last_phase = info["phase"]
+                STRIDES[0] += info["stride"]
                 return False, info["stride"], info["failure"]
             if "apex_z" in info:
                 if info["stride"] >= max_strides:
+                    STRIDES[0] += info["stride"]
                     return True, info["stride"], None
                 if self.on_apex is not None:
                     self.on_apex(np.array(info["apex_z"]), float(obs[self.i_since_apex]))
@@ -140,29 +214,20 @@ class ClosedLoop:
         [j seg, (j + 1) seg) from the apex state z0, zero after the last piece. Returns
         (strides completed >= max_strides, progress score, failure, phase, strides) with
         score = strides completed + the fraction of a nominal stride survived since."""
-        env = self.env
-        obs, info = env.reset(options={"apex_state": np.asarray(z0, dtype=float)})
-        if info["failure"] is not None:
-            return False, 0.0, info["failure"], "df", 0
-        n_act = len(actions)
-        t_apex = 0.0
-        for k in range(self.max_steps * max_strides):
-            a = actions[k // seg] if k // seg < n_act else 0.0
-            obs, _, terminated, _, info = env.step(np.array([a]))
-            if "apex_z" in info:
-                t_apex = info["time"] - float(obs[self.i_since_apex])
-                if info["stride"] >= max_strides:
-                    return True, float(info["stride"]), None, None, info["stride"]
-            if terminated:
-                frac = min(0.99, (info["time"] - t_apex) / max(self.period_hint, 1e-3))
-                return (
-                    False,
-                    info["stride"] + frac,
-                    info["failure"],
-                    info["phase"],
-                    info["stride"],
-                )
-        return False, float(info["stride"]), "no_apex", info["phase"], info["stride"]
+        code, n, t_step, t_apex, t, status, phase = self.plant.open_loop(
+            z0, actions, seg, max_strides
+        )
+        STRIDES[0] += n
+        if code == 1:
+            return True, float(n), None, None, n
+        if code == -2:  # the start itself is impossible
+            return False, 0.0, FAILURE_NAMES[status], "df", 0
+        if code == 0:
+            # the apex time as the env's loop read it: the observation's float32 time since it
+            t_seen = t_step - float(np.float32(t_step - t_apex)) if t_step > 0.0 else 0.0
+            frac = min(0.99, (t - t_seen) / max(self.period_hint, 1e-3))
+            return False, n + frac, FAILURE_NAMES[status], PHASES[phase], n
+        return False, float(n), "no_apex", PHASES[phase], n
 
     period_hint = 0.39  # s, nominal stride duration for the profile score (set by the tasks)
 
@@ -207,7 +272,13 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
         task.draw_slope_noise(b, i, rngs[i])
     on_apex = getattr(ctrl, "on_apex", None)
     batched = callable(getattr(ctrl, "batch", None)) and on_apex is None
-    copies = None if batched else [copy.deepcopy(ctrl) for _ in range(n)]
+    # a stride controller: every robot's plan in one array (the same actions as its copies)
+    plans = None
+    if not batched and callable(getattr(ctrl, "apex_torques", None)):
+        plans = StridePlans(ctrl, n)
+        for i in range(n):
+            plans.apex(i, z0.copy(), 0.0)
+    copies = None if batched or plans is not None else [copy.deepcopy(ctrl) for _ in range(n)]
     if copies is not None and on_apex is not None:
         for c in copies:
             c.on_apex(z0.copy(), 0.0)
@@ -222,6 +293,8 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
     while live.any():
         if batched:
             b.actions[:] = ctrl.batch(b.obs)
+        elif plans is not None:
+            b.actions[live] = plans.actions(b.obs[:, loop.i_since_apex])[live]
         else:
             for i in np.flatnonzero(live):
                 b.actions[i] = copies[i](b.obs[i])
@@ -241,10 +314,15 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
             strides[i] = int(s[i, S_STRIDES])
             if strides[i] >= max_strides:
                 live[i] = False
-            elif copies is not None and on_apex is not None:
+            elif plans is not None or (copies is not None and on_apex is not None):
                 napex = int(s[i, S_NAPEX])
-                z1 = b.apex[i, min(napex, b.apex.shape[1]) - 1][z_idx]
-                copies[i].on_apex(np.array(z1, dtype=float), float(b.obs[i, loop.i_since_apex]))
+                z1 = np.array(b.apex[i, min(napex, b.apex.shape[1]) - 1][z_idx], dtype=float)
+                t_seen = float(b.obs[i, loop.i_since_apex])
+                if plans is not None:
+                    plans.apex(i, z1, t_seen)
+                else:
+                    copies[i].on_apex(z1, t_seen)
+    STRIDES[0] += int(strides.sum())
     return {"strides": strides.tolist(), "fell": fell.tolist(), "failures": failures}
 
 

@@ -16,9 +16,8 @@ def task_curve(setup: Setup, size: float) -> dict:
     dirs = random_directions(setup.budget.curve_dirs, sample_seeds(setup.seed)["directions"])
     timed = getattr(loop.controller, "decision_seconds", None)  # a controller that times itself
     n0 = len(timed) if timed is not None else 0
-    outcomes = [
-        int(loop.run(zc + size * np.abs(zs) * u, zc, setup.budget.basin_strides)[0]) for u in dirs
-    ]
+    runs = loop.run_many(zc + size * np.abs(zs) * dirs, zc, setup.budget.basin_strides)
+    outcomes = [int(ok) for ok, _, _ in runs]
     wins = sum(outcomes)
     out = {
         "size": size,

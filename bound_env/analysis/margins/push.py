@@ -17,13 +17,13 @@ def task_push(setup: Setup, kind: str, size: float, index: int) -> dict:
     rng = np.random.default_rng(
         [index, 0 if kind == "xdot" else 1, *sample_seeds(setup.seed)["push"]]
     )
-    wins = 0
     n = setup.budget.push_samples
     steps = max(1, setup.cycle_steps - 1)
+    kicks = []
     for _ in range(n):
         k = int(rng.integers(0, steps))
         sign = 1.0 if rng.random() < 0.5 else -1.0
-        wins += loop.run(
-            setup.z_cl, setup.z_cl, setup.budget.basin_strides, kick=(k, y_index, sign * size)
-        )[0]
+        kicks.append((k, y_index, sign * size))
+    runs = loop.run_many([setup.z_cl] * n, setup.z_cl, setup.budget.basin_strides, kicks=kicks)
+    wins = sum(ok for ok, _, _ in runs)
     return {"kind": kind, "size": size, "success": wins / n, "n": n}

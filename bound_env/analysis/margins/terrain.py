@@ -15,13 +15,10 @@ def task_terrain(setup: Setup, sigma: float) -> dict:
     loop = loop_for(setup, env_extra={"slope_noise_deg": float(sigma)})
     b = setup.budget
     base = sample_seeds(setup.seed)["terrain"]
-    k, strides, reasons = 0, [], {}
-    for j in range(b.terrain_runs):
-        ok, n, failure = loop.episode(setup.z_cl, b.terrain_strides, seed=base + j)
-        k += ok
-        strides.append(n)
-        if failure:
-            reasons[failure] = reasons.get(failure, 0) + 1
+    # the runs of loop.episode(z_cl, terrain_strides, seed=base + j), batched
+    out = rough_episodes(loop, setup.z_cl, [base + j for j in range(b.terrain_runs)],
+                         b.terrain_strides)  # fmt: skip
+    k, strides, reasons = b.terrain_runs - sum(out["fell"]), out["strides"], out["failures"]
     return {
         "sigma_deg": sigma,
         "k": int(k),
