@@ -6,6 +6,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from .policy_args import POLICY_HELP, policy_label
+
 
 def register(sub) -> None:
     from bound_env.analysis.basin import (
@@ -21,8 +23,6 @@ def register(sub) -> None:
     p = sub.add_parser(
         "basin-map", help="2-D basin map (basin.npz, basin.png) of the passive gait or a policy"
     )
-    from .cli import POLICY_HELP
-
     p.add_argument("--policy", default="passive", help=POLICY_HELP + " (default: %(default)s)")
     p.add_argument(
         "--axes",
@@ -85,7 +85,6 @@ def resolve(policy: str, gait: str | None, force: bool = False):
     """(controller, or None for the compiled passive path; label; gait)."""
     if policy == "passive":
         return None, "passive", gait or "default"
-    from .cli import _policy_label
     from .policy import load_controller
 
     ctrl = load_controller(policy, gait=gait, force=force)
@@ -94,7 +93,7 @@ def resolve(policy: str, gait: str | None, force: bool = False):
             f"--policy {policy}: basin-map needs 'passive' or a controller "
             "with env_kwargs and __call__(obs) or batch(obs)"
         )
-    return ctrl, _policy_label(policy), gait or ctrl.env_kwargs.get("gait") or "default"
+    return ctrl, policy_label(policy), gait or ctrl.env_kwargs.get("gait") or "default"
 
 
 def cmd_basin_map(args) -> int:

@@ -16,19 +16,9 @@ from bound_env.cli_args import (
     say,
     strict_json,
 )
-from bound_env.resources import controllers_dir
 
-# the classical controllers by name: the specs in configs/controllers/ (a cheap glob: the help
-# is built on every start of bound-env)
-_CONTROLLER_NAMES = ", ".join(sorted(p.stem for p in controllers_dir().glob("*.yaml")))
-POLICY_HELP = (
-    "'passive', a shipped policy ('default': the learned controller chosen on validation, "
-    "'ppo-v1', 'literal-cycle', 'finetuned/s0' .. 's2', 'distilled/s0' .. 's2', "
-    "'ppo-v1-final/s0' .. 's2', 'stride-residual/s0' .. 's2'), a "
-    "classical controller (" + _CONTROLLER_NAMES + ": "
-    "bound_env.control, or a controller spec .yaml), or a path: a run/policy folder, a "
-    "model .zip, an rl-zoo3 run folder"
-)
+from .policy_args import POLICY_HELP, policy_label
+
 SEED_MAX = 2**32 - 1  # NumPy's and Gymnasium's seeds are unsigned 32-bit integers
 BUDGET_HELP = (
     "margins budget (bound_env.analysis.margins.BUDGETS): test (a smoke test), quick (32 random "
@@ -308,7 +298,7 @@ def cmd_rollout(args) -> int:
         video=args.video,
         force=args.force,
     )
-    out = Path(args.out) if args.out else Path("out") / "rollout" / _policy_label(args.policy)
+    out = Path(args.out) if args.out else Path("out") / "rollout" / policy_label(args.policy)
     path = _write_json(out / "summary.json", r)
     if args.json:
         print(strict_json(r))
@@ -318,22 +308,12 @@ def cmd_rollout(args) -> int:
     return 0
 
 
-def _policy_label(policy: str) -> str:
-    """A folder name for a policy given by name or path."""
-    from .policy import policy_names
-
-    return policy if policy in policy_names() else Path(policy).resolve().name
-
-
 def _write_json(path: Path, data) -> Path:
-    """Write JSON atomically (temp name, then rename), creating the folder."""
-    import os
+    """Write JSON atomically (`bound_env.cache.atomic_write`), creating the folder."""
+    from bound_env.cache import atomic_write
 
     out_dir(path.parent)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
-    return path
+    return atomic_write(path, json.dumps(data, indent=2) + "\n")
 
 
 def cmd_train(args) -> int:
@@ -466,7 +446,7 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
         raise FileNotFoundError(f"no model.zip in {run_dir}")
     best = run_dir / "best"
     src = best if source == "best" and (best / "model.zip").is_file() else run_dir
-    from .policy import check_policy_files, find_policy_files, write_fingerprint
+    from .policy_files import check_policy_files, find_policy_files, write_fingerprint
 
     files = find_policy_files(src)
     check_policy_files(files, {}, force=True)  # refuses statistics of another model
@@ -494,7 +474,7 @@ def cmd_margins(args) -> int:
     from .margins import compute_margins  # the front: the core, with the policy's sources
     from .policy import load_controller
 
-    name = _policy_label(args.policy)
+    name = policy_label(args.policy)
     if args.seed != 12345:  # a held-out set: not over the test set's outputs
         name += f"-seed{args.seed}"
     out = out_dir(args.out or Path("out") / "margins" / name)

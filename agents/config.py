@@ -136,7 +136,7 @@ def get_class_by_name(name: str):
         raise ValueError(f"{module_name} has no {cls_name!r}") from None
 
 
-def _entries(value) -> list[tuple[str, dict]]:
+def class_entries(value) -> list[tuple[str, dict]]:
     """rl-zoo3's list syntax: a class path, a {path: kwargs} dict, or a list of either."""
     if value is None:
         return []
@@ -218,8 +218,8 @@ def preprocess(hp: dict) -> TrainSpec:
     if normalize_kwargs is not None and "gamma" in hp:
         normalize_kwargs["gamma"] = float(hp["gamma"])  # rl-zoo3 uses the algorithm's gamma
     env_kwargs = dict(hp.get("env_kwargs") or {})
-    wrappers = [(get_class_by_name(n), kw) for n, kw in _entries(hp.get("env_wrapper"))]
-    callbacks = [(get_class_by_name(n), kw) for n, kw in _entries(hp.get("callback"))]
+    wrappers = [(get_class_by_name(n), kw) for n, kw in class_entries(hp.get("env_wrapper"))]
+    callbacks = [(get_class_by_name(n), kw) for n, kw in class_entries(hp.get("callback"))]
     algo = {k: v for k, v in hp.items() if k not in _NON_ALGO_KEYS}
     for key in ("learning_rate", "clip_range", "clip_range_vf"):
         v = algo.get(key)

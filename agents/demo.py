@@ -150,7 +150,8 @@ def compare_from_start(policy: str = DEMO_POLICY, gait="default", show_after: in
     a fall), ``failure``, ``mean_abs_tau``: mean |tau| [N m] over the control intervals up to
     the return, ``max_torque`` [N m]); and, under the private keys ``_states`` and ``_dt``,
     the recorded runs (passive, learned) and the control interval, for the animation."""
-    from .policy import ZeroController, load_controller
+    from .controllers import ZeroController
+    from .policy import load_controller
 
     z0, z_star, xi = demo_start(gait)
     ctrl = load_controller(policy, gait=gait)
@@ -255,7 +256,8 @@ def demo_comparison(gait="default", out=None, progress: bool = False):
     ``default`` controller was not made for, the comparison is skipped (and says why)."""
     from bound_env.render import write_video
 
-    from .policy import load_controller, same_gait
+    from .controllers import same_gait
+    from .policy import load_controller
 
     own = load_controller(DEMO_POLICY).env_kwargs.get("gait")
     if own is not None and not same_gait(own, gait):

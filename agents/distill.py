@@ -43,6 +43,9 @@ from bound_env.control import load_controller as load_classical
 from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library
 from bound_env.stride_map import EVAL_RTOL, StrideMap
 
+from .mlp import mlp_forward
+from .policy_files import FINGERPRINT_FILE, file_sha256
+
 POLICY_FILE = "choice.npz"  # the student's weights and library, in a policy folder
 VALIDATION_SEED = 777  # validation directions of every design choice (test set: 12345)
 
@@ -72,16 +75,6 @@ class DistillConfig:
 # --------------------------------------------------------------------------------------------
 
 
-def _forward(layers, x: np.ndarray) -> np.ndarray:
-    """The MLP: tanh hidden layers, linear output (rows of x)."""
-    h = x
-    for k, (W, b) in enumerate(layers):
-        h = h @ W.T + b
-        if k < len(layers) - 1:
-            h = np.tanh(h)
-    return h
-
-
 @dataclass
 class ChoicePolicyController(MPCController):
     """The distilled student (module docstring): the MPC's protocol, its plan a library row."""
@@ -91,7 +84,7 @@ class ChoicePolicyController(MPCController):
 
     def logits(self, z) -> np.ndarray:
         x = (np.atleast_2d(z) - self.z_ref) / self.scales
-        return _forward(self.layers, x)
+        return mlp_forward(self.layers, x, "Tanh")  # tanh hidden layers, linear output
 
     def plan(self, z) -> np.ndarray:
         z = np.asarray(z, dtype=float)
@@ -152,9 +145,7 @@ FINGERPRINTED = (POLICY_FILE, "config.json")
 def write_choice_fingerprint(folder) -> Path:
     """``fingerprint.json`` of a choice policy folder: the sha256 of ``choice.npz`` and
     ``config.json`` (written atomically), checked by `check_choice_fingerprint`, as
-    `agents.policy.write_fingerprint` binds a PPO policy's files."""
-    from .policy import FINGERPRINT_FILE, file_sha256
-
+    `agents.policy_files.write_fingerprint` binds a PPO policy's files."""
     folder = Path(folder)
     data = {name: file_sha256(folder / name) for name in FINGERPRINTED}
     return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
@@ -165,8 +156,6 @@ def check_choice_fingerprint(folder, force: bool = False) -> list[str]:
     ``fingerprint.json`` (changed or cut short since the policy was saved, or files of two
     policies mixed); ``force`` evaluates it as it is, and the mismatch comes back as a
     warning. A folder without a fingerprint (saved before they were written) passes."""
-    from .policy import FINGERPRINT_FILE, file_sha256
-
     folder = Path(folder)
     fp = folder / FINGERPRINT_FILE
     if not fp.is_file():
@@ -517,15 +506,21 @@ def check_export(export, force: bool) -> None:
 
 
 def export_folder(src: Path, dest) -> Path:
-    """Copy a policy folder to ``dest`` whole: a copy beside it, then a rename."""
+    """Copy a policy folder to ``dest`` whole: a copy beside it under a name of its own (a
+    folder: `bound_env.cache.atomic_path` writes files), then a rename; removed on failure."""
     import shutil
+    import tempfile
 
     dest = Path(dest)
-    tmp = dest.with_name(dest.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    shutil.copytree(src, tmp)
-    shutil.rmtree(dest, ignore_errors=True)
-    tmp.rename(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent))
+    try:
+        shutil.copytree(src, tmp, dirs_exist_ok=True)  # and src's mode (mkdtemp's is 0700)
+        shutil.rmtree(dest, ignore_errors=True)
+        tmp.rename(dest)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     return dest
 
 

@@ -1,170 +1,49 @@
-"""Controllers for evaluation: the zero action, or a trained PPO policy as plain NumPy.
+"""Controllers for evaluation by name or path: `load_controller`.
 
-A trained policy is a saved SB3 PPO model (``model.zip``), its ``VecNormalize`` statistics
+``--policy`` takes a built-in controller's name (`CONTROLLERS`: ``passive`` and the classical
+controllers of `bound_env.control`), a shipped policy's name (`shipped_policies`) or a path.
+A trained PPO policy is a saved SB3 PPO model (``model.zip``), its ``VecNormalize`` statistics
 (``vecnormalize.pkl``) and its run config (``config.yaml``, for the environment keyword
-arguments it was trained with: ``max_torque``, ``dt``, ...). `load_controller` reads them once
-(with torch) and returns an `MLPController`: the deterministic action
+arguments it was trained with: ``max_torque``, ``dt``, ...; `agents.policy_files`).
+`load_controller` reads them once (with torch) and returns an `MLPController`
+(`agents.controllers`): the deterministic action
 ``clip(action_net(policy_net(normalize(obs))), -1, 1)``, exactly what
 ``model.predict(obs, deterministic=True)`` returns after ``VecNormalize.normalize_obs``, but
 evaluated with NumPy in float64 (~10 us instead of ~150 us per call), picklable, and free of
-torch in the worker processes of the margins (`bound_env.analysis.margins`).
+torch in the worker processes of the margins (`bound_env.analysis.margins`). A distilled
+student (``choice.npz``) is loaded by `agents.distill`, a stride-level policy by `agents.stride`.
 """
 
 from __future__ import annotations
 
-import hashlib
-import math
 import pickle
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from functools import partial
 from importlib import resources
 from pathlib import Path
 
-import numba as nb
 import numpy as np
-import yaml
 
 from bound_env import STRIDE_ENV_IDS
 from bound_env.resources import controllers_dir
 
-# Environment keyword arguments that shape the dynamics, the observation or the action; the
-# evaluation environment takes these from the policy's run config (reward weights and start
-# noise do not matter for evaluation).
-DYNAMICS_KWARGS = (
-    "gait",
-    "gait_overrides",
-    "dt",
-    "max_torque",
-    "apex_scales",
-    "exclude_current_positions_from_observation",
+from .controllers import MLPController, ZeroController, check_gait, same_gait  # noqa: F401 - re-exported
+from .mlp import extract_actor
+from .policy_files import (  # noqa: F401 - the policy-file API, importable from here as before
+    DYNAMICS_KWARGS,
+    FINGERPRINT_FILE,
+    FINGERPRINTED_SETTINGS,
+    PolicyFiles,
+    check_policy_files,
+    file_sha256,
+    find_policy_files,
+    read_policy_section,
+    read_run_config,
+    resolve_policy_files,
+    section_env_kwargs,
+    write_fingerprint,
 )
-_ACTIVATIONS = {
-    "Tanh": np.tanh,
-    "ReLU": lambda x: np.maximum(x, 0.0),
-    "ELU": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
-    "Identity": lambda x: x,
-}
-
-
-@dataclass
-class ZeroController:
-    """The passive gait: zero spine torque in every interval."""
-
-    name: str = "passive"
-    env_kwargs: dict = field(default_factory=dict)
-
-    def __call__(self, obs: np.ndarray) -> float:
-        return 0.0
-
-    def batch(self, obs: np.ndarray) -> np.ndarray:
-        """Actions for a batch of observations (one row each)."""
-        return np.zeros(len(obs))
-
-    def interval_actions(self, Z) -> np.ndarray:
-        """Zero on every interval of every stride (the stride-controller protocol)."""
-        return np.zeros((len(np.atleast_2d(Z)), 1))
-
-    def fingerprint(self) -> str:
-        return "passive"
-
-
-@dataclass
-class MLPController:
-    """A PPO actor as NumPy: observation normalization, hidden layers, action layer, clip."""
-
-    name: str
-    layers: list  # [(W, b)] hidden layers, then the action layer
-    activation: str
-    obs_mean: np.ndarray | None = None  # VecNormalize statistics (None: no normalization)
-    obs_var: np.ndarray | None = None
-    epsilon: float = 1e-8
-    clip_obs: float = 10.0
-    env_kwargs: dict = field(default_factory=dict)
-    obs_shape: tuple = ()
-    seed: int | None = None
-    obs_index: np.ndarray | None = None  # entries of the env's observation the policy reads
-
-    def normalize(self, obs) -> np.ndarray:
-        x = np.asarray(obs, dtype=np.float64)
-        if self.obs_index is not None:
-            x = x[self.obs_index]
-        if self.obs_mean is None:
-            return x
-        return np.clip(
-            (x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
-            -self.clip_obs,
-            self.clip_obs,
-        )
-
-    def __call__(self, obs: np.ndarray) -> float:
-        act = _ACTIVATIONS[self.activation]
-        x = self.normalize(obs)
-        for W, b in self.layers[:-1]:
-            x = act(W @ x + b)
-        W, b = self.layers[-1]
-        return float(np.clip((W @ x + b)[0], -1.0, 1.0))
-
-    def batch(self, obs: np.ndarray) -> np.ndarray:
-        """Actions for a batch of observations (one row each), as ``__call__`` row by row (to
-        rounding). Each row is computed alone, in a fixed order, without BLAS threads, and tanh
-        element by element (NumPy's vectorized tanh rounds differently in and after its SIMD
-        blocks): a row's action depends neither on the other rows nor on the machine's load."""
-        act = _tanh_elements if self.activation == "Tanh" else _ACTIVATIONS[self.activation]
-        x = np.asarray(obs, dtype=np.float64)
-        if self.obs_index is not None:
-            x = x[:, self.obs_index]
-        if self.obs_mean is not None:
-            x = np.clip(
-                (x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon),
-                -self.clip_obs,
-                self.clip_obs,
-            )
-        for W, b in self.layers[:-1]:
-            x = act(_affine_rows(x, W, b))
-        W, b = self.layers[-1]
-        return np.clip(_affine_rows(x, W, b)[:, 0], -1.0, 1.0)
-
-    def fingerprint(self) -> str:
-        h = hashlib.sha256()
-        for W, b in self.layers:
-            h.update(np.ascontiguousarray(W).tobytes())
-            h.update(np.ascontiguousarray(b).tobytes())
-        if self.obs_index is not None:
-            h.update(np.asarray(self.obs_index).tobytes())
-        if self.obs_mean is not None:
-            h.update(self.obs_mean.tobytes())
-            h.update(self.obs_var.tobytes())
-        h.update(repr(sorted(self.env_kwargs.items())).encode())
-        # the activation and the normalization constants change the actions too
-        h.update(repr((self.activation, self.epsilon, self.clip_obs)).encode())
-        return h.hexdigest()[:16]
-
-
-@nb.njit(cache=True)
-def _tanh_elements(x):
-    """tanh of each element by the same scalar routine, wherever it sits in the array."""
-    out = np.empty_like(x)
-    flat_in, flat_out = x.ravel(), out.ravel()
-    for i in range(flat_in.size):
-        flat_out[i] = math.tanh(flat_in[i])
-    return out
-
-
-@nb.njit(cache=True)
-def _affine_rows(x, W, b):
-    """x @ W.T + b, one row at a time, each sum in index order (no fast-math: a vectorized
-    sum would depend on the row's alignment in memory), so row i depends on x[i] only."""
-    out = np.empty((x.shape[0], W.shape[0]))
-    for i in range(x.shape[0]):
-        for j in range(W.shape[0]):
-            acc = b[j]
-            for k in range(W.shape[1]):
-                acc += W[j, k] * x[i, k]
-            out[i, j] = acc
-    return out
-
 
 # The shipped policies, package data of `agents` (``agents/policies/<name>/``), read with
 # importlib.resources so that an installed wheel finds them too.
@@ -256,275 +135,6 @@ _INFERENCE_ONLY = {
     "lr_schedule": lambda _: 0.0,
     "clip_range": lambda _: 0.0,
 }  # replaces training-only pickled objects
-FINGERPRINT_FILE = "fingerprint.json"  # sha256 of the model and its statistics, as one unit
-# Files a fingerprint also covers when they are present: the run config (it sets max_torque, dt,
-# the gait, the observation filter) and a residual policy's base controller. A fingerprint
-# written before they were covered has no entry for them and is read as before.
-FINGERPRINTED_SETTINGS = ("config.yaml", "base.json")
-
-
-@dataclass
-class PolicyFiles:
-    """The files of a saved policy (see `find_policy_files`)."""
-
-    model: Path
-    vecnormalize: Path | None
-    config: Path | None
-    layout: str = "bound_env"  # or "rl-zoo3"
-    env_id: str | None = None  # rl-zoo3: the run's env id (its params folder's name)
-
-    @property
-    def fingerprint(self) -> Path:
-        return self.model.parent / FINGERPRINT_FILE
-
-
-def _zoo_params_folder(folder: Path) -> Path | None:
-    """The params folder (``<env id>/`` with ``config.yml``) of an rl-zoo3 run folder."""
-    subs = [d for d in sorted(folder.iterdir()) if d.is_dir() and (d / "config.yml").is_file()]
-    return subs[0] if len(subs) == 1 else None
-
-
-def find_policy_files(path: str | Path) -> PolicyFiles:
-    """The files of a policy given as a folder or a model zip.
-
-    - this project's layout (``bound-env train`` runs, ``--export`` folders): ``model.zip``,
-      ``vecnormalize.pkl`` and ``config.yaml`` side by side;
-    - rl-zoo3's layout (``logs/ppo/<env id>_<n>/``): the model ``<env id>.zip`` (or
-      ``best_model.zip``), and ``<env id>/config.yml`` + ``<env id>/vecnormalize.pkl`` in a
-      subfolder; the run folder, its params subfolder or the model zip may be given.
-    """
-    p = Path(path)
-    if not p.exists():
-        raise FileNotFoundError(
-            f"policy {str(path)!r} does not exist (give a run or policy "
-            "directory with model.zip, a model .zip, or 'passive')"
-        )
-    folder = p if p.is_dir() else p.parent
-    if (folder / "config.yml").is_file() and not (folder / "model.zip").is_file():
-        folder = folder.parent  # the params folder of an rl-zoo3 run was given
-        p = folder if p.is_dir() else p
-    zoo = _zoo_params_folder(folder)
-    if zoo is not None and not (folder / "config.yaml").is_file():
-        if p.is_file():
-            model = p
-        else:
-            cands = [folder / f"{zoo.name}.zip", folder / "best_model.zip"]
-            model = next((c for c in cands if c.is_file()), None)
-            if model is None:
-                raise FileNotFoundError(
-                    f"rl-zoo3 run folder {folder} has no {cands[0].name} or best_model.zip"
-                )
-        vn = zoo / "vecnormalize.pkl"
-        return PolicyFiles(
-            model, vn if vn.is_file() else None, zoo / "config.yml", "rl-zoo3", zoo.name
-        )
-    if p.is_dir():
-        model = p / "model.zip"
-        if not model.is_file():
-            zips = sorted(p.glob("*.zip"))
-            if len(zips) != 1:
-                raise FileNotFoundError(f"no model.zip in policy directory {p}")
-            model = zips[0]
-    else:
-        model = p
-    vn, cfg = folder / "vecnormalize.pkl", folder / "config.yaml"
-    return PolicyFiles(model, vn if vn.is_file() else None, cfg if cfg.is_file() else None)
-
-
-def resolve_policy_files(path: str | Path) -> tuple[Path, Path | None, Path | None]:
-    """(model zip, vecnormalize pkl or None, config or None): `find_policy_files` as a tuple."""
-    f = find_policy_files(path)
-    return f.model, f.vecnormalize, f.config
-
-
-class _ZooLoader(yaml.SafeLoader):
-    """YAML safe loading plus the one Python tag rl-zoo3 writes (an OrderedDict as pairs)."""
-
-
-_ZooLoader.add_constructor(
-    "tag:yaml.org,2002:python/object/apply:collections.OrderedDict",
-    lambda loader, node: dict(
-        loader.construct_sequence(node.value[0], deep=True)
-        if isinstance(node, yaml.SequenceNode)
-        else loader.construct_mapping(node, deep=True).get("args", [[]])[0]
-    ),
-)
-
-
-def _read_yaml(path: Path, loader=yaml.SafeLoader):
-    try:
-        data = yaml.load(path.read_text(), Loader=loader)  # noqa: S506 - safe loaders only
-    except (yaml.YAMLError, UnicodeDecodeError) as e:
-        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise ValueError(f"{path}: not a readable YAML file ({msg})") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a mapping, got {type(data).__name__}")
-    return data
-
-
-def read_policy_section(files: PolicyFiles) -> tuple[dict, str, int | None]:
-    """(hyperparameter section, env id, seed) of a policy's config; ({}, default id, None)
-    without one."""
-    if files.config is None:
-        return {}, "PassiveBound-v0", None
-    if files.layout == "rl-zoo3":
-        return _read_yaml(files.config, _ZooLoader), files.env_id or "PassiveBound-v0", None
-    data = _read_yaml(files.config)
-    run = data.get("run") or {}
-    env_id = run.get("env_id")
-    section = data.get(env_id) if env_id else None
-    if section is None:  # a plain rl-zoo3-style file with one section
-        sections = {k: v for k, v in data.items() if isinstance(v, dict) and k != "run"}
-        if len(sections) == 1:
-            env_id, section = next(iter(sections.items()))
-        else:
-            section = {}
-    if not isinstance(section, dict):
-        raise ValueError(f"{files.config}: section {env_id!r} is not a mapping")
-    return section, env_id or "PassiveBound-v0", run.get("seed")
-
-
-def section_env_kwargs(section: dict, env_id: str) -> dict:
-    """The environment kwargs that matter for evaluation (`DYNAMICS_KWARGS`): those of the
-    registered env id, then the section's ``env_kwargs``."""
-    env_kwargs = section.get("env_kwargs") or {}
-    if not isinstance(env_kwargs, dict):
-        raise ValueError(f"env_kwargs must be a mapping, got {env_kwargs!r}")
-    if env_id != "PassiveBound-v0":
-        import gymnasium as gym
-
-        import bound_env  # noqa: F401 - registers the env ids
-
-        try:
-            spec_kwargs = gym.spec(env_id).kwargs or {}
-        except gym.error.Error:
-            raise ValueError(
-                f"the policy was trained on {env_id!r}, which is not a registered environment"
-            ) from None
-        env_kwargs = {**spec_kwargs, **env_kwargs}
-    return {k: v for k, v in env_kwargs.items() if k in DYNAMICS_KWARGS}
-
-
-def read_run_config(config: Path | None) -> tuple[dict, int | None, list]:
-    """(environment kwargs that matter for evaluation, seed, env_wrapper entries) from a
-    run's config.yaml."""
-    if config is None:
-        return {}, None, []
-    layout = "rl-zoo3" if config.name == "config.yml" else "bound_env"
-    files = PolicyFiles(config, None, config, layout, config.parent.name)
-    section, env_id, seed = read_policy_section(files)
-    return section_env_kwargs(section, env_id), seed, section.get("env_wrapper") or []
-
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with Path(path).open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def write_fingerprint(folder: str | Path, **extra) -> Path:
-    """Bind the files of the policy in ``folder`` together: the sha256 of ``model.zip``,
-    ``vecnormalize.pkl`` and, when present, ``config.yaml`` and ``base.json``
-    (`FINGERPRINTED_SETTINGS`) in ``fingerprint.json`` (written atomically), checked by
-    `check_policy_files`."""
-    import json
-
-    from bound_env.cache import atomic_write
-
-    folder = Path(folder)
-    data = {"model.zip": file_sha256(folder / "model.zip")}
-    for name in ("vecnormalize.pkl", *FINGERPRINTED_SETTINGS):
-        if (folder / name).is_file():
-            data[name] = file_sha256(folder / name)
-    data.update(extra)
-    return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
-
-
-def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -> list[str]:
-    """ValueError for a policy whose evaluation would be silently wrong; returns warnings.
-
-    - no config: the env kwargs it was trained with (``max_torque``, ``dt``, wrappers) are
-      unknown (``force`` evaluates it with the env's defaults);
-    - trained with ``normalize`` but no ``vecnormalize.pkl`` beside the model;
-    - a ``fingerprint.json`` (written at export and at the end of training) that does not match
-      the model or the statistics: they belong to different policies;
-    - a ``config.yaml`` (or ``base.json``) that does not match the fingerprint: edited or cut
-      short since the policy was saved (a config cut before ``env_kwargs`` still parses, and
-      would evaluate the policy at the env's default max_torque); ``force`` evaluates it as it
-      is, with a warning.
-    """
-    warnings = []
-    if files.config is None:
-        msg = (
-            f"policy {files.model}: no config.yaml beside it, so the environment it was "
-            "trained on (max_torque, dt, observation filter) is unknown"
-        )
-        if not force:
-            raise ValueError(msg + "; pass --force to evaluate it with the env's defaults")
-        warnings.append(msg)
-    if section.get("normalize") and files.vecnormalize is None:
-        where = files.config.parent if files.config is not None else files.model.parent
-        raise ValueError(
-            f"policy {files.model} was trained with normalize="
-            f"{section['normalize']!r} but {where} has no vecnormalize.pkl"
-        )
-    fp = files.fingerprint
-    if fp.is_file():
-        import json
-
-        try:
-            want = json.loads(fp.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            raise ValueError(f"{fp}: not a readable JSON file") from None
-        pairs = [("model.zip", files.model), ("vecnormalize.pkl", files.vecnormalize)]
-        for key, path in pairs:
-            if key in want and (path is None or file_sha256(path) != want[key]):
-                raise ValueError(
-                    f"{path or key} does not match {fp} (sha256): the model and "
-                    "its normalization statistics belong to different policies"
-                )
-        for key in FINGERPRINTED_SETTINGS:
-            path = files.model.parent / key
-            if key in want and path.is_file() and file_sha256(path) != want[key]:
-                msg = (
-                    f"{path} does not match {fp} (sha256): it was changed or cut short "
-                    "after the policy was saved"
-                )
-                if not force:
-                    raise ValueError(
-                        msg + "; pass --force (margins, rollout, basin-map) to evaluate the "
-                        "policy with it as it is"
-                    )
-                warnings.append(msg)
-    elif files.vecnormalize is not None and files.layout == "bound_env":
-        warnings.append(
-            f"{files.model.parent}: no {FINGERPRINT_FILE}, so it cannot be checked "
-            "that vecnormalize.pkl belongs to this model"
-        )
-    return warnings
-
-
-def same_gait(a, b) -> bool:
-    """Whether two gait names/paths give the same parameters and reference apex state."""
-    from bound_env.params import load_gait
-
-    ga, gb = load_gait(a), load_gait(b)
-    return ga.params == gb.params and np.array_equal(ga.z0, gb.z0)
-
-
-def check_gait(controller, gait, force: bool = False) -> None:
-    """ValueError when ``gait`` is not the gait ``controller`` was trained on (``force``
-    allows it on purpose). Built-in controllers have no trained gait and take any."""
-    trained = getattr(controller, "env_kwargs", {}).get("gait")
-    if gait is None or trained is None or force or isinstance(controller, ZeroController):
-        return
-    if not same_gait(trained, gait):
-        raise ValueError(
-            f"policy {controller.name} was trained on gait {trained!r}, not "
-            f"{str(gait)!r}; pass --force to evaluate it there on purpose"
-        )
 
 
 def load_controller(path: str | Path, gait: str | Path | None = None, force: bool = False):
@@ -564,7 +174,7 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
     for w in check_policy_files(files, section, force):
         print(f"warning: {w}", file=sys.stderr)
-    layers, activation = _extract_actor(model, model_path)
+    layers, activation = extract_actor(model, model_path)
     ctrl = MLPController(
         name=str(path),
         layers=layers,
@@ -628,29 +238,3 @@ def check_spaces(model, env_kwargs: dict, wrappers, model_path: Path) -> np.ndar
     if not isinstance(act, gym.spaces.Box) or act.shape != want_act.shape:
         raise ValueError(f"policy {model_path} acts in {act}, PassiveBound expects {want_act}")
     return index
-
-
-def _extract_actor(model, model_path: Path) -> tuple[list, str]:
-    """Hidden layers of ``mlp_extractor.policy_net`` plus ``action_net`` as NumPy arrays."""
-    from torch import nn
-
-    policy = model.policy
-    if type(policy.pi_features_extractor).__name__ != "FlattenExtractor":
-        raise ValueError(f"{model_path}: only MLP policies on a flat observation are supported")
-    layers, activation = [], "Identity"
-    for m in policy.mlp_extractor.policy_net:
-        if isinstance(m, nn.Linear):
-            layers.append(
-                (m.weight.detach().double().numpy().copy(), m.bias.detach().double().numpy().copy())
-            )
-        elif type(m).__name__ in _ACTIVATIONS:
-            activation = type(m).__name__
-        else:
-            raise ValueError(f"{model_path}: unsupported layer {m} in the policy network")
-    an = policy.action_net
-    layers.append(
-        (an.weight.detach().double().numpy().copy(), an.bias.detach().double().numpy().copy())
-    )
-    if getattr(policy, "squash_output", False):
-        raise ValueError(f"{model_path}: squashed (gSDE) policies are not supported")
-    return layers, activation

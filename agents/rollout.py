@@ -27,14 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .policy import (
-    MLPController,
-    check_gait,
-    find_policy_files,
-    load_controller,
-    read_policy_section,
-    resolve_policy,
-)
+from .controllers import MLPController, check_gait
+from .policy import load_controller, resolve_policy
+from .policy_files import find_policy_files, read_policy_section
 
 ENV_ID = "PassiveBound-v0"  # the env class; the policy's env id only adds its registered kwargs
 
@@ -44,14 +39,14 @@ def _policy_wrappers(path) -> list:
     for a distilled choice policy, `agents.distill`: it reads the env's own observation)."""
     import gymnasium as gym
 
-    from .config import _entries, get_class_by_name
+    from .config import class_entries, get_class_by_name
     from .distill import POLICY_FILE
 
     if Path(path).is_dir() and (Path(path) / POLICY_FILE).is_file():
         return []
     section, _, _ = read_policy_section(find_policy_files(path))
     out = []
-    for name, kwargs in _entries(section.get("env_wrapper")):
+    for name, kwargs in class_entries(section.get("env_wrapper")):
         cls = get_class_by_name(name)
         if issubclass(cls, (gym.ObservationWrapper, gym.ActionWrapper)):
             out.append((cls, kwargs))

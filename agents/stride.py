@@ -49,6 +49,10 @@ from stable_baselines3.common.callbacks import BaseCallback
 # policies trained before v1 (agents/policies/stride-residual) name v0: they load, and act on v1
 from bound_env import STRIDE_ENV_ID, STRIDE_ENV_IDS
 
+from .controllers import check_gait
+from .mlp import extract_actor, mlp_forward
+from .policy_files import check_policy_files, find_policy_files, read_policy_section
+
 BASE_FILE = "base.json"
 # tolerance of the nominal stride that sets the basis' window edges in the step env: that of
 # `bound_env.control.load_controller`, so a zero residual plays out exactly as the LQR there
@@ -419,13 +423,7 @@ class StridePolicyController:
         return TorqueBasis("policy", self.edges, self.phi)
 
     def _net(self, x) -> np.ndarray:
-        from .policy import _ACTIVATIONS
-
-        act = _ACTIVATIONS[self.activation]
-        for W, b in self.layers[:-1]:
-            x = act(W @ x + b)
-        W, b = self.layers[-1]
-        return W @ x + b
+        return mlp_forward(self.layers, x, self.activation)
 
     def residual(self, z) -> np.ndarray:
         """du = clip(mean action, -1, 1) at apex state z."""
@@ -514,9 +512,9 @@ class StridePolicyController:
 
 def wrapper_kwargs(env_wrappers, name: str) -> dict | None:
     """The kwargs of the ``env_wrapper`` entry whose class is ``name`` (None if absent)."""
-    from .config import _entries
+    from .config import class_entries
 
-    for path, kw in _entries(env_wrappers):
+    for path, kw in class_entries(env_wrappers):
         if path.rsplit(".", 1)[-1] == name:
             return dict(kw)
     return None
@@ -530,14 +528,6 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
     from stable_baselines3 import PPO
 
     from bound_env.stride_task import StrideTask
-
-    from .policy import (
-        _extract_actor,
-        check_gait,
-        check_policy_files,
-        find_policy_files,
-        read_policy_section,
-    )
 
     files = find_policy_files(path)
     model_path, vecnorm_path = files.model, files.vecnormalize
@@ -574,7 +564,7 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
         if not base_path.is_file():
             raise FileNotFoundError(f"residual policy {path}: missing {base_path}")
         base = BaseGain.from_json(json.loads(base_path.read_text()))
-    layers, activation = _extract_actor(model, model_path)
+    layers, activation = extract_actor(model, model_path)
     ctrl = StridePolicyController(
         name=str(path),
         layers=layers,
@@ -610,11 +600,11 @@ def write_base(run_dir: Path, venv) -> None:
     # the worker process (the parent then sees EOFError).
     if not venv.has_attr("base"):
         return
+    from bound_env.cache import atomic_write
+
     bases = venv.get_attr("base")
     if bases and bases[0] is not None:
-        tmp = Path(run_dir) / (BASE_FILE + ".tmp")
-        tmp.write_text(json.dumps(bases[0].to_json(), indent=2) + "\n")
-        tmp.replace(Path(run_dir) / BASE_FILE)
+        atomic_write(Path(run_dir) / BASE_FILE, json.dumps(bases[0].to_json(), indent=2) + "\n")
 
 
 # --------------------------------------------------------------------------------------------
@@ -704,12 +694,10 @@ def r50_of(sizes, p) -> float:
     return float(sizes[-1])
 
 
-def main(argv=None) -> int:
+def main(argv=None, *, load_controller) -> int:
     """``python -m agents.stride POLICY [POLICY ...]``: the validation curve as JSON lines."""
+    # load_controller: `agents.policy.load_controller`, given by the script block below
     import argparse
-    import sys
-
-    from .policy import load_controller
 
     p = argparse.ArgumentParser(prog="python -m agents.stride", description=main.__doc__)
     p.add_argument("policies", nargs="+", help="passive, lqr, a spec .yaml or a policy dir")
@@ -727,5 +715,10 @@ def main(argv=None) -> int:
     return 0
 
 
+# python -m agents.stride: the file runs as the module __main__ (never as agents.stride), which
+# takes `agents.policy.load_controller` from above (agents.policy loads stride policies with
+# `load_stride_policy`, so agents.stride itself never imports it)
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from agents.policy import load_controller
+
+    raise SystemExit(main(load_controller=load_controller))

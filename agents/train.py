@@ -48,6 +48,8 @@ import numpy as np
 import yaml
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
+from bound_env.cache import atomic_path, atomic_write
+
 from .config import (
     DEFAULT_CONFIG,
     DEFAULT_ENV_ID,
@@ -149,18 +151,16 @@ def make_vec(
 def save_policy(model, folder: Path) -> None:
     """Save ``model.zip``, its ``vecnormalize.pkl`` (when normalizing) and ``fingerprint.json``
     binding the two, each under a temporary name and then renamed; the fingerprint last."""
-    from .policy import write_fingerprint
+    from .policy_files import write_fingerprint
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    tmp = folder / "model.zip.tmp.zip"  # SB3 appends .zip to names without it
-    model.save(tmp)
-    os.replace(tmp, folder / "model.zip")
+    with atomic_path(folder / "model.zip", suffix=".zip") as tmp:  # SB3 appends .zip otherwise
+        model.save(tmp)
     vn = model.get_vec_normalize_env()
     if vn is not None:
-        tmp = folder / "vecnormalize.pkl.tmp"
-        vn.save(str(tmp))
-        os.replace(tmp, folder / "vecnormalize.pkl")
+        with atomic_path(folder / "vecnormalize.pkl") as tmp:
+            vn.save(str(tmp))
     write_fingerprint(folder)
 
 
@@ -261,10 +261,12 @@ class BasinValidationCallback(BaseCallback):
     def controller(self):
         import bound_env.task as task_mod
 
-        from .policy import DYNAMICS_KWARGS, MLPController, _extract_actor
+        from .controllers import MLPController
+        from .mlp import extract_actor
+        from .policy_files import DYNAMICS_KWARGS
         from .wrappers import observation_index
 
-        layers, activation = _extract_actor(self.model, Path("(training)"))
+        layers, activation = extract_actor(self.model, Path("(training)"))
         kwargs = {k: v for k, v in self.env_kwargs.items() if k in DYNAMICS_KWARGS}
         names = task_mod.PassiveBoundTask(
             **{k: v for k, v in kwargs.items() if k != "apex_scales"}
@@ -477,28 +479,17 @@ def checkpoint_paths(folder: Path, n: int) -> tuple[Path, Path, Path]:
     )
 
 
-def _atomic_write_text(path: Path, text: str) -> None:
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
 def save_checkpoint(model, folder: Path, n: int) -> Path:
     """A checkpoint that is complete or absent: the model, then its VecNormalize statistics,
     each under a temporary name and renamed, then a manifest (sha256 of both) written last.
     `last_checkpoint` only takes checkpoints whose manifest matches their files."""
-    from .policy import file_sha256
+    from .policy_files import file_sha256
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     zip_path, pkl_path, manifest = checkpoint_paths(folder, n)
-    tmp = folder / f".rl_model_{n}_steps.tmp.zip"
-    model.save(tmp)
-    os.replace(tmp, zip_path)
+    with atomic_path(zip_path, suffix=".zip") as tmp:
+        model.save(tmp)
     hook = os.environ.get(CHECKPOINT_SLEEP_ENV, "")  # "SECONDS" or "SECONDS@TIMESTEPS"
     sleep, _, at = hook.partition("@")
     sleep = float(sleep) if sleep and (not at or int(at) == n) else 0.0
@@ -512,19 +503,18 @@ def save_checkpoint(model, folder: Path, n: int) -> Path:
     entry = {"timesteps": int(n), "model": zip_path.name, "model_sha256": file_sha256(zip_path)}
     vn = model.get_vec_normalize_env()
     if vn is not None:
-        tmp = folder / f".rl_model_vecnormalize_{n}_steps.pkl.tmp"
-        vn.save(str(tmp))
-        os.replace(tmp, pkl_path)
+        with atomic_path(pkl_path) as tmp:
+            vn.save(str(tmp))
         entry.update(vecnormalize=pkl_path.name, vecnormalize_sha256=file_sha256(pkl_path))
         if vn.norm_obs:  # norm_obs=False (e.g. configs/ppo-stride.yaml) keeps no obs_rms
             entry["obs_count"] = float(vn.obs_rms.count)
-    _atomic_write_text(manifest, json.dumps(entry, indent=2) + "\n")
+    atomic_write(manifest, json.dumps(entry, indent=2) + "\n")
     return zip_path
 
 
 def _complete(zip_path: Path, pkl_path: Path, manifest: Path) -> bool:
     """Whether a checkpoint's manifest is readable and matches its files."""
-    from .policy import file_sha256
+    from .policy_files import file_sha256
 
     try:
         entry = json.loads(manifest.read_text())
@@ -607,7 +597,7 @@ def truncate_csv(path: Path, max_timesteps: int, column: str = "timesteps") -> N
             ok = False
         if ok:
             keep.append(line)
-    _atomic_write_text(path, "\n".join(keep) + "\n")
+    atomic_write(path, "\n".join(keep) + "\n")
 
 
 def _continue_evaluations(cb: EvalCallback, path: Path, done: int) -> None:
@@ -798,7 +788,7 @@ def train(
         "sessions": sessions,
         "command": " ".join(sys.argv),
     }
-    _atomic_write_text(info_path, json.dumps(info, indent=2) + "\n")
+    atomic_write(info_path, json.dumps(info, indent=2) + "\n")
 
     th.set_num_threads(1)
     set_random_seed(seed)
@@ -855,7 +845,7 @@ def train(
         X, A = collect(bc_env, teacher, seed, progress=progress_bar)
         bc_env.close()
         info["init_from"] = {"policy": str(init_from), **clone(model, venv, X, A, seed)}
-        _atomic_write_text(info_path, json.dumps(info, indent=2) + "\n")
+        atomic_write(info_path, json.dumps(info, indent=2) + "\n")
     n_envs = spec.n_envs
     # evaluation before the checkpoint of the same step, so a checkpoint never precedes an
     # evaluation it should include; both count timesteps, so a resume keeps their schedules
@@ -906,7 +896,7 @@ def train(
             "machine": f"{platform.machine()}, {_ncpu()} cores",
         }
     )
-    _atomic_write_text(info_path, json.dumps(info, indent=2) + "\n")
+    atomic_write(info_path, json.dumps(info, indent=2) + "\n")
     return run_dir
 
 
@@ -940,4 +930,4 @@ def write_config(
     """The resolved section in rl-zoo3's format, plus a ``run:`` entry (env id, seed, and the
     evaluation and checkpoint schedule), written atomically."""
     data = {env_id: hp, "run": {"env_id": env_id, "seed": int(seed), **(schedule or {})}}
-    _atomic_write_text(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+    atomic_write(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))

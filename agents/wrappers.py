@@ -124,10 +124,12 @@ class ObservationFilter(gym.ObservationWrapper):
 def observation_index(env_wrappers, obs_names) -> np.ndarray | None:
     """Indices of the observation an ``env_wrapper`` list (rl-zoo3 syntax) keeps through its
     `ObservationFilter`, or None when it has none."""
-    from .config import _entries
+    from .config import class_entries
 
     filters = [
-        kw for name, kw in _entries(env_wrappers) if name.rsplit(".", 1)[-1] == "ObservationFilter"
+        kw
+        for name, kw in class_entries(env_wrappers)
+        if name.rsplit(".", 1)[-1] == "ObservationFilter"
     ]
     if not filters:
         return None

@@ -5,8 +5,9 @@ finished work here, so that a run killed at any instant (``kill -9``) resumes wi
 lost and nothing corrupt:
 
 - `settings_hash`: a short hash of every setting that changes a result (a cache key).
-- `atomic_write`: a whole file, written to ``name.tmp`` and renamed over ``name``: the file is
-  complete or it is the previous version, never half written.
+- `atomic_write`: a whole file, written to a temporary name beside it and renamed over it: the
+  file is complete or it is the previous version, never half written. `atomic_path` is the
+  same for a writer that wants a path (``model.save(tmp)``, an image writer).
 - `append_line` / `read_lines`: append-only logs; each append is flushed and fsynced, and a
   last line cut short by a kill is skipped with a warning on reading.
 - `TaskCache`: task results as JSON lines ``{"key": ..., "result": ...}`` on top of those.
@@ -14,9 +15,11 @@ lost and nothing corrupt:
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
+import secrets
 import warnings
 from pathlib import Path
 
@@ -27,19 +30,43 @@ def settings_hash(settings, length: int = 16) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:length]
 
 
-def atomic_write(path, data: str | bytes) -> Path:
-    """Write ``data`` to ``path`` through ``path.tmp`` and `os.replace` (atomic on POSIX)."""
+def _reserve_temp(path: Path, suffix: str) -> Path:
+    """A new empty file beside ``path`` with a name no other writer holds (pid and a random
+    part, created exclusively). Not `tempfile.mkstemp`: its files are private (mode 0600),
+    and the renamed file would keep that mode instead of the usual one (umask)."""
+    while True:
+        tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{suffix}")
+        try:
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            continue
+        return tmp
+
+
+@contextlib.contextmanager
+def atomic_path(path, suffix: str = ""):
+    """A temporary path beside ``path`` to write the new file to; when the block ends without
+    error the file is flushed to disk and renamed over ``path`` (`os.replace`, atomic on
+    POSIX), else it is removed. ``suffix`` ends the temporary name (writers that choose their
+    format by the extension: ``suffix=path.suffix``). Concurrent writers of one path each
+    write their own temporary file; the last rename wins."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
+    tmp = _reserve_temp(path, suffix)
     try:
-        with open(tmp, "wb") as f:
-            f.write(data.encode() if isinstance(data, str) else data)
-            f.flush()
+        yield tmp
+        with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def atomic_write(path, data: str | bytes) -> Path:
+    """Write ``data`` (a str is written as UTF-8) to ``path`` through `atomic_path`."""
+    path = Path(path)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write(data.encode() if isinstance(data, str) else data)
     return path
 
 

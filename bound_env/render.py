@@ -269,14 +269,13 @@ def save_gif(frames, path, fps=30):
 
 
 def write_video(frames, path, fps) -> Path:
-    """An animation file, written atomically (``name.tmp.ext``, then renamed): a GIF
+    """An animation file, written atomically (`bound_env.cache.atomic_path`): a GIF
     (`save_gif`, Pillow) or an MP4 (needs imageio with ffmpeg: ``pip install imageio-ffmpeg``)."""
-    import os
+    from .cache import atomic_path
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    try:
+    with atomic_path(path, suffix=path.suffix) as tmp:  # the writers go by the extension
         if path.suffix.lower() == ".gif":
             save_gif(frames, tmp, fps=fps)
         elif path.suffix.lower() == ".mp4":
@@ -293,7 +292,4 @@ def write_video(frames, path, fps) -> Path:
                 raise ValueError(f"cannot write {path}: {e}; write a .gif instead") from None
         else:
             raise ValueError(f"{path}: an animation must end in .gif or .mp4")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return path

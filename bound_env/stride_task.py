@@ -49,7 +49,7 @@ import numpy as np
 from .params import Gait, load_gait
 from .stride import DEFAULT_T_MAX, simulate_stride
 from .stride_map import EVAL_RTOL, StrideMap, interval_weights
-from .task import DEFAULT_DT, DEFAULT_RESET_NOISE_SCALE, PassiveBoundTask, _number
+from .task import DEFAULT_DT, DEFAULT_RESET_NOISE_SCALE, PassiveBoundTask, check_number
 
 BASES = ("windows", "phases", "hats")
 DEFAULT_BASIS = "windows"
@@ -250,10 +250,10 @@ class StrideTask:
         self.z_ref = self.step_task.z_ref
         self.apex_scales = self.step_task.apex_scales
         self.max_torque = self.step_task.max_torque
-        self.alive_reward = _number("alive_reward", alive_reward, 0.0)
-        self.tracking_cost_weight = _number("tracking_cost_weight", tracking_cost_weight, 0.0)
-        self.ctrl_cost_weight = _number("ctrl_cost_weight", ctrl_cost_weight, 0.0)
-        self.rtol = _number("rtol", rtol, 0.0, strict=True)
+        self.alive_reward = check_number("alive_reward", alive_reward, 0.0)
+        self.tracking_cost_weight = check_number("tracking_cost_weight", tracking_cost_weight, 0.0)
+        self.ctrl_cost_weight = check_number("ctrl_cost_weight", ctrl_cost_weight, 0.0)
+        self.rtol = check_number("rtol", rtol, 0.0, strict=True)
         # the nominal stride is the gait file's (without overrides), so that the basis, like
         # z*, is the same for every override of the same gait
         nominal = nominal_stride(load_gait(gait), rtol=self.rtol)

@@ -404,7 +404,7 @@ def step_batch_parallel(Y, AUX, FLAGS, S, APEX, OBS, cfg, actions, active):
 # ---------------------------------------------------------------------------------------------
 
 
-def _number(name, value, minimum, strict=False) -> float:
+def check_number(name, value, minimum, strict=False) -> float:
     """``value`` as a finite float above (``strict``) or at least ``minimum``, else ValueError."""
     try:
         v = float(value)
@@ -439,7 +439,7 @@ class TaskConfig:
     def __post_init__(self):
         put = object.__setattr__  # normalize the values of a frozen instance
         for name in ("dt", "max_torque", "rtol"):
-            put(self, name, _number(name, getattr(self, name), 0.0, strict=True))
+            put(self, name, check_number(name, getattr(self, name), 0.0, strict=True))
         for name in (
             "slope_noise_deg",
             "reset_noise_scale",
@@ -447,7 +447,7 @@ class TaskConfig:
             "tracking_cost_weight",
             "ctrl_cost_weight",
         ):
-            put(self, name, _number(name, getattr(self, name), 0.0))
+            put(self, name, check_number(name, getattr(self, name), 0.0))
         if self.apex_scales is not None:
             scales = np.asarray(self.apex_scales, dtype=float)
             if scales.shape != (6,) or not np.all(np.isfinite(scales)) or np.any(scales <= 0):

@@ -1,8 +1,13 @@
-"""Layering of the package, read from the source with `ast`: imports point down only.
+"""Layering of the packages, read from the source with `ast`: imports point down only.
 
 Every import counts, also those inside functions (deferred imports) and string imports through
-``importlib.import_module`` / ``__import__``. One check runs instead: the classical margins
-path (``bound-env margins --policy lqr``) never loads torch.
+``importlib.import_module`` / ``__import__``. A file's ``if __name__ == "__main__":`` block runs
+only when the file is executed as a script (``python -m``), as the module ``__main__``, never
+when the module is imported: its imports belong to a node of their own, ``<module> as
+__main__``, that imports the module (nothing imports a script). Neither `bound_env` nor
+`agents` has an import cycle, `bound_env` never imports `agents`, and no module imports
+another one's private (underscore) name. One check runs a command instead of reading
+imports: the classical margins path (``bound-env margins --policy lqr``) never loads torch.
 """
 
 import ast
@@ -13,32 +18,63 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGE = ROOT / "bound_env"
+PACKAGES = ("bound_env", "agents")
+SCRIPT = " as __main__"  # the node of a module's ``if __name__ == "__main__":`` block
 
 
-def _modules() -> dict[str, tuple[Path, bool]]:
-    """Dotted module name -> (file, is a package ``__init__``)."""
+def _modules(*packages: str) -> dict[str, tuple[Path, bool]]:
+    """Dotted module name -> (file, is a package ``__init__``), of ``packages`` (default:
+    `bound_env`)."""
     mods = {}
-    for f in sorted(PACKAGE.rglob("*.py")):
+    files = [f for p in packages or ("bound_env",) for f in sorted((ROOT / p).rglob("*.py"))]
+    for f in files:
         parts = list(f.relative_to(ROOT).with_suffix("").parts)
         is_pkg = parts[-1] == "__init__"
         mods[".".join(parts[:-1] if is_pkg else parts)] = (f, is_pkg)
     return mods
 
 
-def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
-    """Every dotted name ``mod`` imports, absolute, including ``from X import submodule``."""
+def _from_module(mod: str, is_pkg: bool, node: ast.ImportFrom) -> str:
+    """The absolute module of ``from X import ...`` in ``mod``."""
+    if not node.level:
+        return node.module
+    base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _tree(path: Path) -> ast.AST:
+    return ast.parse(path.read_text(), filename=str(path))
+
+
+def _script_blocks(tree: ast.Module) -> list[ast.If]:
+    """The module's top-level ``if __name__ == "__main__":`` blocks."""
+    return [
+        n
+        for n in tree.body
+        if isinstance(n, ast.If)
+        and isinstance(n.test, ast.Compare)
+        and isinstance(n.test.left, ast.Name)
+        and n.test.left.id == "__name__"
+        and len(n.test.comparators) == 1
+        and isinstance(n.test.comparators[0], ast.Constant)
+        and n.test.comparators[0].value == "__main__"
+    ]
+
+
+def _imported_names(mod: str, path: Path, is_pkg: bool, script: bool = False) -> set[str]:
+    """Every dotted name ``mod`` imports, absolute, including ``from X import submodule``;
+    with ``script``, those of its ``if __name__ == "__main__":`` block instead."""
+    tree = _tree(path)
+    in_script = {id(n) for block in _script_blocks(tree) for n in ast.walk(block)}
     names = set()
-    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+    for node in ast.walk(tree):
+        if (id(node) in in_script) != script:
+            continue
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = mod.split(".") if is_pkg else mod.split(".")[:-1]
-                base = base[: len(base) - (node.level - 1)]
-                module = ".".join(base + ([node.module] if node.module else []))
-            else:
-                module = node.module
+            module = _from_module(mod, is_pkg, node)
             names.add(module)
             names.update(f"{module}.{a.name}" for a in node.names)
         elif isinstance(node, ast.Call):
@@ -51,10 +87,36 @@ def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
     return names
 
 
-def _graph():
-    mods = _modules()
+def _private_imports(mod: str, tree: ast.AST, is_pkg: bool, mods) -> list[str]:
+    """``from X import _name`` in ``mod``, X another module of ``mods`` and ``_name`` not a
+    module (a package may import its own private submodules, e.g. ``_dop853``)."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            module = _from_module(mod, is_pkg, node)
+            if module not in mods or module == mod:
+                continue
+            for a in node.names:
+                private = a.name.startswith("_") and not a.name.startswith("__")
+                if private and f"{module}.{a.name}" not in mods:
+                    found.append(f"line {node.lineno}: from {module} import {a.name}")
+    return found
+
+
+def _all_private_imports() -> dict[str, list[str]]:
+    mods = _modules(*PACKAGES)
+    found = {m: _private_imports(m, _tree(f), is_pkg, mods) for m, (f, is_pkg) in mods.items()}
+    return {m: v for m, v in found.items() if v}
+
+
+def _graph(*packages: str):
+    mods = _modules(*packages)
     imports = {m: _imported_names(m, *mods[m]) for m in mods}
-    edges = {m: sorted(n for n in imports[m] if n in mods and n != m) for m in mods}
+    for m in mods:  # a script runs its module's code, then its own block
+        block = _imported_names(m, *mods[m], script=True)
+        if block:
+            imports[m + SCRIPT] = block | {m}
+    edges = {m: sorted(n for n in names if n in mods and n != m) for m, names in imports.items()}
     return mods, imports, edges
 
 
@@ -97,6 +159,26 @@ def test_the_walker_sees_deferred_and_string_imports():
     assert "bound_env.params" in edges["bound_env.dynamics"]
     assert _cycles({"a": ["b"], "b": ["c"], "c": ["a"], "d": ["a"]}) == [["a", "b", "c"]]
     assert _cycles({"a": ["b"], "b": []}) == []
+    # agents: deferred imports, and a script block on a node of its own
+    _, _, edges = _graph("agents")
+    assert "agents.stride" in edges["agents.policy"]  # inside load_controller
+    assert "agents.config" in edges["agents.stride"]  # inside wrapper_kwargs
+    assert "agents.policy" in edges["agents.stride" + SCRIPT]  # python -m agents.stride
+    assert "agents.policy" not in edges["agents.stride"]
+    assert "agents.stride" in edges["agents.stride" + SCRIPT]  # it runs the module's code too
+
+
+def test_the_walker_sees_private_imports():
+    mods = {"p": None, "p.a": None, "p.b": None, "p._c": None}
+    code = (
+        "from .b import _x, y\n"
+        "from . import _c\n"  # a private submodule of the package: allowed
+        "from .a import _own\n"  # its own name
+        "def f():\n    from p.b import _z\n"
+        "from numpy import _private_but_not_ours\n"
+    )
+    found = _private_imports("p.a", ast.parse(code), False, mods)
+    assert found == ["line 1: from p.b import _x", "line 5: from p.b import _z"]
 
 
 def test_nothing_in_bound_env_imports_agents():
@@ -108,9 +190,15 @@ def test_nothing_in_bound_env_imports_agents():
     assert {m: v for m, v in offenders.items() if v} == {}
 
 
-def test_no_import_cycle_inside_bound_env():
-    _, _, edges = _graph()
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_import_cycle(package):
+    _, _, edges = _graph(package)
     assert _cycles(edges) == []
+
+
+def test_no_private_name_is_imported_across_modules():
+    """A name another module needs is public; ``_name`` stays in its module."""
+    assert _all_private_imports() == {}
 
 
 # Runs ``bound-env margins`` in a fresh interpreter up to the point where the work starts (the

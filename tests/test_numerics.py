@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 
 import numpy as np
 import pytest
@@ -17,7 +18,14 @@ from bound_env.analysis.numerics import (
     newton,
     sorted_eigenvalues,
 )
-from bound_env.cache import TaskCache, append_line, atomic_write, read_lines, settings_hash
+from bound_env.cache import (
+    TaskCache,
+    append_line,
+    atomic_path,
+    atomic_write,
+    read_lines,
+    settings_hash,
+)
 
 
 def _linear_map(seed=1):
@@ -130,3 +138,52 @@ def test_atomic_write_leaves_no_partial_file(tmp_path, monkeypatch):
     monkeypatch.undo()
     atomic_write(path, b"\x00bytes")
     assert path.read_bytes() == b"\x00bytes"
+
+
+def test_two_writers_of_one_file_both_succeed(tmp_path, monkeypatch):
+    """Two threads write one file at once, both with their data written before either renames
+    (a barrier in fsync): each has its own temporary file, so both succeed and the file holds
+    one of the two contents, whole, with no temporary file left."""
+    path = tmp_path / "results.json"
+    contents = [b"a" * 1_000_000, b"b" * 2_000_000]
+    barrier = threading.Barrier(2)
+    fsync = os.fsync
+
+    def fsync_together(fd):
+        barrier.wait(timeout=30)
+        fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync_together)
+    errors = []
+
+    def write(data):
+        try:
+            atomic_write(path, data)
+        except BaseException as e:  # noqa: BLE001 - reported by the assert below
+            errors.append(e)
+
+    threads = [threading.Thread(target=write, args=(c,)) for c in contents]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert errors == []
+    assert path.read_bytes() in contents
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results.json"]
+
+
+def test_atomic_path_for_a_writer_that_wants_a_path(tmp_path):
+    path = tmp_path / "anim.gif"
+    with atomic_path(path, suffix=path.suffix) as tmp:
+        assert tmp.parent == tmp_path and tmp.name.endswith(".gif") and tmp != path
+        tmp.write_bytes(b"GIF")
+    assert path.read_bytes() == b"GIF"
+    with pytest.raises(ValueError, match="no writer"), atomic_path(path) as tmp:
+        tmp.write_bytes(b"half")
+        raise ValueError("no writer")
+    assert path.read_bytes() == b"GIF"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["anim.gif"]
+    mode = os.stat(path).st_mode & 0o777
+    umask = os.umask(0)
+    os.umask(umask)
+    assert mode == 0o666 & ~umask  # the usual mode, not a private temporary file's 0600

@@ -92,7 +92,8 @@ def literal_gait() -> Gait:
     return load_gait(LITERAL_FILE)
 
 
-def _gait_config(g) -> dict:
+def gait_config(g) -> dict:
+    """What of a gait goes into the run's configuration (and its cache hashes)."""
     return {
         "params": g.params.to_gait_dict(),
         "min_leg_frac": g.params.min_leg_frac,

@@ -4,7 +4,6 @@ results. Nothing here simulates."""
 from __future__ import annotations
 
 import csv
-import math
 from pathlib import Path
 
 import numpy as np
@@ -44,12 +43,6 @@ def _write_csv(path: Path, header, rows) -> Path:
                 ["" if v is None else (repr(float(v)) if isinstance(v, float) else v) for v in r]
             )
     return path
-
-
-def _f(v, fmt="{:.4g}"):
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return "–"
-    return fmt.format(v)
 
 
 # --------------------------------------------------------------------------------------------

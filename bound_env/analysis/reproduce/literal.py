@@ -28,7 +28,7 @@ from .settings import (
     RELAXED_LEG_FRAC,
     Budget,
 )
-from .stiff import _path_points
+from .stiff import path_points
 
 
 def min_leg_fraction(z, params: Params, hi=0.25) -> dict:
@@ -196,7 +196,7 @@ def stage_literal(b: Budget, z_star_si, log) -> dict:
         h0=LITERAL_PATH_STEP,
         h_max=b.path_step_max,
     )
-    pts = _path_points(res)
+    pts = path_points(res)
     out["kc_path"] = {
         "reason": res.reason,
         "reached": res.reached,

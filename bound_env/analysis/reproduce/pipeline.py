@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...cache import atomic_write
-from .claims import _gait_config, literal_gait, reproducing_gait
+from .claims import gait_config, literal_gait, reproducing_gait
 from .closest import stage_closest
 from .figures import write_figures
 from .gaits import write_gait_files
@@ -20,7 +20,7 @@ from .report import write_report
 from .reproducing import stage_reproducing
 from .settings import CACHE_VERSION, FULL, QUICK
 from .stiff import stage_stiff
-from .store import Cache, _Log, jsonable
+from .store import Cache, ProgressLog, jsonable
 from .windows import stage_sweeps
 
 
@@ -36,14 +36,14 @@ def run(
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    log = _Log(progress)
+    log = ProgressLog(progress)
     b = QUICK if quick else FULL
     cache = Cache(out_dir, force, log)
     base_cfg = {
         "version": CACHE_VERSION,
         "budget": asdict(b),
-        "paper": _gait_config(reproducing_gait()),
-        "literal": _gait_config(literal_gait()),
+        "paper": gait_config(reproducing_gait()),
+        "literal": gait_config(literal_gait()),
     }
     results: dict = {"budget": asdict(b)}
     results["reproducing"] = cache.get("reproducing", base_cfg, lambda: stage_reproducing(b, log))

@@ -16,7 +16,7 @@ import numpy as np
 from ...cache import atomic_write
 from ..stability import RECOVERY_REL, RECOVERY_TOL
 from .claims import CLAIMS, published
-from .figures import PATH_STYLE, Z_FMT, Z_LABELS, Z_LABELS_UNITS, _f
+from .figures import PATH_STYLE, Z_FMT, Z_LABELS, Z_LABELS_UNITS
 
 EMAX_CLOSE = 0.05  # |e_max - paper's| below this: "close"
 Z_CLOSE_REL = 0.02  # a component of z* within 2 % of the paper's: "close"
@@ -25,6 +25,13 @@ VISUAL_FRACTION = 0.01  # "by eye": every component within 1 % of its own peak d
 REAL_TOL = 1e-9  # |Im| below this prints an eigenvalue as real
 KC_MATCH = 1e-6  # a path's last point is at the published kc within this [N m/rad]
 GAP_PHASES = ["df", "bs", "df", "fs"]  # the stride's start with the short bs -> fs flight
+
+
+def _f(v, fmt="{:.4g}"):
+    """``v`` formatted, or a dash when it is missing or not finite."""
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    return fmt.format(v)
 
 
 # --------------------------------------------------------------------------------------------

@@ -14,7 +14,8 @@ from .points import point_summary
 from .settings import ARC_STEP_MAX, FP_TOL, STIFF_ALPHA0_DEG, Budget
 
 
-def _path_points(res, log=None) -> list:
+def path_points(res, log=None) -> list:
+    """`point_summary` of every point of a continuation path."""
     pts = []
     for p, z in res.points:
         pts.append(point_summary(p, z))
@@ -53,7 +54,7 @@ def stage_stiff(b: Budget, z_star_si, log) -> dict:
             "reason": res.reason,
             "reached": res.reached,
             "ladder": res.ladder,
-            "points": _path_points(res),
+            "points": path_points(res),
         }
         end = paths[name]["points"][-1] if paths[name]["points"] else None
         if end:

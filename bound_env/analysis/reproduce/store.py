@@ -13,7 +13,9 @@ import numpy as np
 from ...cache import atomic_write, settings_hash
 
 
-class _Log:
+class ProgressLog:
+    """``log(msg)``: a progress line on stderr with the seconds since the start (if enabled)."""
+
     def __init__(self, enabled: bool):
         self.enabled, self.t0 = enabled, time.perf_counter()
 
@@ -49,7 +51,7 @@ def config_hash(config: dict) -> str:
 class Cache:
     """One JSON file per stage, named by the hash of the stage's configuration."""
 
-    def __init__(self, out_dir: Path, force: bool, log: _Log):
+    def __init__(self, out_dir: Path, force: bool, log: ProgressLog):
         self.dir = Path(out_dir) / "cache"
         self.dir.mkdir(parents=True, exist_ok=True)
         self.force, self.log = force, log

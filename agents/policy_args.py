@@ -1,0 +1,27 @@
+"""The ``--policy`` argument of the agents' commands (``rollout``, ``margins``, ``compare``,
+``basin-map``, ...): its help text and the folder name a policy's outputs go under."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bound_env.resources import controllers_dir
+
+# the classical controllers by name: the specs in configs/controllers/ (a cheap glob: the help
+# is built on every start of bound-env)
+_CONTROLLER_NAMES = ", ".join(sorted(p.stem for p in controllers_dir().glob("*.yaml")))
+POLICY_HELP = (
+    "'passive', a shipped policy ('default': the learned controller chosen on validation, "
+    "'ppo-v1', 'literal-cycle', 'finetuned/s0' .. 's2', 'distilled/s0' .. 's2', "
+    "'ppo-v1-final/s0' .. 's2', 'stride-residual/s0' .. 's2'), a "
+    "classical controller (" + _CONTROLLER_NAMES + ": "
+    "bound_env.control, or a controller spec .yaml), or a path: a run/policy folder, a "
+    "model .zip, an rl-zoo3 run folder"
+)
+
+
+def policy_label(policy: str) -> str:
+    """A folder name for a policy given by name or path."""
+    from .policy import policy_names
+
+    return policy if policy in policy_names() else Path(policy).resolve().name

@@ -1,0 +1,278 @@
+"""The files of a saved policy: where they are, what its run config says, and the fingerprint
+that binds them together.
+
+A trained PPO policy is a ``model.zip``, its ``VecNormalize`` statistics (``vecnormalize.pkl``)
+and its run config (``config.yaml``: the environment it was trained on), in this project's
+layout or in rl-zoo3's (`find_policy_files`). ``fingerprint.json`` holds the sha256 of the
+model, the statistics and the settings files (`write_fingerprint`); `check_policy_files`
+refuses a policy whose evaluation would be silently wrong. The loaders above it
+(`agents.policy`, `agents.stride`, `agents.distill`) read policies through these functions.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+# Environment keyword arguments that shape the dynamics, the observation or the action; the
+# evaluation environment takes these from the policy's run config (reward weights and start
+# noise do not matter for evaluation).
+DYNAMICS_KWARGS = (
+    "gait",
+    "gait_overrides",
+    "dt",
+    "max_torque",
+    "apex_scales",
+    "exclude_current_positions_from_observation",
+)
+FINGERPRINT_FILE = "fingerprint.json"  # sha256 of the model and its statistics, as one unit
+# Files a fingerprint also covers when they are present: the run config (it sets max_torque, dt,
+# the gait, the observation filter) and a residual policy's base controller. A fingerprint
+# written before they were covered has no entry for them and is read as before.
+FINGERPRINTED_SETTINGS = ("config.yaml", "base.json")
+
+
+@dataclass
+class PolicyFiles:
+    """The files of a saved policy (see `find_policy_files`)."""
+
+    model: Path
+    vecnormalize: Path | None
+    config: Path | None
+    layout: str = "bound_env"  # or "rl-zoo3"
+    env_id: str | None = None  # rl-zoo3: the run's env id (its params folder's name)
+
+    @property
+    def fingerprint(self) -> Path:
+        return self.model.parent / FINGERPRINT_FILE
+
+
+def _zoo_params_folder(folder: Path) -> Path | None:
+    """The params folder (``<env id>/`` with ``config.yml``) of an rl-zoo3 run folder."""
+    subs = [d for d in sorted(folder.iterdir()) if d.is_dir() and (d / "config.yml").is_file()]
+    return subs[0] if len(subs) == 1 else None
+
+
+def find_policy_files(path: str | Path) -> PolicyFiles:
+    """The files of a policy given as a folder or a model zip.
+
+    - this project's layout (``bound-env train`` runs, ``--export`` folders): ``model.zip``,
+      ``vecnormalize.pkl`` and ``config.yaml`` side by side;
+    - rl-zoo3's layout (``logs/ppo/<env id>_<n>/``): the model ``<env id>.zip`` (or
+      ``best_model.zip``), and ``<env id>/config.yml`` + ``<env id>/vecnormalize.pkl`` in a
+      subfolder; the run folder, its params subfolder or the model zip may be given.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(
+            f"policy {str(path)!r} does not exist (give a run or policy "
+            "directory with model.zip, a model .zip, or 'passive')"
+        )
+    folder = p if p.is_dir() else p.parent
+    if (folder / "config.yml").is_file() and not (folder / "model.zip").is_file():
+        folder = folder.parent  # the params folder of an rl-zoo3 run was given
+        p = folder if p.is_dir() else p
+    zoo = _zoo_params_folder(folder)
+    if zoo is not None and not (folder / "config.yaml").is_file():
+        if p.is_file():
+            model = p
+        else:
+            cands = [folder / f"{zoo.name}.zip", folder / "best_model.zip"]
+            model = next((c for c in cands if c.is_file()), None)
+            if model is None:
+                raise FileNotFoundError(
+                    f"rl-zoo3 run folder {folder} has no {cands[0].name} or best_model.zip"
+                )
+        vn = zoo / "vecnormalize.pkl"
+        return PolicyFiles(
+            model, vn if vn.is_file() else None, zoo / "config.yml", "rl-zoo3", zoo.name
+        )
+    if p.is_dir():
+        model = p / "model.zip"
+        if not model.is_file():
+            zips = sorted(p.glob("*.zip"))
+            if len(zips) != 1:
+                raise FileNotFoundError(f"no model.zip in policy directory {p}")
+            model = zips[0]
+    else:
+        model = p
+    vn, cfg = folder / "vecnormalize.pkl", folder / "config.yaml"
+    return PolicyFiles(model, vn if vn.is_file() else None, cfg if cfg.is_file() else None)
+
+
+def resolve_policy_files(path: str | Path) -> tuple[Path, Path | None, Path | None]:
+    """(model zip, vecnormalize pkl or None, config or None): `find_policy_files` as a tuple."""
+    f = find_policy_files(path)
+    return f.model, f.vecnormalize, f.config
+
+
+class _ZooLoader(yaml.SafeLoader):
+    """YAML safe loading plus the one Python tag rl-zoo3 writes (an OrderedDict as pairs)."""
+
+
+_ZooLoader.add_constructor(
+    "tag:yaml.org,2002:python/object/apply:collections.OrderedDict",
+    lambda loader, node: dict(
+        loader.construct_sequence(node.value[0], deep=True)
+        if isinstance(node, yaml.SequenceNode)
+        else loader.construct_mapping(node, deep=True).get("args", [[]])[0]
+    ),
+)
+
+
+def _read_yaml(path: Path, loader=yaml.SafeLoader):
+    try:
+        data = yaml.load(path.read_text(), Loader=loader)  # noqa: S506 - safe loaders only
+    except (yaml.YAMLError, UnicodeDecodeError) as e:
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ValueError(f"{path}: not a readable YAML file ({msg})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping, got {type(data).__name__}")
+    return data
+
+
+def read_policy_section(files: PolicyFiles) -> tuple[dict, str, int | None]:
+    """(hyperparameter section, env id, seed) of a policy's config; ({}, default id, None)
+    without one."""
+    if files.config is None:
+        return {}, "PassiveBound-v0", None
+    if files.layout == "rl-zoo3":
+        return _read_yaml(files.config, _ZooLoader), files.env_id or "PassiveBound-v0", None
+    data = _read_yaml(files.config)
+    run = data.get("run") or {}
+    env_id = run.get("env_id")
+    section = data.get(env_id) if env_id else None
+    if section is None:  # a plain rl-zoo3-style file with one section
+        sections = {k: v for k, v in data.items() if isinstance(v, dict) and k != "run"}
+        if len(sections) == 1:
+            env_id, section = next(iter(sections.items()))
+        else:
+            section = {}
+    if not isinstance(section, dict):
+        raise ValueError(f"{files.config}: section {env_id!r} is not a mapping")
+    return section, env_id or "PassiveBound-v0", run.get("seed")
+
+
+def section_env_kwargs(section: dict, env_id: str) -> dict:
+    """The environment kwargs that matter for evaluation (`DYNAMICS_KWARGS`): those of the
+    registered env id, then the section's ``env_kwargs``."""
+    env_kwargs = section.get("env_kwargs") or {}
+    if not isinstance(env_kwargs, dict):
+        raise ValueError(f"env_kwargs must be a mapping, got {env_kwargs!r}")
+    if env_id != "PassiveBound-v0":
+        import gymnasium as gym
+
+        import bound_env  # noqa: F401 - registers the env ids
+
+        try:
+            spec_kwargs = gym.spec(env_id).kwargs or {}
+        except gym.error.Error:
+            raise ValueError(
+                f"the policy was trained on {env_id!r}, which is not a registered environment"
+            ) from None
+        env_kwargs = {**spec_kwargs, **env_kwargs}
+    return {k: v for k, v in env_kwargs.items() if k in DYNAMICS_KWARGS}
+
+
+def read_run_config(config: Path | None) -> tuple[dict, int | None, list]:
+    """(environment kwargs that matter for evaluation, seed, env_wrapper entries) from a
+    run's config.yaml."""
+    if config is None:
+        return {}, None, []
+    layout = "rl-zoo3" if config.name == "config.yml" else "bound_env"
+    files = PolicyFiles(config, None, config, layout, config.parent.name)
+    section, env_id, seed = read_policy_section(files)
+    return section_env_kwargs(section, env_id), seed, section.get("env_wrapper") or []
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with Path(path).open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def write_fingerprint(folder: str | Path, **extra) -> Path:
+    """Bind the files of the policy in ``folder`` together: the sha256 of ``model.zip``,
+    ``vecnormalize.pkl`` and, when present, ``config.yaml`` and ``base.json``
+    (`FINGERPRINTED_SETTINGS`) in ``fingerprint.json`` (written atomically), checked by
+    `check_policy_files`."""
+    import json
+
+    from bound_env.cache import atomic_write
+
+    folder = Path(folder)
+    data = {"model.zip": file_sha256(folder / "model.zip")}
+    for name in ("vecnormalize.pkl", *FINGERPRINTED_SETTINGS):
+        if (folder / name).is_file():
+            data[name] = file_sha256(folder / name)
+    data.update(extra)
+    return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
+
+
+def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -> list[str]:
+    """ValueError for a policy whose evaluation would be silently wrong; returns warnings.
+
+    - no config: the env kwargs it was trained with (``max_torque``, ``dt``, wrappers) are
+      unknown (``force`` evaluates it with the env's defaults);
+    - trained with ``normalize`` but no ``vecnormalize.pkl`` beside the model;
+    - a ``fingerprint.json`` (written at export and at the end of training) that does not match
+      the model or the statistics: they belong to different policies;
+    - a ``config.yaml`` (or ``base.json``) that does not match the fingerprint: edited or cut
+      short since the policy was saved (a config cut before ``env_kwargs`` still parses, and
+      would evaluate the policy at the env's default max_torque); ``force`` evaluates it as it
+      is, with a warning.
+    """
+    warnings = []
+    if files.config is None:
+        msg = (
+            f"policy {files.model}: no config.yaml beside it, so the environment it was "
+            "trained on (max_torque, dt, observation filter) is unknown"
+        )
+        if not force:
+            raise ValueError(msg + "; pass --force to evaluate it with the env's defaults")
+        warnings.append(msg)
+    if section.get("normalize") and files.vecnormalize is None:
+        where = files.config.parent if files.config is not None else files.model.parent
+        raise ValueError(
+            f"policy {files.model} was trained with normalize="
+            f"{section['normalize']!r} but {where} has no vecnormalize.pkl"
+        )
+    fp = files.fingerprint
+    if fp.is_file():
+        import json
+
+        try:
+            want = json.loads(fp.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            raise ValueError(f"{fp}: not a readable JSON file") from None
+        pairs = [("model.zip", files.model), ("vecnormalize.pkl", files.vecnormalize)]
+        for key, path in pairs:
+            if key in want and (path is None or file_sha256(path) != want[key]):
+                raise ValueError(
+                    f"{path or key} does not match {fp} (sha256): the model and "
+                    "its normalization statistics belong to different policies"
+                )
+        for key in FINGERPRINTED_SETTINGS:
+            path = files.model.parent / key
+            if key in want and path.is_file() and file_sha256(path) != want[key]:
+                msg = (
+                    f"{path} does not match {fp} (sha256): it was changed or cut short "
+                    "after the policy was saved"
+                )
+                if not force:
+                    raise ValueError(
+                        msg + "; pass --force (margins, rollout, basin-map) to evaluate the "
+                        "policy with it as it is"
+                    )
+                warnings.append(msg)
+    elif files.vecnormalize is not None and files.layout == "bound_env":
+        warnings.append(
+            f"{files.model.parent}: no {FINGERPRINT_FILE}, so it cannot be checked "
+            "that vecnormalize.pkl belongs to this model"
+        )
+    return warnings
