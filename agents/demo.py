@@ -116,7 +116,7 @@ def _run(controller, gait, z0, z_star, show_after: int = 0) -> dict:
     ``show_after`` more strides on the cycle (recorded, not counted)."""
     from bound_env.analysis.margins import ClosedLoop
 
-    loop = ClosedLoop(controller, gait)
+    loop = ClosedLoop(controller, gait, through_map=False)  # its env recorded, step by step
     rec = _Recorded(loop.env)
     loop.env = rec
     returned, strides, failure = loop.run(z0, z_star, DEMO_STRIDES)

@@ -53,7 +53,11 @@ class ClosedLoop:
         gait: str = "default",
         gait_overrides: dict | None = None,
         env_extra: dict | None = None,
+        through_map: bool = True,
     ):
+        """``through_map``: advance a stride controller's strides through the one stride map
+        (the same strides as the env loop, bit for bit); False steps ``env`` interval by
+        interval, for a caller that records it (the demo)."""
         import gymnasium as gym
 
         import bound_env
@@ -79,8 +83,10 @@ class ClosedLoop:
         # what it outputs interval by interval), without a Python call per interval
         self.plant = StrideMap(gait, overrides or None, self.dt, self.max_torque, EVAL_RTOL)
         self.stride_map = None  # set for a stride controller on smooth ground
-        if callable(getattr(controller, "interval_actions", None)) and not kwargs.get(
-            "slope_noise_deg"
+        if (
+            through_map
+            and callable(getattr(controller, "interval_actions", None))
+            and not kwargs.get("slope_noise_deg")
         ):
             self.stride_map = self.plant
 
