@@ -35,7 +35,7 @@ from .policy import load_controller
 # The agents modules whose code a controller loaded here may run: a trained PPO policy
 # (policy.py), a stride-level policy (stride.py), a distilled student (distill.py). bound_env/
 # (the classical controllers included) is hashed by the core itself.
-POLICY_SOURCES = ("policy.py", "stride.py", "distill.py")
+POLICY_SOURCES = ("policy.py", "controllers.py", "mlp.py", "policy_files.py", "stride.py", "distill.py")
 
 
 def as_controller(policy, gait=None):
