@@ -32,10 +32,18 @@ from bound_env.parallel import SerialExecutor  # noqa: F401 - its old home, kept
 
 from .policy import load_controller
 
-# The agents modules whose code a controller loaded here may run: a trained PPO policy
-# (policy.py), a stride-level policy (stride.py), a distilled student (distill.py). bound_env/
-# (the classical controllers included) is hashed by the core itself.
-POLICY_SOURCES = ("policy.py", "controllers.py", "mlp.py", "policy_files.py", "stride.py", "distill.py")
+# The agents modules whose code a controller loaded here may run: the loaders (policy.py,
+# policy_files.py), a trained PPO policy (controllers.py, mlp.py), a stride-level policy
+# (stride.py), a distilled student (distill.py). bound_env/ (the classical controllers
+# included) is hashed by the core itself.
+POLICY_SOURCES = (
+    "policy.py",
+    "policy_files.py",
+    "controllers.py",
+    "mlp.py",
+    "stride.py",
+    "distill.py",
+)
 
 
 def as_controller(policy, gait=None):

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, chi2, lognorm
 
-from agents.margins import as_controller, policy_sources
+from agents.margins import POLICY_SOURCES, as_controller, policy_sources
 from agents.policy import MLPController, ZeroController
 from bound_env.analysis import margins
 from bound_env.analysis.margins import (
@@ -373,7 +373,8 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
     k0 = setup_key(c, "default", q)
     # the files of a controller's code outside bound_env/ (the agents front names them)
     extra = policy_sources(c)
-    assert {f.name for f in extra} == {"policy.py", "stride.py", "distill.py"}
+    assert {f.name for f in extra} == set(POLICY_SOURCES)
+    assert {"policy.py", "controllers.py", "mlp.py", "distill.py"} <= set(POLICY_SOURCES)
     assert all(f.is_file() and f.parent.name == "agents" for f in extra)
     own = tmp_path / "own.py"
     own.write_text("GAIN = 1\n")
