@@ -87,7 +87,18 @@ class ChoicePolicyController(MPCController):
         return mlp_forward(self.layers, x, "Tanh")  # tanh hidden layers, linear output
 
     def plan(self, z) -> np.ndarray:
+        """The coefficients at apex z: the LQR's within the safe radius, else the library row
+        the network picks (row 0: the LQR's own plan). For n apex states Z (n, 6) at once,
+        (n, K): one forward pass for all (equal to row by row to rounding)."""
         z = np.asarray(z, dtype=float)
+        if z.ndim == 2:
+            U = np.array([self.lqr.coefficients(zi) for zi in z]).reshape(len(z), -1)
+            past = np.max(np.abs(z - self.z_ref) / self.scales, axis=1) > self.safe
+            if past.any():
+                c = np.argmax(self.logits(z[past]), axis=1)
+                rows = np.flatnonzero(past)
+                U[rows[c > 0]] = self.rows[c[c > 0]]
+            return U
         u_lqr = self.lqr.coefficients(z)
         if np.max(np.abs(z - self.z_ref) / self.scales) <= self.safe:
             return u_lqr

@@ -165,3 +165,22 @@ class Fixed:
 
         U = np.tile(self.u, (len(np.atleast_2d(Z)), 1))
         return interval_actions_of(self.basis, self.max_torque, U, grid_times(self.dt), self.dt)
+
+
+def test_stride_controllers_plan_for_n_apex_states_at_once(lqr):
+    from agents.policy import load_controller as load_policy
+
+    Z = np.concatenate([starts(lqr.z_ref, 6, r=0.02), starts(lqr.z_ref, 6, r=0.3)])
+    U = lqr.plan(Z)
+    assert U.shape == (len(Z), K)
+    np.testing.assert_allclose(U, [lqr.coefficients(z) for z in Z], rtol=0, atol=1e-12)
+    default = load_policy("default")
+    U = default.plan(Z)
+    np.testing.assert_array_equal(U, [default.plan(z) for z in Z])
+    assert np.any(U != lqr.plan(Z))  # the network overrides the LQR somewhere out there
+    mpc = load_controller("mpc")
+    np.testing.assert_array_equal(mpc.plan(Z[5:7]), [mpc.plan(Z[5]), mpc.plan(Z[6])])
+    # and their step env actions for n states at once are those of one state at a time
+    A = default.interval_actions(Z[:3])
+    assert A.shape == (3, max_intervals(default.dt))
+    np.testing.assert_array_equal(A[1], default.interval_actions(Z[1])[0])

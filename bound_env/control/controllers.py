@@ -147,6 +147,14 @@ class StrideFeedback:
         """The action of PassiveBoundStride-v1 at apex state z."""
         return self.coefficients(z)
 
+    def plan(self, Z) -> np.ndarray:
+        """The coefficients for n apex states at once, (n, K) for Z (n, 6) (one matrix
+        product: equal to `coefficients` row by row to rounding); (K,) for one state."""
+        Z = np.asarray(Z, dtype=float)
+        if Z.ndim == 1:
+            return self.coefficients(Z)
+        return np.clip(-((Z - self.z_ref) @ self.gain.T), -1.0, 1.0)
+
     def interval_actions(self, Z) -> np.ndarray:
         """The step env's actions of the strides from the apex states Z (module docstring)."""
         U = [self.coefficients(z) for z in np.atleast_2d(Z)]

@@ -202,8 +202,11 @@ class MPCController:
         return scores(*out, self.horizon), out[0], out[1]
 
     def plan(self, z) -> np.ndarray:
-        """The coefficients of the stride from apex z (the decision, untimed)."""
+        """The coefficients of the stride from apex z (the decision, untimed); for n apex
+        states Z (n, 6) at once, (n, K), each row decided alone."""
         z = np.asarray(z, dtype=float)
+        if z.ndim == 2:
+            return np.array([self.plan(zi) for zi in z]).reshape(len(z), self.basis.K)
         u_lqr = self.lqr.coefficients(z)
         if np.max(np.abs(z - self.z_ref) / self.scales) <= self.safe:
             return u_lqr
