@@ -207,6 +207,12 @@ class DampingFeedback:
     def __call__(self, obs) -> float:
         return float(np.clip(-self.c * float(obs[OBS_TH2DOT]) / self.max_torque, -1.0, 1.0))
 
+    def batch(self, obs) -> np.ndarray:
+        """The actions for a batch of observations (one row each), as ``__call__`` row by
+        row (the same elementwise operations)."""
+        x = np.asarray(obs)[:, OBS_TH2DOT].astype(float)
+        return np.clip(-self.c * x / self.max_torque, -1.0, 1.0)
+
     def fingerprint(self) -> str:
         return hashlib.sha256(
             repr(("damping", self.c, self.max_torque, self.dt, self.gait)).encode()

@@ -11,6 +11,7 @@ import numpy as np
 
 from ...control.controllers import StridePlans
 from ...events import PHASES
+from ...params import Z_IN_Y
 from ...stride_map import (
     EVAL_RTOL,
     RETURN_TOL,
@@ -19,13 +20,14 @@ from ...stride_map import (
     max_intervals,
     to_next_apex,
 )
-from ...task import FAILURE_NAMES
+from ...task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS
 from .budget import DEFAULT_SEED, Budget
 
 ENV_ID = "PassiveBound-v0"
 PROFILE_SEG = 5  # ceiling search: control intervals per piece of a torque profile
 PROFILE_SPAN = 1.3  # ceiling search: the profile covers 1.3 x the strides' nominal duration
 STRIDES = [0]  # strides advanced in this process (benchmarks/margins.py reads it)
+_Z_IDX = np.array(Z_IN_Y)  # z = y[_Z_IDX] at an apex
 
 
 @dataclass
@@ -170,12 +172,14 @@ class ClosedLoop:
         strides are its own)."""
         Z = np.array(np.atleast_2d(Z0), dtype=float)
         kicks = list(kicks) if kicks is not None else [None] * len(Z)
-        if self.stride_map is None:
-            pairs = zip(Z, kicks, strict=True)
-            return [self.run(z, z_target, max_strides, kick=k) for z, k in pairs]
         for k in kicks:
             if k is not None and not 4 <= k[1] <= 7:
                 raise ValueError(f"a kick changes a velocity (state index 4..7), got {k[1]}")
+        if self.stride_map is None:
+            if callable(getattr(self.controller, "batch", None)) and self.on_apex is None:
+                return self._run_many_batched(Z, z_target, max_strides, kicks)
+            pairs = zip(Z, kicks, strict=True)
+            return [self.run(z, z_target, max_strides, kick=k) for z, k in pairs]
         out: list = [None] * len(Z)
         live = np.arange(len(Z))
         for n in range(1, max_strides + 1):
@@ -196,6 +200,60 @@ class ClosedLoop:
                 break
         for i in live:
             out[i] = (False, max_strides, None)
+        return out
+
+    def _run_many_batched(self, Z, z_target, max_strides: int, kicks) -> list:
+        """`run_many` of a step-level controller with ``batch(obs)``: all robots stepped
+        together through the env's task, one ``batch`` call per control interval, each robot
+        restarted at its apex as `stride` restarts the env (the actions are ``batch``'s, equal
+        to ``__call__`` row by row to rounding)."""
+        task, ctrl = self.env.task, self.controller
+        n = len(Z)
+        b = task.new_batch(n)
+        for i in range(n):
+            task.reset_robot(b, i, Z[i])
+        out: list = [None] * n
+        strides = np.zeros(n, dtype=np.int64)  # completed
+        steps = np.zeros(n, dtype=np.int64)  # intervals in the current stride
+        live = np.ones(n, dtype=np.bool_)
+        for i in np.flatnonzero(b.s[:, S_STATUS] >= FAIL_FIRST):  # impossible starts
+            out[i] = (False, 1, FAILURE_NAMES[int(b.s[i, S_STATUS])])
+            live[i] = False
+        kick_at = np.array([-1 if k is None else k[0] for k in kicks])
+        while live.any():
+            for i in np.flatnonzero(live & (strides == 0) & (steps == kick_at)):
+                b.y[i, kicks[i][1]] += kicks[i][2]
+            b.actions[:] = ctrl.batch(b.obs)
+            b.active[:] = live
+            task.step(b)
+            steps[live] += 1
+            s = b.s
+            apex = live & (s[:, S_NAPEX] > 0)
+            failed = live & ~apex & (s[:, S_STATUS] >= FAIL_FIRST)
+            timeout = live & ~apex & ~failed & (steps >= self.max_steps)
+            for i in np.flatnonzero(apex | failed | timeout):
+                if apex[i]:
+                    strides[i] += 1
+                    napex = min(int(s[i, S_NAPEX]), b.apex.shape[1])
+                    z = np.array(b.apex[i, napex - 1][_Z_IDX], dtype=float)
+                    STRIDES[0] += 1
+                    if not np.all(np.isfinite(z)):
+                        out[i] = (False, int(strides[i]), "non_finite")
+                    elif np.max(np.abs(z - z_target)) < RETURN_TOL:
+                        out[i] = (True, int(strides[i]), None)
+                    elif strides[i] >= max_strides:
+                        out[i] = (False, max_strides, None)
+                    else:
+                        task.reset_robot(b, i, z)
+                        steps[i] = 0
+                        continue
+                    live[i] = False
+                elif failed[i]:
+                    out[i] = (False, int(strides[i]) + 1, FAILURE_NAMES[int(s[i, S_STATUS])])
+                    live[i] = False
+                else:
+                    out[i] = (False, int(strides[i]) + 1, "no_apex")
+                    live[i] = False
         return out
 
     def episode(self, z0, max_strides: int, seed: int | None = None) -> tuple:
@@ -269,10 +327,9 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
 
     from gymnasium.utils import seeding
 
-    from bound_env.params import Z_IN_Y
-    from bound_env.task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_STRIDES
+    from bound_env.task import S_STRIDES
 
-    z_idx = np.array(Z_IN_Y)  # z = y[z_idx] at an apex (as the task reads info["apex_z"])
+    z_idx = _Z_IDX  # z = y[z_idx] at an apex (as the task reads info["apex_z"])
 
     task, ctrl = loop.env.task, loop.controller
     n = len(seeds)
