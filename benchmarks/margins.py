@@ -4,7 +4,8 @@
     python benchmarks/margins.py --policy mpc --budget full --base ../wt-base   # vs a checkout
 
 For one column (``--policy``) it runs every task of one margins evaluation serially in this
-process, without the cache, and prints each measure's wall time, its share, the strides it
+process, without the cache (after a warm-up on the test budget, so that compiling is not
+timed), and prints each measure's wall time, its share, the strides it
 advanced and the strides per second. With ``--base DIR`` (a checkout of another version, e.g.
 today's main in a `git worktree`), the same tasks run in a subprocess on that code first, and
 a ratio column says how much faster this code is, both timed in this run. The machine's load
@@ -13,6 +14,10 @@ compare (benchmark on a quiet machine: load under 1.5).
 
 ``--measures curve,basin`` restricts the run to some measures (the cycle always runs first: the
 others start from the closed-loop fixed point it finds).
+
+With ``--base``, the results are compared too, task by task (every number but the timings):
+the last columns count the tasks whose results are identical, and the largest relative
+difference of a number elsewhere (the contract of a refactor: the same outcomes).
 """
 
 from __future__ import annotations
@@ -35,16 +40,72 @@ def _api():
         from bound_env.analysis.margins import closed_loop as cl
         from bound_env.analysis.margins import run as core
 
-        return core.Setup, core.run_task, core.setup_key, core.as_budget, cl.STRIDES, "core"
+        return (
+            core.Setup, core.run_task, core.setup_key, core.as_budget, cl.STRIDES, "core",
+            core.MFPT_CHUNK,
+        )  # fmt: skip
     except ImportError:  # a checkout from before the move (no stride counter)
         from agents import margins as core
 
-        return core.Setup, core.run_task, core.setup_key, core.BUDGETS.get, None, "agents"
+        return (
+            core.Setup, core.run_task, core.setup_key, core.BUDGETS.get, None, "agents",
+            core.MFPT_CHUNK,
+        )  # fmt: skip
 
 
-def jobs_of(budget, measures) -> list:
+TIMINGS = ("seconds", "decision_seconds")
+
+
+def _untimed(x):
+    """A task's result without its wall times (JSON-able)."""
+    if isinstance(x, dict):
+        return {k: _untimed(v) for k, v in x.items() if k not in TIMINGS}
+    if isinstance(x, (list, tuple)):
+        return [_untimed(v) for v in x]
+    if hasattr(x, "tolist"):
+        return x.tolist()
+    return x
+
+
+def _merge_chunks(results: list) -> list:
+    """MFPT results per sigma, whatever the checkout's robots per task: the chunks of one
+    sigma joined (robots in order); other results as they are."""
+    if not results or "chunk" not in results[0]:
+        return results
+    by_sigma: dict = {}
+    for r in results:
+        m = by_sigma.setdefault(r["sigma_deg"], {"sigma_deg": r["sigma_deg"], "robots": 0,
+                                                 "strides": [], "fell": [], "failures": {}})
+        m["robots"] += r["robots"]
+        m["strides"] += r["strides"]
+        m["fell"] += r["fell"]
+        for k, n in r["failures"].items():
+            m["failures"][k] = m["failures"].get(k, 0) + n
+    return list(by_sigma.values())
+
+
+def max_difference(a, b) -> float:
+    """The largest relative difference between two results' numbers (inf: other keys,
+    lengths, strings or outcomes)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        if set(a) != set(b):
+            return math.inf
+        return max((max_difference(a[k], b[k]) for k in a), default=0.0)
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return math.inf
+        return max((max_difference(x, y) for x, y in zip(a, b, strict=True)), default=0.0)
+    if isinstance(a, bool) or isinstance(b, bool) or not isinstance(a, (int, float)):
+        return 0.0 if a == b else math.inf
+    if not isinstance(b, (int, float)):
+        return math.inf
+    if a == b or (math.isnan(a) and math.isnan(b)):
+        return 0.0
+    return abs(a - b) / max(abs(a), abs(b))
+
+
+def jobs_of(budget, measures, chunk: int) -> list:
     """The (measure, args) tasks of one evaluation (as compute_margins lists them)."""
-    chunk = 16
     jobs = []
     for m in measures:
         if m == "basin" or m == "ceiling":
@@ -73,7 +134,7 @@ def measure(policy: str, budget_name: str, measures: list[str], gait: str) -> di
     from agents.policy import load_controller
     from bound_env.params import load_gait
 
-    Setup, run_task, setup_key, as_budget, strides, where = _api()
+    Setup, run_task, setup_key, as_budget, strides, where, chunk = _api()
     budget = as_budget(budget_name)
     ctrl = load_controller(policy, gait=gait)
     z_star = np.asarray(load_gait(gait).z0, dtype=float)
@@ -90,6 +151,7 @@ def measure(policy: str, budget_name: str, measures: list[str], gait: str) -> di
             "strides": (strides[0] - n0) if strides is not None else None,
             "tasks": len(args_list),
             "load": os.getloadavg()[0],
+            "results": _merge_chunks([_untimed(r) for r in results]),
         }
         print(f"  {where}: {name:8s} {dt:8.1f} s", file=sys.stderr, flush=True)
         return results
@@ -103,7 +165,7 @@ def measure(policy: str, budget_name: str, measures: list[str], gait: str) -> di
     )
     for m in measures:
         if m != "cycle":
-            timed(m, [args for name, args in jobs_of(budget, [m]) if name == m])
+            timed(m, [args for name, args in jobs_of(budget, [m], chunk) if name == m])
     return out
 
 
@@ -122,6 +184,7 @@ def main(argv=None) -> int:
     if bad:
         ap.error(f"--measures: unknown {bad}; known: {', '.join(MEASURES)}")
     if a.raw:
+        measure(a.policy, "test", measures, a.gait)  # compile (or load) every kernel first
         print(json.dumps(measure(a.policy, a.budget, measures, a.gait)))
         return 0
     base = None
@@ -139,14 +202,15 @@ def main(argv=None) -> int:
             return 1
         base = json.loads(r.stdout.strip().splitlines()[-1])
     print("this checkout", file=sys.stderr)
+    measure(a.policy, "test", measures, a.gait)  # compile (or load) every kernel first
     new = measure(a.policy, a.budget, measures, a.gait)
     total = sum(v["seconds"] for v in new.values())
     print(f"\n{a.policy}, budget {a.budget}, one process, no cache")
     head = "| measure | tasks | seconds | share | strides | strides/s | load |"
     sep = "| --- | --- | --- | --- | --- | --- | --- |"
     if base:
-        head += " base seconds | base load | speed-up |"
-        sep += " --- | --- | --- |"
+        head += " base seconds | base load | speed-up | identical tasks | max rel. difference |"
+        sep += " --- | --- | --- | --- | --- |"
     print(head)
     print(sep)
     rows = list(new) + ["total"]
@@ -169,6 +233,15 @@ def main(argv=None) -> int:
                 "load": float("nan"),
             }
             line += f" {b['seconds']:.1f} | {b['load']:.2f} | {b['seconds'] / v['seconds']:.2f}x |"
+            if m != "total":
+                d = [
+                    max_difference(x, y)
+                    for x, y in zip(v["results"], b["results"], strict=True)
+                ]
+                worst = max(d, default=0.0)
+                line += f" {sum(x == 0.0 for x in d)}/{len(d)} | {worst:.1e} |"
+            else:
+                line += " | |"
         print(line)
     if a.json:
         Path(a.json).write_text(json.dumps({"new": new, "base": base}, indent=1))
