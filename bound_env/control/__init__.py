@@ -66,7 +66,7 @@ def load_controller(spec, gait: str | None = None):
     K = task.K
     lin = linearize(task.sim, task.z_ref, s.jacobian)
     A_n, B_n = lin.normalized(task.apex_scales)
-    G = read_gain(s, K, s.basis)
+    G = read_gain(s, K, s.basis, gait)
     design = {
         "A": lin.A.tolist(),
         "B": lin.B.tolist(),

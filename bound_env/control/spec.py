@@ -175,10 +175,14 @@ def weights(path, key: str, value, n: int) -> np.ndarray:
     return np.diag(w)
 
 
-def read_gain(spec: ControllerSpec, K: int, basis: str) -> np.ndarray | None:
-    """The explicit gain of the spec (K x 6, SI) or None; ValueError if its shape does not
-    match the basis."""
+def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None):
+    """The explicit gain of the spec (K x 6, SI) for ``gait`` (default: the spec's), or None
+    (to be designed); ValueError if its shape does not match the basis. ``gain`` is one
+    matrix (for every gait), a file, or a mapping of gait names to matrices (a gait it does
+    not list is designed)."""
     g = spec.gain
+    if isinstance(g, dict):
+        g = g.get(str(gait if gait is not None else spec.gait))
     if g is None:
         return None
     if isinstance(g, str):
