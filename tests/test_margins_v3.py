@@ -13,7 +13,7 @@ import pytest
 from scipy.stats import binomtest, chi2, lognorm
 
 from agents.margins import POLICY_SOURCES, as_controller, policy_sources
-from agents.policy import MLPController, ZeroController
+from agents.controllers import MLPController, ZeroController
 from bound_env.analysis import margins
 from bound_env.analysis.margins import (
     BUDGETS,

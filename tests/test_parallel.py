@@ -299,7 +299,7 @@ def test_zero_action_through_the_vector_kernel_matches_the_passive_map():
     """Physics cross-check: the closed loop with zero action (interval-by-interval, kernel of
     the vector env) and the compiled passive strides give the same outcomes away from the
     basin's edge."""
-    from agents.policy import ZeroController
+    from agents.controllers import ZeroController
     from bound_env.analysis.basin import BasinSpec, run_chunk
     from bound_env.params import load_gait
 
