@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from agents.config import DEFAULT_CONFIG, apply_sets, load_hyperparams, parse_set, preprocess
+from agents.controllers import MLPController, ZeroController
 from agents.margins import compute_margins
-from agents.policy import MLPController, ZeroController, load_controller
+from agents.policy import load_controller
 from bound_env.analysis.margins import BUDGETS, random_directions
 from bound_env.analysis.numerics import (
     bisect_threshold,

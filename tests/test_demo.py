@@ -10,6 +10,7 @@ import json
 import numpy as np
 import pytest
 
+from agents.controllers import ZeroController
 from agents.demo import (
     DEMO_DIRECTIONS,
     DEMO_INDEX,
@@ -21,7 +22,7 @@ from agents.demo import (
     demo_start,
     table_lines,
 )
-from agents.policy import ZeroController, load_controller
+from agents.policy import load_controller
 from bound_env.analysis.margins import DEFAULT_SEED, ClosedLoop, random_directions
 
 

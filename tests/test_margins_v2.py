@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from agents.compare import parse_entry
-from agents.margins import as_controller
 from agents.controllers import ZeroController
+from agents.margins import as_controller
 from agents.train import VALIDATION_SEED, BasinValidationCallback
 from bound_env.analysis import margins
 from bound_env.analysis.margins import (

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, chi2, lognorm
 
-from agents.margins import POLICY_SOURCES, as_controller, policy_sources
 from agents.controllers import MLPController, ZeroController
+from agents.margins import POLICY_SOURCES, as_controller, policy_sources
 from bound_env.analysis import margins
 from bound_env.analysis.margins import (
     BUDGETS,
