@@ -85,11 +85,13 @@ def stride(y, aux, flags, s, apex, obs, cfg, actions, kick_step, kick_index, kic
     `bound_env.task.reset_at_apex`): interval k holds actions[min(k, len - 1)]; before interval
     ``kick_step`` the velocity y[kick_index] gets ``kick_delta``. At most ``n_max`` intervals.
 
-    Returns (status, t, impulse, intervals): `APEX` with t the apex time, else the failure
-    code and the time reached; impulse = integral of |tau| dt up to t [N m s]. At an apex the
-    full state is ``apex[0]``; after a failure, ``y`` is the last state."""
+    Returns (status, t, impulse, intervals, impulse_before, t_prev): `APEX` with t the apex
+    time, else the failure code and the time reached; impulse = integral of |tau| dt up to t
+    [N m s], impulse_before the same up to t_prev, the start of the last interval. At an apex
+    the full state is ``apex[0]`` (and s[S.T] the end of that interval); after a failure,
+    ``y`` is the last state."""
     if s[S.STATUS] >= FAIL_FIRST:  # an impossible start
-        return int(s[S.STATUS]), 0.0, 0.0, 0
+        return int(s[S.STATUS]), 0.0, 0.0, 0, 0.0, 0.0
     n_a = actions.shape[0]
     t_prev = 0.0
     impulse = 0.0
@@ -100,13 +102,14 @@ def stride(y, aux, flags, s, apex, obs, cfg, actions, kick_step, kick_index, kic
         tau = abs(s[S.TAU])
         if s[S.NAPEX] > 0.0:
             t_apex = s[S.T_APEX]
-            impulse += tau * max(0.0, t_apex - t_prev)
-            return APEX, t_apex, impulse, k + 1
+            total = impulse + tau * max(0.0, t_apex - t_prev)
+            return APEX, t_apex, total, k + 1, impulse, t_prev
+        before = impulse
         impulse += tau * (s[S.T] - t_prev)
-        t_prev = s[S.T]
         if s[S.STATUS] >= FAIL_FIRST:
-            return int(s[S.STATUS]), s[S.T], impulse, k + 1
-    return F_NO_APEX, s[S.T], impulse, n_max
+            return int(s[S.STATUS]), s[S.T], impulse, k + 1, before, t_prev
+        t_prev = s[S.T]
+    return F_NO_APEX, s[S.T], impulse, n_max, impulse, t_prev
 
 
 @jit
@@ -178,10 +181,10 @@ def to_next_apex(
 def strides(
     Y, AUX, FLAGS, SS, APEXES, OBS, cfg, A, kick_step, kick_index, kick_delta, n_max, out
 ):
-    """`stride` for every robot i of a batch (row i of each array); ``out[i]`` = (status, t,
-    impulse, intervals)."""
+    """`stride` for every robot i of a batch (row i of each array); ``out[i]`` = its six
+    returns."""
     for i in range(Y.shape[0]):
-        st, t, imp, k = stride(
+        st, t, imp, k, before, t_prev = stride(
             Y[i],
             AUX[i],
             FLAGS[i],
@@ -196,6 +199,7 @@ def strides(
             n_max,
         )
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = st, t, imp, k
+        out[i, 4], out[i, 5] = before, t_prev
 
 
 @dataclass
@@ -209,6 +213,10 @@ class Strides:
     intervals: np.ndarray  # (n,) control intervals stepped
     y_end: np.ndarray  # (n, 8) full state at the end (the apex, or the last state)
     phase: np.ndarray  # (n,) stance condition index at the end (`bound_env.events.PHASES`)
+    t_step: np.ndarray  # (n,) end of the last interval stepped [s]
+    t_prev: np.ndarray  # (n,) its start [s]
+    tau_last: np.ndarray  # (n,) |tau| held over it [N m]
+    impulse_before: np.ndarray  # (n,) integral of |tau| dt up to t_prev [N m s]
 
     @property
     def ok(self) -> np.ndarray:
@@ -294,7 +302,7 @@ class StrideMap:
         for i, kick in enumerate(kicks if kicks is not None else ()):
             if kick is not None:
                 ks[i], ki[i], kd[i] = int(kick[0]), int(kick[1]), float(kick[2])
-        out = np.zeros((n, 4))
+        out = np.zeros((n, 6))
         strides(
             b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.task.cfg,
             np.ascontiguousarray(A), ks, ki, kd, self.n_max, out,
@@ -313,6 +321,10 @@ class StrideMap:
             intervals=out[:, 3].astype(np.int64),
             y_end=y_end,
             phase=b.s[:, S.PHASE].astype(np.int64),
+            t_step=b.s[:, S.T].copy(),
+            t_prev=out[:, 5].copy(),
+            tau_last=np.abs(b.s[:, S.TAU]),
+            impulse_before=out[:, 4].copy(),
         )
 
     def open_loop(self, z, actions, seg: int, max_strides: int) -> tuple:

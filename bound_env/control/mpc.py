@@ -79,7 +79,7 @@ def rollouts(
         a = cand[c].copy()
         for k in range(horizon + 1):
             reset_at_apex(y, aux, flags, s, obs, aux0, z, cfg)
-            status, t, _, _ = stride(y, aux, flags, s, apex, obs, cfg, a, NO_KICK, 0, 0.0, n_max)
+            status, t = stride(y, aux, flags, s, apex, obs, cfg, a, NO_KICK, 0, 0.0, n_max)[:2]
             if status != APEX:
                 outcome[c] = FELL
                 progress[c] = k + min(t / period, 1.0)

@@ -107,10 +107,14 @@ class ClosedLoop:
                 raise ValueError(f"a kick changes a velocity (state index 4..7), got {kick[1]}")
             r = self.strides(z[None], None if kick is None else [kick])
             if r.ok[0]:
+                # the apex time as the env loop reads it (the observation's float32 time since
+                # the apex, at the end of that interval), and the effort to it, as before
+                t_step = float(r.t_step[0])
+                t_seen = t_step - float(np.float32(t_step - r.period[0]))
+                impulse = r.impulse_before[0] + r.tau_last[0] * max(0.0, t_seen - r.t_prev[0])
                 return StrideOut(
-                    r.z1[0].copy(), None, float(r.effort[0]), float(r.period[0]),
-                    int(r.intervals[0]),
-                )  # fmt: skip
+                    r.z1[0].copy(), None, float(impulse / t_seen), t_seen, int(r.intervals[0])
+                )
             return StrideOut(
                 None, r.failure(0), steps=int(r.intervals[0]), phase=PHASES[int(r.phase[0])]
             )
