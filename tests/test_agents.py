@@ -42,6 +42,8 @@ MARGIN_KEYS = (
 def test_config_file_parses_in_rl_zoo3_format():
     from stable_baselines3 import PPO
 
+    import agents.train_callbacks as callbacks
+
     hp = load_hyperparams(DEFAULT_CONFIG, "PassiveBound-v0")
     for key in (
         "n_envs",
@@ -69,6 +71,11 @@ def test_config_file_parses_in_rl_zoo3_format():
     assert [c.__name__ for c, _ in spec.callbacks] == [
         "NoiseCurriculumCallback",
         "BasinValidationCallback",
+    ]
+    # the shipped configs and saved runs name them agents.train.<name>: still the classes
+    assert [c for c, _ in spec.callbacks] == [
+        callbacks.NoiseCurriculumCallback,
+        callbacks.BasinValidationCallback,
     ]
     literal = preprocess(load_hyperparams(DEFAULT_CONFIG, "PassiveBoundLiteral-v0"))
     assert literal.env_kwargs["gait"] == "literal-cycle"
@@ -256,7 +263,8 @@ def _dummy_venv(obs_space):
 def test_resume_continues_from_the_last_checkpoint(smoke_run, tmp_path):
     import shutil
 
-    from agents.train import last_checkpoint, train
+    from agents.checkpoints import last_checkpoint
+    from agents.train import train
 
     run = tmp_path / "runs" / "smoke"
     shutil.copytree(smoke_run, run)
@@ -304,7 +312,7 @@ def test_curriculum_raises_the_start_noise():
     import gymnasium as gym
 
     import bound_env
-    from agents.train import NoiseCurriculumCallback
+    from agents.train_callbacks import NoiseCurriculumCallback
     from agents.wrappers import PerturbedStarts
 
     gym.register_envs(bound_env)
