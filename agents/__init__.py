@@ -1,7 +1,8 @@
 """PPO spine controllers for PassiveBound and the stability margins they buy.
 
 - `agents.train`: training with Stable-Baselines3 PPO from rl-zoo3-style configs
-  (``configs/ppo.yaml``), ``bound-env train``;
+  (``configs/ppo.yaml``), ``bound-env train``; its callbacks (`agents.train_callbacks`),
+  checkpoints (`agents.checkpoints`) and a run folder's other files (`agents.run_files`);
 - `agents.policy`: a trained policy (or the zero action) as a fast NumPy controller;
 - `agents.margins`: ``bound-env margins``, the front that loads a policy for
   `bound_env.analysis.margins` (basin, Floquet multipliers, slope and stiffness windows, push

@@ -10,9 +10,10 @@ state z = z* + s * apex_scales * xi (``reset(options={"apex_state": z})``), wher
 - the direction xi is, with probability ``axis_prob``, one axis (a single component, either
   sign: the directions in which the basin is measured) and otherwise U(-1, 1) in every component.
 
-``noise_scale`` is the curriculum's knob: `agents.train.NoiseCurriculumCallback` raises it
-during training through ``VecEnv.env_method("set_noise_scale", value)`` (SB3 finds the method
-through ``get_wrapper_attr``, so it works under `Monitor`, `TimeLimit` and `SubprocVecEnv`).
+``noise_scale`` is the curriculum's knob: `agents.train_callbacks.NoiseCurriculumCallback`
+raises it during training through ``VecEnv.env_method("set_noise_scale", value)`` (SB3 finds the
+method through ``get_wrapper_attr``, so it works under `Monitor`, `TimeLimit` and
+`SubprocVecEnv`).
 
 The wrapper is rl-zoo3 compatible: ``env_wrapper: [{agents.wrappers.PerturbedStarts: {...}}]``.
 """

@@ -257,7 +257,8 @@ def _dummy_venv(obs_space):
 def test_resume_continues_from_the_last_checkpoint(smoke_run, tmp_path):
     import shutil
 
-    from agents.train import last_checkpoint, train
+    from agents.checkpoints import last_checkpoint
+    from agents.train import train
 
     run = tmp_path / "runs" / "smoke"
     shutil.copytree(smoke_run, run)
@@ -301,11 +302,21 @@ def test_observation_filter_drops_the_flags():
         ObservationFilter(base, drop=("nope",))
 
 
+def test_configs_name_the_callbacks_through_agents_train():
+    """configs/ppo.yaml and the saved runs' config.yaml name the callbacks
+    ``agents.train.<name>``: still the classes of `agents.train_callbacks`."""
+    import agents.train_callbacks as callbacks
+    from agents.config import get_class_by_name
+
+    for name in ("NoiseCurriculumCallback", "BasinValidationCallback"):
+        assert get_class_by_name(f"agents.train.{name}") is getattr(callbacks, name)
+
+
 def test_curriculum_raises_the_start_noise():
     import gymnasium as gym
 
     import bound_env
-    from agents.train import NoiseCurriculumCallback
+    from agents.train_callbacks import NoiseCurriculumCallback
     from agents.wrappers import PerturbedStarts
 
     gym.register_envs(bound_env)

@@ -12,7 +12,7 @@ import pytest
 from agents.compare import parse_entry
 from agents.controllers import ZeroController
 from agents.margins import as_controller
-from agents.train import VALIDATION_SEED, BasinValidationCallback
+from agents.train_callbacks import VALIDATION_SEED, BasinValidationCallback
 from bound_env.analysis import margins
 from bound_env.analysis.margins import (
     BUDGETS,

@@ -31,8 +31,9 @@ def _zero_residual_policy(tmp_path) -> Path:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
+    from agents.run_files import write_config
     from agents.stride import write_base
-    from agents.train import make_vec, resolve_section, write_config
+    from agents.train import make_vec, resolve_section
 
     hp = resolve_section(CONFIG, STRIDE_ENV_ID, TINY, None)
     spec = preprocess(hp)
@@ -230,7 +231,8 @@ def test_anchored_policy_keeps_the_cycle_whatever_the_weights(zero_run, tmp_path
 @pytest.mark.slow
 def test_checkpoint_without_observation_normalization(tmp_path):
     """norm_obs=False (the stride configs): a checkpoint is written and the run resumes."""
-    from agents.train import last_checkpoint, train
+    from agents.checkpoints import last_checkpoint
+    from agents.train import train
 
     run = train(
         config=CONFIG,

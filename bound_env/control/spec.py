@@ -175,6 +175,19 @@ def weights(path, key: str, value, n: int) -> np.ndarray:
     return np.diag(w)
 
 
+def _gait_key(gains: dict, gait) -> str | None:
+    """The key of ``gains`` that names the gait file ``gait`` (a name or a path), or None."""
+    from ..params import load_gait
+
+    if str(gait) in gains:
+        return str(gait)
+    try:
+        path = load_gait(gait).path.resolve()
+        return next((k for k in gains if load_gait(k).path.resolve() == path), None)
+    except (OSError, ValueError):
+        return None
+
+
 def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None):
     """The explicit gain of the spec (K x 6, SI) for ``gait`` (default: the spec's), or None
     (to be designed); ValueError if its shape does not match the basis. ``gain`` is one
@@ -182,7 +195,7 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
     not list is designed)."""
     g = spec.gain
     if isinstance(g, dict):
-        g = g.get(str(gait if gait is not None else spec.gait))
+        g = g.get(_gait_key(g, gait if gait is not None else spec.gait))
     if g is None:
         return None
     if isinstance(g, str):
