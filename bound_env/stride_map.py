@@ -285,6 +285,11 @@ class StrideMap:
         A = np.broadcast_to(A, (n, A.shape[-1])) if A.ndim == 1 else A
         if Z.shape[1] != 6 or A.shape[0] != n:
             raise ValueError(f"Z must be (n, 6) and A (n, K) or (K,), got {Z.shape}, {A.shape}")
+        if not (np.isfinite(Z).all() and np.isfinite(A).all()):
+            raise ValueError("Z and A must be finite (no NaN or inf)")
+        for kick in kicks if kicks is not None else ():
+            if kick is not None and not 4 <= int(kick[1]) <= 7:
+                raise ValueError(f"a kick changes a velocity (state index 4..7), got {kick[1]}")
         b = self._batch(n)
         for i in range(n):
             self.task.reset_robot(b, i, Z[i])

@@ -184,3 +184,17 @@ def test_stride_controllers_plan_for_n_apex_states_at_once(lqr):
     A = default.interval_actions(Z[:3])
     assert A.shape == (3, max_intervals(default.dt))
     np.testing.assert_array_equal(A[1], default.interval_actions(Z[1])[0])
+
+
+def test_bad_input_is_refused_with_a_one_line_error(lqr):
+    sm = StrideMap("default", None, lqr.dt, 80.0)
+    z = lqr.z_ref
+    for Z, A, kicks, msg in (
+        (z[None, :5], np.zeros((1, 3)), None, "Z must be"),
+        (z[None], np.zeros((2, 3)), None, "A"),
+        (np.full((1, 6), np.nan), np.zeros((1, 3)), None, "finite"),
+        (z[None], np.full((1, 3), np.inf), None, "finite"),
+        (z[None], np.zeros((1, 3)), [(3, 2, 0.1)], "kick"),
+    ):
+        with pytest.raises(ValueError, match=msg):
+            sm.run(Z, A, kicks=kicks)

@@ -103,9 +103,7 @@ class ClosedLoop:
     def stride(self, z, kick: tuple | None = None) -> StrideOut:
         if self.stride_map is not None:
             z = np.asarray(z, dtype=float)
-            if kick is not None and not 4 <= kick[1] <= 7:
-                raise ValueError(f"a kick changes a velocity (state index 4..7), got {kick[1]}")
-            r = self.strides(z[None], None if kick is None else [kick])
+            r = self.strides(z[None], None if kick is None else [kick])  # (checks the kick)
             if r.ok[0]:
                 # the apex time as the env loop reads it (the observation's float32 time since
                 # the apex, at the end of that interval), and the effort to it, as before
