@@ -42,14 +42,21 @@ is the passive Poincare map up to the integrator tolerance.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
 
 import numpy as np
 
 from .params import Gait, load_gait
 from .stride import DEFAULT_T_MAX, simulate_stride
 from .stride_map import EVAL_RTOL, StrideMap, interval_weights
-from .task import DEFAULT_DT, DEFAULT_RESET_NOISE_SCALE, PassiveBoundTask, check_number
+from .task import (
+    DEFAULT_DT,
+    DEFAULT_RESET_NOISE_SCALE,
+    PassiveBoundTask,
+    TaskConfig,
+    check_number,
+)
 
 BASES = ("windows", "phases", "hats")
 DEFAULT_BASIS = "windows"
@@ -210,56 +217,85 @@ class StrideSimulator:
         return self.run(z, u).z1
 
 
-class StrideTask:
-    """Configuration and logic of `bound_env.stride_env.PassiveBoundStrideEnv` (its docstring
-    lists the arguments). Reuses `bound_env.task.PassiveBoundTask` for the gait, z*, the
-    apex scales and the start state, so both envs start alike from the same seed."""
+@dataclass(frozen=True)
+class StrideTaskConfig:
+    """The stride task's settings: one field per keyword argument of PassiveBoundStride-v1
+    (the env's docstring has their meaning and units). The plant's share of them is the step
+    env's `bound_env.task.TaskConfig` (`plant`), checked there; the basis is checked by
+    `make_basis`, the reward weights by `StrideTask`."""
 
-    def __init__(
-        self,
-        gait: str = "default",
-        gait_overrides: dict | None = None,
-        basis: str = DEFAULT_BASIS,
-        K: int | None = None,
-        max_torque: float = DEFAULT_STRIDE_MAX_TORQUE,
-        reset_noise_scale: float = DEFAULT_RESET_NOISE_SCALE,
-        alive_reward: float = 1.0,
-        tracking_cost_weight: float = 1.0,
-        ctrl_cost_weight: float = DEFAULT_CTRL_COST_WEIGHT,
-        apex_scales=None,
-        rtol: float = DEFAULT_STRIDE_RTOL,
-        slope_noise_deg: float = 0.0,
-        dt: float = DEFAULT_DT,
-    ):
-        self.step_task = PassiveBoundTask(
-            gait=gait,
-            gait_overrides=gait_overrides,
-            dt=dt,
-            max_torque=max_torque,
-            reset_noise_scale=reset_noise_scale,
-            alive_reward=alive_reward,
-            tracking_cost_weight=tracking_cost_weight,
-            ctrl_cost_weight=ctrl_cost_weight,
-            apex_scales=apex_scales,
-            rtol=rtol,
-            slope_noise_deg=slope_noise_deg,
-        )  # (validates every number)
+    gait: str | Path = "default"
+    gait_overrides: dict | None = None
+    basis: str = DEFAULT_BASIS
+    K: int | None = None
+    max_torque: float = DEFAULT_STRIDE_MAX_TORQUE
+    reset_noise_scale: float = DEFAULT_RESET_NOISE_SCALE
+    alive_reward: float = 1.0
+    tracking_cost_weight: float = 1.0
+    ctrl_cost_weight: float = DEFAULT_CTRL_COST_WEIGHT
+    apex_scales: tuple | None = None
+    rtol: float = DEFAULT_STRIDE_RTOL
+    slope_noise_deg: float = 0.0
+    dt: float = DEFAULT_DT
+
+    def plant(self) -> TaskConfig:
+        """The step env's settings of the same robot: the plant a stride advances."""
+        return TaskConfig(
+            gait=self.gait,
+            gait_overrides=self.gait_overrides,
+            dt=self.dt,
+            max_torque=self.max_torque,
+            reset_noise_scale=self.reset_noise_scale,
+            alive_reward=self.alive_reward,
+            tracking_cost_weight=self.tracking_cost_weight,
+            ctrl_cost_weight=self.ctrl_cost_weight,
+            apex_scales=self.apex_scales,
+            rtol=self.rtol,
+            slope_noise_deg=self.slope_noise_deg,
+        )
+
+
+STRIDE_TASK_SETTINGS = tuple(f.name for f in fields(StrideTaskConfig))
+
+
+class StrideTask:
+    """Configuration and logic of `bound_env.stride_env.PassiveBoundStrideEnv`: a
+    `StrideTaskConfig`, or its fields as keyword arguments. Reuses
+    `bound_env.task.PassiveBoundTask` (on the config's `plant`) for the gait, z*, the apex
+    scales and the start state, so both envs start alike from the same seed."""
+
+    def __init__(self, config: StrideTaskConfig | None = None, **settings):
+        unknown = sorted(set(settings) - set(STRIDE_TASK_SETTINGS))
+        if unknown:
+            raise ValueError(
+                f"unknown stride task setting(s) {unknown}; known: {STRIDE_TASK_SETTINGS}"
+            )
+        if config is None:
+            config = StrideTaskConfig(**settings)
+        elif settings:
+            config = replace(config, **settings)
+        self.config = config
+        self.step_task = PassiveBoundTask(config.plant())  # (validates every number)
         self.slope_noise_deg = self.step_task.slope_noise_deg
         self.gait = self.step_task.gait
         self.params = self.step_task.params
         self.z_ref = self.step_task.z_ref
         self.apex_scales = self.step_task.apex_scales
         self.max_torque = self.step_task.max_torque
-        self.alive_reward = check_number("alive_reward", alive_reward, 0.0)
-        self.tracking_cost_weight = check_number("tracking_cost_weight", tracking_cost_weight, 0.0)
-        self.ctrl_cost_weight = check_number("ctrl_cost_weight", ctrl_cost_weight, 0.0)
-        self.rtol = check_number("rtol", rtol, 0.0, strict=True)
+        self.alive_reward = check_number("alive_reward", config.alive_reward, 0.0)
+        self.tracking_cost_weight = check_number(
+            "tracking_cost_weight", config.tracking_cost_weight, 0.0
+        )
+        self.ctrl_cost_weight = check_number("ctrl_cost_weight", config.ctrl_cost_weight, 0.0)
+        self.rtol = check_number("rtol", config.rtol, 0.0, strict=True)
         # the nominal stride is the gait file's (without overrides), so that the basis, like
         # z*, is the same for every override of the same gait
-        nominal = nominal_stride(load_gait(gait), rtol=self.rtol)
-        self.basis = make_basis(basis, K, nominal.t_end, nominal.durations)
+        nominal = nominal_stride(load_gait(config.gait), rtol=self.rtol)
+        self.basis = make_basis(config.basis, config.K, nominal.t_end, nominal.durations)
         self.dt = self.step_task.dt
-        stride_map = StrideMap(gait, gait_overrides, self.dt, self.max_torque, self.rtol)
+        stride_map = StrideMap(
+            config.gait, config.gait_overrides, self.dt, self.max_torque, self.rtol
+        )
         self.sim = StrideSimulator(stride_map, self.basis)
 
     @property

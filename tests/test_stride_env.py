@@ -3,6 +3,7 @@ the passive Poincare map, the profile's interval torques match the reference bac
 rewards, failures, arguments, seeding and both env checkers."""
 
 import warnings
+from dataclasses import replace
 
 import gymnasium as gym
 import numpy as np
@@ -252,3 +253,17 @@ def test_gymnasium_and_sb3_env_checkers_pass_without_warnings(kw):
         sb3_check_env(env.unwrapped)
         sb3_check_env(env)
     env.close()
+
+
+def test_one_config_holds_the_stride_tasks_settings():
+    from bound_env.stride_task import StrideTask, StrideTaskConfig
+
+    cfg = StrideTaskConfig(K=8, max_torque=80.0, dt=0.02)
+    task = StrideTask(cfg, slope_noise_deg=0.1)
+    assert task.config == replace(cfg, slope_noise_deg=0.1)
+    assert task.K == 8 and task.dt == 0.02 and task.sim.dt == 0.02
+    assert task.step_task.config == task.config.plant()  # the plant: the step env's settings
+    with pytest.raises(ValueError, match="unknown stride task setting"):
+        StrideTask(cfg, basis_name="windows")
+    with pytest.raises(ValueError, match="dt"):
+        StrideTask(dt=0.0)
