@@ -218,15 +218,16 @@ def _stride_controller_batch(controller, Z, z_ref, gait, max_strides, tol, rtol)
     outputs interval by interval (``interval_actions``): the same outcomes as the step env's
     loop, without a Python call per interval."""
     from ..stride_map import StrideMap
+    from ..task import DEFAULT_DT, DEFAULT_MAX_TORQUE
 
-    kwargs = controller.env_kwargs
+    kwargs = controller.env_kwargs  # the env's defaults where the controller names none
     key = ("map", controller.fingerprint(), gait, rtol)
     if key not in _TASKS:
         if len(_TASKS) > 16:
             _TASKS.clear()
         _TASKS[key] = StrideMap(
-            gait, kwargs.get("gait_overrides") or None, kwargs.get("dt", 0.01),
-            kwargs["max_torque"], rtol,
+            gait, kwargs.get("gait_overrides") or None, kwargs.get("dt", DEFAULT_DT),
+            kwargs.get("max_torque", DEFAULT_MAX_TORQUE), rtol,
         )  # fmt: skip
     sm = _TASKS[key]
     Z = np.array(Z, dtype=float)
