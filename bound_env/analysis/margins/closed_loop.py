@@ -20,7 +20,7 @@ from ...stride_map import (
     max_intervals,
     to_next_apex,
 )
-from ...task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS
+from ...task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_STRIDES
 from .budget import DEFAULT_SEED, Budget
 
 ENV_ID = "PassiveBound-v0"
@@ -329,10 +329,6 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
 
     from gymnasium.utils import seeding
 
-    from bound_env.task import S_STRIDES
-
-    z_idx = _Z_IDX  # z = y[z_idx] at an apex (as the task reads info["apex_z"])
-
     task, ctrl = loop.env.task, loop.controller
     n = len(seeds)
     z0 = task.check_apex_state(z0)
@@ -395,7 +391,7 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
                 live[i] = False
             elif plans is not None or (copies is not None and on_apex is not None):
                 napex = int(s[i, S_NAPEX])
-                z1 = np.array(b.apex[i, min(napex, b.apex.shape[1]) - 1][z_idx], dtype=float)
+                z1 = np.array(b.apex[i, min(napex, b.apex.shape[1]) - 1][_Z_IDX], dtype=float)
                 t_seen = float(b.obs[i, loop.i_since_apex])
                 if plans is not None:
                     plans.apex(i, z1, t_seen)
