@@ -59,6 +59,11 @@ LEARNED_SELECTION = {
     "student distilled by DAgger from `mpc` with the same seed (`agents/policies/distilled/sS`);"
     " fine-tuning was chosen over the distilled students and 1.5e6 strides over 3e5 there; "
     "`agents/policies/default` is seed 0 (no choice among seeds)",
+    "step-ppo": "recipe (configs/ppo-residual.yaml) **chosen on the validation seed 777** "
+    "(agents/residual.py `validation_curve`: 64 random directions, r = 0.2-0.4), never on this "
+    "page's test set: step-level PPO on PassiveBound-v0 (`bound-env train --config "
+    "ppo-residual`), a residual on `default`'s interval torques active past its safe radius; "
+    "final models, one per seed",
     "warm-started": "ppo-v1's recipe (configs/ppo.yaml, 3e6 steps) unchanged, but the actor "
     "first clones the torques of the shipped `default` (fine-tuned/s0) in the training env "
     "(`train --init-from default`, agents/warmstart.py); final models, nothing chosen on any "
@@ -70,6 +75,7 @@ LEARNED_SELECTION = {
 # the page's (SEED_GROUPS), and the ablations a user can add with --entry (EXTRA_GROUPS)
 SEED_GROUPS = (
     ("fine-tuned", "finetuned"),  # agents/finetune.py: PPO from the distilled (`default`: s0)
+    ("step-ppo", "step-ppo"),  # agents/residual.py: step-level residual PPO over `default`
     ("warm-started", "warm-started"),  # step-level PPO cloned from `default` first
     ("ppo-v1", "ppo-v1-final"),  # ppo-v1's recipe (step-level PPO), final models
 )
@@ -195,12 +201,15 @@ def compare(
             shutil.copyfile(src, dst)
             curves.append((g["label"], g["policies"][0], dst))
     pairs = paired_comparisons(groups)
+    from .decisions import decisions_text, fair_decision_times
+    from .policy import load_controller
+
+    times = fair_decision_times(groups, load_controller, seed)  # the workers are done
     page = render_markdown(groups, plots, curves, budget, note, pairs, basin_maps(docs))
+    page += decisions_text(times, groups)
     path = docs / "MARGINS.md"
-    atomic_write(
-        path.with_name("paired.json"),
-        json.dumps({"budget": budget, "seed": seed, "pairs": pairs}, indent=2) + "\n",
-    )
+    body = {"budget": budget, "seed": seed, "pairs": pairs, "decision_times": times}
+    atomic_write(path.with_name("paired.json"), json.dumps(body, indent=2) + "\n")
     atomic_write(path, page)
     return path
 

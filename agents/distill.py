@@ -101,8 +101,10 @@ class ChoicePolicyController(MPCController):
             return U
         u_lqr = self.lqr.coefficients(z)
         if np.max(np.abs(z - self.z_ref) / self.scales) <= self.safe:
+            self._kind = "gate"
             return u_lqr
         c = int(np.argmax(self.logits(z)[0]))
+        self._kind = "lqr" if c == 0 else "override"
         return u_lqr if c == 0 else self.rows[c].copy()
 
     def fingerprint(self) -> str:

@@ -43,6 +43,8 @@ POLICY_SOURCES = (
     "mlp.py",
     "stride.py",
     "distill.py",
+    "residual.py",
+    "wrappers.py",
 )
 
 

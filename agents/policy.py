@@ -171,7 +171,13 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     section, env_id, seed = read_policy_section(files)
     env_kwargs = section_env_kwargs(section, env_id)
     wrappers = section.get("env_wrapper") or []
-    obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
+    from .residual import residual_settings
+
+    residual = residual_settings(wrappers)
+    if residual is None:
+        obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
+    else:
+        obs_index = None
     for w in check_policy_files(files, section, force):
         print(f"warning: {w}", file=sys.stderr)
     layers, activation = extract_actor(model, model_path)
@@ -184,6 +190,17 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
         seed=seed,
         obs_index=obs_index,
     )
+    read_vecnormalize(ctrl, vecnorm_path)
+    if residual is not None:
+        from .residual import residual_controller
+
+        ctrl = residual_controller(ctrl, residual, model, model_path)
+    check_gait(ctrl, gait, force)
+    return ctrl
+
+
+def read_vecnormalize(ctrl: MLPController, vecnorm_path: Path | None) -> None:
+    """Set ``ctrl``'s observation normalization from a ``vecnormalize.pkl`` (if any)."""
     if vecnorm_path is not None:
         try:
             with vecnorm_path.open("rb") as f:
@@ -204,8 +221,6 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
             ctrl.obs_var = np.asarray(rms.var, dtype=np.float64)
             ctrl.epsilon = float(vn.epsilon)
             ctrl.clip_obs = float(vn.clip_obs)
-    check_gait(ctrl, gait, force)
-    return ctrl
 
 
 def check_spaces(model, env_kwargs: dict, wrappers, model_path: Path) -> np.ndarray | None:

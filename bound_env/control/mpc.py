@@ -47,6 +47,10 @@ from .controllers import (
 
 _Z_IDX = np.array(Z_IN_Y, dtype=np.int64)
 RETURNED, SURVIVED, FELL = 2, 1, 0  # a candidate's outcome, best first
+# Who made a decision (``decision_kinds``): "gate" (within ``safe``: the LQR alone), "lqr"
+# (past it, the LQR's own plan kept: it returns on the planning model, or a learned chooser
+# picked it) and "override" (a searched or chosen profile instead of the LQR's plan).
+DECISION_KINDS = ("gate", "lqr", "override")
 
 
 @jit
@@ -151,6 +155,9 @@ class MPCController:
     seed: int = 0
     library_seed: int = -1  # >= 0: the library's random rows are fixed (drawn from this seed)
     decision_seconds: list = field(default_factory=list, repr=False)
+    # who made each decision (`DECISION_KINDS`): the gate, the LQR's own plan, an override
+    decision_kinds: list = field(default_factory=list, repr=False)
+    _kind: str = field(default="gate", repr=False)
     _u: np.ndarray | None = field(default=None, repr=False)
     _t0: float = field(default=0.0, repr=False)  # time since the apex of the first interval
 
@@ -209,10 +216,13 @@ class MPCController:
             return np.array([self.plan(zi) for zi in z]).reshape(len(z), self.basis.K)
         u_lqr = self.lqr.coefficients(z)
         if np.max(np.abs(z - self.z_ref) / self.scales) <= self.safe:
+            self._kind = "gate"
             return u_lqr
         _, outcome, _ = self.evaluate(z, u_lqr[None])
         if outcome[0] == RETURNED:
+            self._kind = "lqr"
             return u_lqr
+        self._kind = "override"
         self.searches += 1
         rng = np.random.default_rng(
             [self.seed, *np.frombuffer(z.tobytes(), dtype=np.uint32).tolist()]
@@ -235,6 +245,7 @@ class MPCController:
         t0 = time.perf_counter()
         u = self.plan(z)
         self.decision_seconds.append(time.perf_counter() - t0)
+        self.decision_kinds.append(self._kind)
         return u
 
     def stride_action(self, z) -> np.ndarray:
@@ -283,4 +294,5 @@ class MPCController:
         state = dict(self.__dict__)
         state["_u"] = None
         state["decision_seconds"] = []
+        state["decision_kinds"] = []
         return state

@@ -398,6 +398,11 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
                 else:
                     copies[i].on_apex(z1, t_seen)
     STRIDES[0] += int(strides.sum())
+    kinds = getattr(ctrl, "decision_kinds", None)
+    if copies is not None and kinds is not None:  # the copies' decisions, robot by robot
+        n0 = len(kinds)
+        for c in copies:
+            kinds.extend(c.decision_kinds[n0:])
     return {"strides": strides.tolist(), "fell": fell.tolist(), "failures": failures}
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...control.mpc import DECISION_KINDS
 from .budget import random_directions, sample_seeds
 from .closed_loop import Setup, loop_for
 
@@ -16,6 +17,7 @@ def task_curve(setup: Setup, size: float) -> dict:
     dirs = random_directions(setup.budget.curve_dirs, sample_seeds(setup.seed)["directions"])
     timed = getattr(loop.controller, "decision_seconds", None)  # a controller that times itself
     n0 = len(timed) if timed is not None else 0
+    kinds = Decisions(loop.controller)
     runs = loop.run_many(zc + size * np.abs(zs) * dirs, zc, setup.budget.basin_strides)
     outcomes = [int(ok) for ok, _, _ in runs]
     wins = sum(outcomes)
@@ -28,7 +30,34 @@ def task_curve(setup: Setup, size: float) -> dict:
     }
     if timed is not None:  # every decision of these closed loops [s]
         out["decision_seconds"] = [float(t) for t in timed[n0:]]
-    return out
+    return kinds.into(out)
+
+
+class Decisions:
+    """Counts of who made a gated controller's apex decisions during a task (its
+    ``decision_kinds``, `bound_env.control.mpc.DECISION_KINDS`); nothing for others."""
+
+    def __init__(self, controller):
+        self.kinds = getattr(controller, "decision_kinds", None)
+        self.n0 = len(self.kinds) if self.kinds is not None else 0
+
+    def into(self, out: dict) -> dict:
+        """``out`` with ``decision_kinds``: {kind: count} of the decisions since __init__."""
+        if self.kinds is not None:
+            new = self.kinds[self.n0 :]
+            out["decision_kinds"] = {k: int(sum(1 for x in new if x == k)) for k in DECISION_KINDS}
+        return out
+
+
+def decision_shares(results: list) -> dict | None:
+    """The shares of the decisions in tasks' ``decision_kinds`` (None without any)."""
+    counts = [r["decision_kinds"] for r in results if r.get("decision_kinds")]
+    if not counts:
+        return None
+    total = {k: sum(c.get(k, 0) for c in counts) for k in DECISION_KINDS}
+    n = sum(total.values())
+    shares = {k: (total[k] / n if n else None) for k in DECISION_KINDS}
+    return {**shares, "n": n, "counts": total}
 
 
 def decision_summary(curve: list) -> dict | None:

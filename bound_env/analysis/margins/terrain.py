@@ -7,6 +7,7 @@ import numpy as np
 
 from .budget import MFPT_CHUNK, sample_seeds
 from .closed_loop import Setup, loop_for, rough_episodes
+from .curve import Decisions
 
 
 def task_terrain(setup: Setup, sigma: float) -> dict:
@@ -15,11 +16,12 @@ def task_terrain(setup: Setup, sigma: float) -> dict:
     loop = loop_for(setup, env_extra={"slope_noise_deg": float(sigma)})
     b = setup.budget
     base = sample_seeds(setup.seed)["terrain"]
+    kinds = Decisions(loop.controller)
     # the runs of loop.episode(z_cl, terrain_strides, seed=base + j), batched
     out = rough_episodes(loop, setup.z_cl, [base + j for j in range(b.terrain_runs)],
                          b.terrain_strides)  # fmt: skip
     k, strides, reasons = b.terrain_runs - sum(out["fell"]), out["strides"], out["failures"]
-    return {
+    res = {
         "sigma_deg": sigma,
         "k": int(k),
         "n": b.terrain_runs,
@@ -27,6 +29,7 @@ def task_terrain(setup: Setup, sigma: float) -> dict:
         "mean_strides": float(np.mean(strides)),
         "failures": reasons,
     }
+    return kinds.into(res)
 
 
 def task_mfpt(setup: Setup, sigma: float, chunk: int) -> dict:
@@ -38,5 +41,6 @@ def task_mfpt(setup: Setup, sigma: float, chunk: int) -> dict:
     first = chunk * MFPT_CHUNK
     robots = range(first, min(b.mfpt_robots, first + MFPT_CHUNK))
     base = sample_seeds(setup.seed)["mfpt"]
+    kinds = Decisions(loop.controller)
     out = rough_episodes(loop, setup.z_cl, [base + k for k in robots], b.mfpt_strides)
-    return {"sigma_deg": sigma, "chunk": chunk, "robots": len(robots), **out}
+    return kinds.into({"sigma_deg": sigma, "chunk": chunk, "robots": len(robots), **out})
