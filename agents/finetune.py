@@ -80,6 +80,23 @@ class ChoiceStrideEnv(gym.Env):
         return self._obs(), 1.0, False, self.k >= self.horizon, {}
 
 
+def rescue_env_kwargs(policy: ChoicePolicyController, r_max=0.45, horizon=30) -> dict:
+    """`gymnasium.make` arguments of PassiveBoundRescue-v0 for a distilled student: its own
+    LQR (gait, basis, saturation, control grid and frozen gain) and safe radius."""
+    lqr = policy.lqr
+    return {
+        "gait": lqr.gait,
+        "basis": lqr.basis.name,
+        "K": lqr.basis.K,
+        "max_torque": lqr.max_torque,
+        "dt": lqr.dt,
+        "gain": lqr.gain.tolist(),
+        "safe": policy.safe,
+        "r_max": r_max,
+        "horizon": horizon,
+    }
+
+
 @dataclass
 class FinetuneConfig:
     timesteps: int = 300_000
