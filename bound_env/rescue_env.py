@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces, utils
 
-from .stride_env import check_coefficients
+from .stride_env import Z_HIGH, Z_LOW, check_coefficients
 from .stride_map import EVAL_RTOL, StrideMap, interval_weights
 from .task import APEX_SCALES
 
@@ -119,9 +119,10 @@ class PassiveBoundRescueEnv(gym.Env, utils.EzPickle):
 
     ## Observation Space
 
-    `Box(-inf, inf, (6,), float32)`: the normalized apex error x = (z - z*) / s, with z the
+    `Box(low, high, (6,), float32)`: the normalized apex error x = (z - z*) / s, with z the
     apex state, z* the gait's fixed point and s the apex scales of the tasks
-    (`bound_env.task.APEX_SCALES`).
+    (`bound_env.task.APEX_SCALES`); the bounds are `PassiveBoundStride-v1`'s bounds of z,
+    normalized alike (far outside anything a running robot reaches).
 
     | Num | Observation | Scale s_i |
     | --- | --- | --- |
@@ -179,7 +180,7 @@ class PassiveBoundRescueEnv(gym.Env, utils.EzPickle):
     from bound_env.wrappers import LibraryActions
     gym.register_envs(bound_env)
     env = gym.make("PassiveBoundRescue-v0")                   # continuous profiles
-    env = LibraryActions(gym.make("PassiveBoundRescue-v0"))   # the library's 74 rows
+    env = LibraryActions(gym.make("PassiveBoundRescue-v0"))   # the library's 66 rows
     ```
 
     | Parameter | Type | Default | Description |
@@ -243,7 +244,10 @@ class PassiveBoundRescueEnv(gym.Env, utils.EzPickle):
         # the profile's interval averages a = W u (as the MPC's planning model applies it)
         self._W = interval_weights(b.edges, b.phi, self.lqr.dt)
         self.plant = StrideMap(self.lqr.gait, None, self.lqr.dt, self.lqr.max_torque, EVAL_RTOL)
-        self.observation_space = spaces.Box(-np.inf, np.inf, (6,), dtype=np.float32)
+        # the stride env's apex-state bounds, far outside anything a running robot reaches
+        low = ((Z_LOW - self.z_ref) / self.scales).astype(np.float32)
+        high = ((Z_HIGH - self.z_ref) / self.scales).astype(np.float32)
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (self.K,), dtype=np.float32)
         self._z = self.z_ref.copy()
         self._k = 0
@@ -269,7 +273,8 @@ class PassiveBoundRescueEnv(gym.Env, utils.EzPickle):
         return (np.atleast_2d(u) @ self._W.T)[0]
 
     def _obs(self) -> np.ndarray:
-        return ((self._z - self.z_ref) / self.scales).astype(np.float32)
+        x = ((self._z - self.z_ref) / self.scales).astype(np.float32)
+        return np.clip(x, self.observation_space.low, self.observation_space.high)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

@@ -8,7 +8,7 @@ a fixed library of stride profiles, row 0 the LQR's own plan at the current apex
     from bound_env.wrappers import LibraryActions
 
     gym.register_envs(bound_env)
-    env = LibraryActions(gym.make("PassiveBoundRescue-v0"))  # Discrete(74)
+    env = LibraryActions(gym.make("PassiveBoundRescue-v0"))  # Discrete(66)
 """
 
 from __future__ import annotations
