@@ -49,8 +49,17 @@ def test_a_small_run_makes_a_policy(run):
     assert np.array_equal(pol.coefficients(pol.z_ref), np.zeros(8))
     z = pol.z_ref + 0.3 * np.abs(pol.z_ref) * np.array([1, -1, 1, -1, 1, -1])
     u = pol.plan(z)
-    c = int(np.argmax(pol.logits(z)[0]))
-    assert np.array_equal(u, pol.lqr.coefficients(z) if c == 0 else pol.rows[c])
+    # past the safe radius the plan is the row the network prefers: a network whose output
+    # is a fixed preference for row j (zero last-layer weights, a one-hot bias) plays rows[j],
+    # and one that prefers row 0 plays the LQR's plan
+    from dataclasses import replace
+
+    W, b = pol.layers[-1]
+    for j in (0, 3, len(pol.rows) - 1):
+        fixed = replace(pol, layers=[*pol.layers[:-1], (0 * W, 10.0 * np.eye(len(b))[j])])
+        want = pol.lqr.coefficients(z) if j == 0 else pol.rows[j]
+        assert np.array_equal(fixed.plan(z), want)
+        assert np.array_equal(fixed.plan(pol.z_ref), np.zeros(8))  # within safe: the LQR
     # by path, through the loader every command uses
     from agents.policy import load_controller
 
