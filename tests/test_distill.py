@@ -261,3 +261,63 @@ def test_default_returns_from_more_validation_starts_than_the_lqr():
         runs = ClosedLoop(ctrl, "default").run_many(z0, default.z_ref, 100)
         wins[name] = sum(ok for ok, _, _ in runs)
     assert wins["default"] > wins["lqr"] and wins["default"] > wins["random"], wins
+
+
+def test_the_finetuning_loop_resumes_exports_and_fingerprints(tmp_path, monkeypatch, capsys):
+    """`agents.finetune.finetune` with tiny settings from the shipped `default`: killed right
+    after its first checkpoint, a rerun continues from that checkpoint (no second warm start)
+    to the asked timesteps; the exported policy loads through its fingerprint, keeps the
+    student's library and LQR, and a changed weight file is refused."""
+    import stable_baselines3.common.callbacks as cbs
+
+    import agents.finetune as ft
+    from agents.policy import resolve_policy
+
+    student_dir = resolve_policy("default")
+    student = load_choice_policy(student_dir)
+    cfg = ft.FinetuneConfig(
+        timesteps=192, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, critic_warmup=1
+    )
+    killed = []
+
+    class Small(cbs.CheckpointCallback):  # a checkpoint every 64 strides; "killed" after one
+        def __init__(self, save_freq, *args, **kwargs):
+            super().__init__(32, *args, **kwargs)
+
+        def _on_step(self):
+            ok = super()._on_step()
+            if self.n_calls % self.save_freq == 0 and not killed:
+                killed.append(self.num_timesteps)
+                raise KeyboardInterrupt
+            return ok
+
+    monkeypatch.setattr(cbs, "CheckpointCallback", Small)
+    out = tmp_path / "ft"
+    with pytest.raises(KeyboardInterrupt):
+        ft.finetune(student_dir, out, cfg, progress=False)
+    assert killed == [128] and (out / "ckpt_128_steps.zip").is_file()
+    assert not (out / "policy").exists()
+
+    def no_warm_start(*a, **k):
+        raise AssertionError("the rerun started from the student again")
+
+    monkeypatch.setattr(ft, "_copy_actor", no_warm_start)
+    summary = ft.finetune(student_dir, out, cfg, progress=True)
+    assert "resuming from ckpt_128_steps.zip" in capsys.readouterr().err
+    assert summary["timesteps"] == 192
+    pol = load_choice_policy(out / "policy")
+    assert np.array_equal(pol.rows, student.rows)
+    assert np.array_equal(pol.lqr.gain, student.lqr.gain) and pol.safe == student.safe
+    assert pol.fingerprint() != student.fingerprint()  # PPO moved the weights
+    cfg_json = json.loads((out / "policy" / "config.json").read_text())
+    assert cfg_json["finetune"]["timesteps"] == 192
+    from agents.distill import export_folder  # what `bound-env finetune --export` does
+
+    exported = load_choice_policy(export_folder(out / "policy", tmp_path / "exported"))
+    assert exported.fingerprint() == pol.fingerprint()
+    with np.load(out / "policy" / "choice.npz") as f:
+        arrays = dict(f)
+    arrays["W0"] = arrays["W0"] * 1.001
+    np.savez(out / "policy" / "choice.npz", **arrays)
+    with pytest.raises(ValueError, match="choice.npz does not match"):
+        load_choice_policy(out / "policy")
