@@ -192,3 +192,19 @@ def test_plain_sb3_ppo_learns_on_it():
     act, _ = model.predict(obs, deterministic=True)
     assert act.shape == (8,) and np.all(np.isfinite(act))
     assert np.all(np.isfinite([e["r"] for e in model.ep_info_buffer]))
+
+
+def test_the_shipped_config_section_makes_the_env():
+    """configs/ppo-rescue.yaml's section is what `bound-env train --env-id
+    PassiveBoundRescue-v0` reads: PPO takes its hyperparameters and its env_kwargs make the
+    env with continuous actions."""
+    from stable_baselines3 import PPO
+
+    from agents.config import preprocess
+    from agents.train import check_algo_kwargs, check_env_spec, resolve_section
+
+    spec = preprocess(resolve_section("ppo-rescue", RESCUE_ENV_ID, None, None))
+    check_algo_kwargs(spec.algo_kwargs, PPO)
+    check_env_spec(RESCUE_ENV_ID, spec)
+    env = gym.make(RESCUE_ENV_ID, **spec.env_kwargs)
+    assert isinstance(env.action_space, gym.spaces.Box) and env.action_space.shape == (8,)
