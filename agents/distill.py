@@ -41,6 +41,7 @@ import numpy as np
 from bound_env.cache import atomic_write
 from bound_env.control import load_controller as load_classical
 from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library
+from bound_env.rescue_env import sample_starts  # noqa: F401  (moved there; re-exported)
 from bound_env.stride_map import EVAL_RTOL, StrideMap
 
 from .mlp import mlp_forward
@@ -282,14 +283,6 @@ def plant_of(ctrl: MPCController) -> StrideMap:
 def stride_of(ctrl: MPCController, plant: StrideMap, z, u):
     """The next apex from z under the coefficients u on ``plant`` (None on a fall)."""
     return plant.map(z, ctrl.profile_actions(u)[0])
-
-
-def sample_starts(rng, n: int, z_ref, r_max: float, axis_prob: float) -> np.ndarray:
-    from .stride import sample_direction
-
-    r = rng.uniform(0.0, r_max, n)
-    xi = np.array([sample_direction(rng, axis_prob) for _ in range(n)])
-    return z_ref + r[:, None] * np.abs(z_ref) * xi
 
 
 class Labeller:

@@ -1,11 +1,13 @@
 """PPO fine-tuning of a distilled stride controller (agents/distill.py).
 
-**The task** (`ChoiceStrideEnv`): one step = one stride of the one stride map
+**The task** is the public env PassiveBoundRescue-v0 (`bound_env.rescue_env`, made by
+`gymnasium.make` in `rescue_env`): one step = one stride of the one stride map
 (`bound_env.stride_map`, the step env's own kernel at the evaluation tolerance 1e-10, as
-PassiveBoundStride-v1 and `margins`), so what is learned is what `margins` measures. The action is a
-row of the student's library (Discrete; row 0 the LQR's plan u_lqr(z)); the observation the
-normalized apex error x = (z - z*) / s. Episodes start past the safe radius at z* + r |z*| xi
-(r ~ U(0, ``r_max``), the distillation's start distribution). Reward: 1 per stride survived;
+PassiveBoundStride-v1 and `margins`), so what is learned is what `margins` measures. The
+action is a row of the student's library (Discrete, `bound_env.wrappers.LibraryActions`; row 0
+the LQR's plan u_lqr(z)); the observation the normalized apex error x = (z - z*) / s. Episodes
+start past the safe radius at z* + r |z*| xi (r ~ U(0, ``r_max``), the distillation's start
+distribution). Reward: 1 per stride survived;
 reaching the safe radius (where the LQR takes over for good) ends the episode with the strides
 left to ``horizon`` as a bonus, so the return is the number of strides survived out of
 ``horizon`` and a rescue is worth surviving them all; a fall ends it with nothing more.
@@ -28,56 +30,43 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+import bound_env
+from bound_env import RESCUE_ENV_ID
 from bound_env.cache import atomic_write
+from bound_env.wrappers import LibraryActions
 
-from .distill import (
-    ChoicePolicyController,
-    load_choice_policy,
-    plant_of,
-    sample_starts,
-    save_policy,
-    stride_of,
-)
+from .distill import ChoicePolicyController, load_choice_policy, save_policy
+
+gym.register_envs(bound_env)
 
 
-class ChoiceStrideEnv(gym.Env):
-    """See the module docstring."""
+def rescue_env_kwargs(policy: ChoicePolicyController, r_max=0.45, horizon=30) -> dict:
+    """`gymnasium.make` arguments of PassiveBoundRescue-v0 for a distilled student: its own
+    LQR (gait, basis, saturation, control grid and frozen gain) and safe radius."""
+    lqr = policy.lqr
+    return {
+        "gait": lqr.gait,
+        "basis": lqr.basis.name,
+        "K": lqr.basis.K,
+        "max_torque": lqr.max_torque,
+        "dt": lqr.dt,
+        "gain": lqr.gain.tolist(),
+        "safe": policy.safe,
+        "r_max": r_max,
+        "horizon": horizon,
+    }
 
-    def __init__(self, policy: ChoicePolicyController, r_max=0.45, axis_prob=0.25, horizon=30):
-        self.pol = policy
-        self.r_max, self.axis_prob, self.horizon = float(r_max), float(axis_prob), int(horizon)
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (6,), np.float32)
-        self.action_space = gym.spaces.Discrete(len(policy.rows))
-        self.plant = plant_of(policy)
-        self.z = policy.z_ref.copy()
-        self.k = 0
 
-    def _obs(self):
-        return ((self.z - self.pol.z_ref) / self.pol.scales).astype(np.float32)
+def rescue_env(policy: ChoicePolicyController, r_max=0.45, horizon=30, axis_prob=0.25):
+    """The env fine-tuning trains on: PassiveBoundRescue-v0 (`gymnasium.make`) on the
+    student's LQR and safe radius, with the student's library as its discrete actions
+    (`bound_env.wrappers.LibraryActions`, row 0 the LQR's plan)."""
+    kwargs = rescue_env_kwargs(policy, r_max, horizon)
+    env = gym.make(RESCUE_ENV_ID, **kwargs, axis_prob=axis_prob)
+    return LibraryActions(env, policy.rows)
 
-    def _past_safe(self, z) -> bool:
-        return float(np.max(np.abs(z - self.pol.z_ref) / self.pol.scales)) > self.pol.safe
 
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        while True:
-            z = sample_starts(self.np_random, 1, self.pol.z_ref, self.r_max, self.axis_prob)[0]
-            if self._past_safe(z):
-                break
-        self.z, self.k = z, 0
-        return self._obs(), {}
-
-    def step(self, action):
-        a = int(action)
-        u = self.pol.lqr.coefficients(self.z) if a == 0 else self.pol.rows[a]
-        z1 = stride_of(self.pol, self.plant, self.z, u)
-        self.k += 1
-        if z1 is None or not np.all(np.isfinite(z1)):
-            return self._obs(), 0.0, True, False, {"fell": True}
-        self.z = z1
-        if not self._past_safe(z1):
-            return self._obs(), 1.0 + (self.horizon - self.k), True, False, {"returned": True}
-        return self._obs(), 1.0, False, self.k >= self.horizon, {}
+ChoiceStrideEnv = rescue_env  # the name of the former private env (same starts and strides)
 
 
 @dataclass
@@ -135,7 +124,7 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
 
     def make(i):
         def f():
-            env = ChoiceStrideEnv(student, cfg.r_max, horizon=cfg.horizon)
+            env = rescue_env(student, cfg.r_max, horizon=cfg.horizon)
             env.reset(seed=cfg.seed * 1000 + i)
             return gym.wrappers.RecordEpisodeStatistics(env)
 

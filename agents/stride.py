@@ -48,6 +48,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 # policies trained before v1 (agents/policies/stride-residual) name v0: they load, and act on v1
 from bound_env import STRIDE_ENV_ID, STRIDE_ENV_IDS
+from bound_env.rescue_env import sample_direction  # noqa: F401  (moved there; re-exported)
 
 from .controllers import check_gait
 from .mlp import extract_actor, mlp_forward
@@ -69,17 +70,6 @@ def _stride_env(env: gym.Env):
     if not hasattr(u, "task") or not hasattr(u.task, "sim"):
         raise ValueError(f"{type(env).__name__}: needs a PassiveBoundStride-v1 environment")
     return u
-
-
-def sample_direction(rng: np.random.Generator, axis_prob: float) -> np.ndarray:
-    """xi: one axis (either sign) with probability ``axis_prob``, else uniform on the 6-sphere
-    scaled to max |xi_i| = 1 (`bound_env.analysis.margins.random_directions`)."""
-    if rng.random() < axis_prob:
-        xi = np.zeros(6)
-        xi[rng.integers(6)] = rng.choice((-1.0, 1.0))
-        return xi
-    u = rng.standard_normal(6)
-    return u / np.max(np.abs(u))
 
 
 class DirectionStarts(gym.Wrapper):

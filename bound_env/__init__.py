@@ -10,7 +10,11 @@ Importing the package registers these Gymnasium environments:
   rl-zoo3-style configs key hyperparameters by it;
 - ``PassiveBoundStride-v1``: the stride-level `bound_env.stride_env.PassiveBoundStrideEnv`
   (one step = one stride of the step env, through the one stride map `bound_env.stride_map`;
-  v0, on exact window edges, is no longer registered: Gymnasium names v1 when v0 is asked).
+  v0, on exact window edges, is no longer registered: Gymnasium names v1 when v0 is asked);
+- ``PassiveBoundRescue-v0``: `bound_env.rescue_env.PassiveBoundRescueEnv`, the rescue task
+  (starts past the LQR's safe radius, a stride per step, a return ends the episode), with
+  continuous profile actions; `bound_env.wrappers.LibraryActions` gives the profile
+  library's discrete actions.
 
 ::
 
@@ -35,6 +39,7 @@ STRIDE_ENV_ID = "PassiveBoundStride-v1"
 # ids that name the stride env in a trained policy's config: v0 (no longer registered) too
 STRIDE_ENV_IDS = (STRIDE_ENV_ID, "PassiveBoundStride-v0")
 MAX_STRIDE_EPISODE_STEPS = 100  # time limit of the stride env: 100 strides
+RESCUE_ENV_ID = "PassiveBoundRescue-v0"  # no max_episode_steps: its `horizon` kwarg truncates
 # kwargs of the two control-interval envs (PassiveBoundEnv) registered under their own ids.
 ENV_KWARGS = {ENV_ID: {}, LITERAL_ENV_ID: {"gait": "literal-cycle"}}
 # No reward_threshold in the specs: the return mixes an alive bonus (+1 per step) with a
@@ -63,6 +68,8 @@ def _register() -> None:
             entry_point="bound_env.stride_env:PassiveBoundStrideEnv",
             max_episode_steps=MAX_STRIDE_EPISODE_STEPS,
         )
+    if RESCUE_ENV_ID not in registry:
+        register(id=RESCUE_ENV_ID, entry_point="bound_env.rescue_env:PassiveBoundRescueEnv")
 
 
 _register()

@@ -22,6 +22,7 @@ from bound_env.analysis.margins import (
     run_task,
     setup_key,
 )
+from bound_env.analysis.margins.budget import sample_seeds
 from bound_env.analysis.margins.stats import (
     crossing_on_grid,
     t_interval,
@@ -81,12 +82,17 @@ def test_validation_directions_are_disjoint_from_the_test_set():
     cb = BasinValidationCallback()
     val = cb.validation_directions()
     assert val.shape == (8, 6) and VALIDATION_SEED != CURVE_SEED
-    test = [random_directions(BUDGETS[b].curve_dirs) for b in ("test", "quick", "full")]
-    axes = np.vstack([np.eye(6), -np.eye(6)])
-    unit = lambda a: a / np.linalg.norm(a, axis=1, keepdims=True)  # noqa: E731
-    for t in test + [axes]:
-        cos = unit(val) @ unit(t).T
-        assert np.max(np.abs(cos)) < 0.999  # no validation direction parallel to a test one
+    # the callback draws its own sample: the directions of the validation seed, which share
+    # no row with the test curve's (a generator of the test seed would give the test's rows
+    # first: default_rng(seed).standard_normal((n, 6)) starts with the same rows for every n)
+    assert np.array_equal(val, random_directions(8, VALIDATION_SEED))
+    n_test = max(BUDGETS[b].curve_dirs for b in ("test", "quick", "full"))
+    test = random_directions(n_test)
+    assert not any(np.array_equal(v, t) for v in val for t in test)
+    # and no validation direction is one of the basin's 12 axis directions (test set)
+    assert np.all(np.sum(np.abs(val) == 1.0, axis=1) == 1)  # scaled to max |u_i| = 1 ...
+    assert np.all(np.sum(val != 0.0, axis=1) == 6)  # ... and never along one axis
+    assert sample_seeds(VALIDATION_SEED)["directions"] != sample_seeds()["directions"]
     assert np.array_equal(
         random_directions(4, seed=CURVE_SEED), random_directions(4)
     )  # the test set is the default

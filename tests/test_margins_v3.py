@@ -444,5 +444,17 @@ def test_selected_shipped_policies_state_their_validation_directions():
         entry = next(c for c in callbacks if "BasinValidationCallback" in str(c))
         kwargs = next(iter(entry.values()))
         assert "directions" in kwargs or "direction_seed" in kwargs, folder.name
+        # the stated directions build (as the callback builds them) ...
+        from agents.train_callbacks import BasinValidationCallback
+
+        dirs = BasinValidationCallback(**kwargs).validation_directions()
+        assert dirs.shape[1] == 6 and np.allclose(np.max(np.abs(dirs), axis=1), 1.0)
+        # ... and the exported checkpoint is the one they chose: the best validation score
+        # of the run, at the exported timesteps
+        exp_data = json.loads(exp.read_text())
+        rows = np.genfromtxt(folder / "basin_validation.csv", delimiter=",", names=True)
+        best = int(np.argmax(rows["basin_min"]))
+        assert rows["timesteps"][best] == exp_data["timesteps"], folder.name
+        assert rows["basin_min"][best] == pytest.approx(exp_data["basin_validation"], rel=1e-12)
         checked += 1
     assert checked >= 1

@@ -107,7 +107,7 @@ def test_every_user_of_a_stride_lands_on_the_same_apex(lqr):
     distillation's and fine-tuning's plant and margins' closed loop, for the same (z, u), on
     bang-bang rows from r = 0.1 starts, agree to 1e-9."""
     from agents.distill import plant_of, stride_of
-    from agents.finetune import ChoiceStrideEnv
+    from agents.finetune import rescue_env
     from agents.policy import load_controller as load_policy
 
     mpc = load_controller("mpc")
@@ -117,7 +117,7 @@ def test_every_user_of_a_stride_lands_on_the_same_apex(lqr):
     plant = plant_of(mpc)
     stride_env = gym.make("PassiveBoundStride-v1", basis="windows", K=K, max_torque=80.0)
     stride_env = stride_env.unwrapped
-    finetune_env = ChoiceStrideEnv(student)
+    finetune_env = rescue_env(student)  # PassiveBoundRescue-v0 + LibraryActions
     rows = bang_bang_rows(K)
     lib = {tuple(r): i for i, r in enumerate(student.rows) if i > 0}  # 0: the LQR's plan
     compared = {"stride env": 0, "mpc": 0, "distill": 0, "finetune": 0, "margins": 0}
@@ -135,9 +135,9 @@ def test_every_user_of_a_stride_lands_on_the_same_apex(lqr):
                 "margins": ClosedLoop(Fixed(lqr, u), "default").stride(z).z1,
             }
             if tuple(u) in lib:  # a library row: the fine-tuning env's action
-                finetune_env.z, finetune_env.k = z.copy(), 0
+                finetune_env.reset(options={"apex_state": z})
                 _, _, done, _, step_info = finetune_env.step(lib[tuple(u)])
-                got["finetune"] = None if step_info.get("fell") else finetune_env.z
+                got["finetune"] = None if step_info["fell"] else finetune_env.unwrapped.z
             if ref is None:
                 fell += 1
             for name, z1 in got.items():

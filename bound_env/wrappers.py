@@ -1,0 +1,63 @@
+"""Wrappers of the bound_env environments.
+
+`LibraryActions`: the discrete actions of the rescue task (`PassiveBoundRescue-v0`): a row of
+a fixed library of stride profiles, row 0 the LQR's own plan at the current apex state.
+
+    import gymnasium as gym
+    import bound_env
+    from bound_env.wrappers import LibraryActions
+
+    gym.register_envs(bound_env)
+    env = LibraryActions(gym.make("PassiveBoundRescue-v0"))  # Discrete(66)
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+
+from .control.mpc import library
+
+LIBRARY_N_RANDOM = 48  # random sign rows of the default library (distillation's default)
+LIBRARY_SEED = 5  # their generator's seed (distillation's default)
+
+
+def default_library(K: int, n_random: int = LIBRARY_N_RANDOM, seed: int = LIBRARY_SEED):
+    """The library the distilled controllers choose from (`bound_env.control.mpc.library`
+    without noise rows): row 0 a placeholder (zeros) for the LQR's plan, then zero, +-1, the
+    2 (K - 1) one-switch bang-bang profiles and ``n_random`` random sign vectors of
+    ``seed``; (4 + 2 (K - 1) + n_random, K)."""
+    return library(K, np.zeros(K), np.random.default_rng(seed), n_random, 0, 0.0)
+
+
+class LibraryActions(gym.ActionWrapper):
+    """``Discrete(len(rows))`` actions for an env whose action is the coefficients of a stride
+    profile (`PassiveBoundRescue-v0`): action 0 plays the LQR's plan at the current apex
+    state (``env.unwrapped.lqr.coefficients(env.unwrapped.z)``), action j > 0 the row
+    ``rows[j]`` (row 0 of ``rows`` is not used). ``rows`` defaults to `default_library`;
+    rows must be finite, within [-1, 1], and have one column per coefficient."""
+
+    def __init__(self, env: gym.Env, rows=None):
+        super().__init__(env)
+        base = env.unwrapped
+        if not (hasattr(base, "lqr") and hasattr(base, "z")):
+            raise ValueError("LibraryActions needs an env with an LQR and an apex state z "
+                             "(PassiveBoundRescue-v0)")  # fmt: skip
+        K = int(env.action_space.shape[0])
+        rows = default_library(K) if rows is None else np.array(rows, dtype=float)
+        if rows.ndim != 2 or rows.shape[1] != K or len(rows) < 1:
+            raise ValueError(f"rows must be an (n, K={K}) array, got shape {rows.shape}")
+        if not np.isfinite(rows).all() or np.abs(rows).max() > 1.0:
+            raise ValueError("rows must be finite and within [-1, 1]")
+        self.rows = rows
+        self.action_space = gym.spaces.Discrete(len(rows))
+
+    def action(self, action) -> np.ndarray:
+        a = np.asarray(action)
+        if a.size != 1 or not np.issubdtype(a.dtype, np.integer) and a.item() != int(a.item()):
+            raise ValueError(f"action must be one integer, got {action!r}")
+        a = int(a.item())
+        if not 0 <= a < len(self.rows):
+            raise ValueError(f"action must be in [0, {len(self.rows)}), got {a}")
+        base = self.env.unwrapped
+        return base.lqr.coefficients(base.z) if a == 0 else self.rows[a].copy()
