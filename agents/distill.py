@@ -45,6 +45,7 @@ from bound_env.stride_map import EVAL_RTOL, StrideMap
 
 from .mlp import mlp_forward
 from .policy_files import FINGERPRINT_FILE, file_sha256
+from .schema import check_choice_config, check_choice_npz, policy_kind
 
 POLICY_FILE = "choice.npz"  # the student's weights and library, in a policy folder
 VALIDATION_SEED = 777  # validation directions of every design choice (test set: 12345)
@@ -167,16 +168,13 @@ def check_choice_fingerprint(folder, force: bool = False) -> list[str]:
     ``fingerprint.json`` (changed or cut short since the policy was saved, or files of two
     policies mixed); ``force`` evaluates it as it is, and the mismatch comes back as a
     warning. A folder without a fingerprint (saved before they were written) passes."""
+    from .schema import read_fingerprint
+
     folder = Path(folder)
     fp = folder / FINGERPRINT_FILE
-    if not fp.is_file():
+    want = read_fingerprint(folder)  # a folder or a broken file there is an error
+    if want is None:
         return []
-    try:
-        want = json.loads(fp.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        raise ValueError(f"{fp}: not a readable JSON file") from None
-    if not isinstance(want, dict):
-        raise ValueError(f"{fp}: not a fingerprint (a JSON object of sha256 digests)")
     warnings = []
     for name in FINGERPRINTED:
         path = folder / name
@@ -197,24 +195,24 @@ def check_choice_fingerprint(folder, force: bool = False) -> list[str]:
 def load_choice_policy(folder, gait=None, force: bool = False) -> ChoicePolicyController:
     """A saved student (a folder with ``choice.npz`` and ``config.json``), checked against its
     ``fingerprint.json`` (`check_choice_fingerprint`; ``force`` loads a mismatch with a
-    warning)."""
+    warning) and against the schema of its files (`agents.schema`: types, shapes, finite
+    values, ranges); ValueError naming the file and the field."""
     folder = Path(folder)
     for w in check_choice_fingerprint(folder, force):
         print(f"warning: {w}", file=sys.stderr)
     try:
-        cfg = json.loads((folder / "config.json").read_text())
-        with np.load(folder / POLICY_FILE) as d:
-            n = int(d["n_layers"])
-            layers = [(d[f"W{k}"].astype(float), d[f"b{k}"].astype(float)) for k in range(n)]
-            rows = d["rows"].astype(float)
-    except (OSError, KeyError, ValueError, json.JSONDecodeError) as e:
-        raise ValueError(f"{folder}: not a readable distilled policy ({e})") from None
-    try:
-        expert = expert_of(cfg["expert"], gait)
-    except (KeyError, TypeError) as e:
-        raise ValueError(f"{folder}: not a readable distilled policy (missing {e})") from None
-    if layers[-1][0].shape[0] != rows.shape[0] or rows.shape[1] != expert.basis.K:
-        raise ValueError(f"{folder}: the network's output does not match its library")
+        policy_kind(folder)  # a PPO folder with a choice.npz dropped in: ambiguous
+        cfg = check_choice_config(folder / "config.json")
+        layers, rows = check_choice_npz(folder / POLICY_FILE)
+    except ValueError as e:
+        raise ValueError(f"{e} (not a readable distilled policy)") from None
+    if rows.shape[1] != cfg["expert"]["K"]:
+        raise ValueError(
+            f"{folder / POLICY_FILE}: rows has {rows.shape[1]} columns, but "
+            f"{folder / 'config.json'}: expert.K is {cfg['expert']['K']} (not a readable "
+            "distilled policy)"
+        )
+    expert = expert_of(cfg["expert"], gait)
     s = expert.settings()
     return ChoicePolicyController(
         name=str(folder),

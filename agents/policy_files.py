@@ -242,14 +242,11 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
             f"policy {files.model} was trained with normalize="
             f"{section['normalize']!r} but {where} has no vecnormalize.pkl"
         )
-    fp = files.fingerprint
-    if fp.is_file():
-        import json
+    from .schema import read_fingerprint
 
-        try:
-            want = json.loads(fp.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            raise ValueError(f"{fp}: not a readable JSON file") from None
+    fp = files.fingerprint
+    want = read_fingerprint(fp.parent)  # a folder or a broken file there is an error
+    if want is not None:
         pairs = [("model.zip", files.model), ("vecnormalize.pkl", files.vecnormalize)]
         for key, path in pairs:
             if key in want and (path is None or file_sha256(path) != want[key]):
