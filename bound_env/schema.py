@@ -119,7 +119,8 @@ def real_array(
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{where} must be finite (no NaN or inf)")
     if (lo is not None and a.min() < lo) or (hi is not None and a.max() > hi):
-        raise ValueError(f"{where} must lie in [{lo}, {hi}], got [{float(a.min())!r}, {float(a.max())!r}]")
+        got = f"[{float(a.min())!r}, {float(a.max())!r}]"
+        raise ValueError(f"{where} must lie in [{lo}, {hi}], got {got}")
     return a
 
 
