@@ -267,8 +267,7 @@ def register(sub) -> None:
 
     register_basin_map(sub)
 
-    from .distill import register as register_distill
-    from .finetune import register as register_finetune
+    from .learn_cli import register_distill, register_finetune
 
     register_distill(sub)
     register_finetune(sub)

@@ -43,32 +43,14 @@ from bound_env.control import load_controller as load_classical
 from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library
 from bound_env.stride_map import EVAL_RTOL, StrideMap
 
+from .learn_cli import register_distill as register  # noqa: F401 - as before
+from .learn_config import DistillConfig  # noqa: F401 - importable from here as before
 from .mlp import mlp_forward
 from .policy_files import FINGERPRINT_FILE, file_sha256
 from .schema import check_choice_config, check_choice_npz, policy_kind
 
 POLICY_FILE = "choice.npz"  # the student's weights and library, in a policy folder
 VALIDATION_SEED = 777  # validation directions of every design choice (test set: 12345)
-
-
-@dataclass
-class DistillConfig:
-    """Settings of one distillation run (all of them go into its config.json)."""
-
-    expert: str = "mpc"  # controller spec of the expert (its LQR, safe radius and horizon)
-    n_random: int = 48  # random sign rows of the library
-    library_seed: int = 5
-    r_max: float = 0.45  # starts up to this relative size
-    axis_prob: float = 0.25
-    rounds: int = 4  # DAgger rounds (round 0: expert data)
-    starts_first: int = 3000  # starts labelled in round 0
-    starts_round: int = 1500  # starts the student is rolled out from in each later round
-    rollout_strides: int = 6  # strides of a student rollout (states past `safe` are labelled)
-    hidden: tuple = (128, 128)
-    epochs: int = 60
-    batch: int = 256
-    lr: float = 3e-3
-    seed: int = 0
 
 
 # --------------------------------------------------------------------------------------------
@@ -469,43 +451,6 @@ def write_run_info(folder: Path, seed: int, command: str, seconds: float, made: 
 # --------------------------------------------------------------------------------------------
 # bound-env distill
 # --------------------------------------------------------------------------------------------
-
-
-def register(sub) -> None:
-    from bound_env.cli_args import add_json_arg, add_progress_args, number
-
-    p = sub.add_parser(
-        "distill",
-        help="distill the MPC expert into a stride controller (DAgger; runs/distill_s<seed>/)",
-    )
-    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="(default: 0)")
-    p.add_argument("--out", help="run folder, resumable (default: runs/distill_s<seed>)")
-    p.add_argument(
-        "--expert", default="mpc", help="mpc controller spec: name or .yaml (default: mpc)"
-    )
-    d = DistillConfig()
-    p.add_argument(
-        "--rounds", type=number(int, 1, 100), default=d.rounds, help="(default: %(default)s)"
-    )
-    p.add_argument(
-        "--starts",
-        type=number(int, 10, 10**6),
-        default=d.starts_first,
-        help="starts of round 0; later rounds take half (default: %(default)s)",
-    )
-    p.add_argument(
-        "--epochs", type=number(int, 1, 10**4), default=d.epochs, help="(default: %(default)s)"
-    )
-    p.add_argument(
-        "--export",
-        metavar="DIR",
-        help="copy the final policy there (e.g. agents/policies/distilled/s0); an existing "
-        "folder is refused without --force",
-    )
-    p.add_argument("--force", action="store_true", help="let --export replace a folder")
-    add_progress_args(p)
-    add_json_arg(p)
-    p.set_defaults(func=cmd_distill)
 
 
 def check_export(export, force: bool) -> None:
