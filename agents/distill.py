@@ -107,6 +107,8 @@ def _npz_bytes(**arrays) -> bytes:
 
 
 def save_policy(folder: Path, expert: MPCController, layers, rows, config: dict) -> None:
+    from .policy import source_name
+
     folder.mkdir(parents=True, exist_ok=True)
     arrays = {"rows": rows, "n_layers": np.array(len(layers))}
     for k, (W, b) in enumerate(layers):
@@ -116,7 +118,7 @@ def save_policy(folder: Path, expert: MPCController, layers, rows, config: dict)
     spec = {
         "kind": "choice",
         "expert": {  # the expert's LQR and settings, frozen: later spec edits change nothing
-            "name": str(expert.name),
+            "name": source_name(expert.name),  # a shipped student by its name, not a path
             "gait": lqr.gait,
             "basis": lqr.basis.name,
             "K": lqr.basis.K,

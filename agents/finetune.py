@@ -40,6 +40,7 @@ from .distill import (
 )
 from .learn_cli import register_finetune as register  # noqa: F401 - as before
 from .learn_config import FinetuneConfig
+from .policy import source_name
 
 
 class ChoiceStrideEnv(gym.Env):
@@ -179,7 +180,7 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
         student,
         layers,
         student.rows,
-        {"finetune": asdict(cfg), "student": str(student_dir)},
+        {"finetune": asdict(cfg), "student": source_name(student_dir)},
     )
     ep = [e["r"] for e in model.ep_info_buffer] if model.ep_info_buffer else []
     summary = {

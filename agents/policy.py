@@ -111,6 +111,18 @@ def shipped_policies() -> dict[str, Path]:
     return out
 
 
+def source_name(path) -> str:
+    """How a saved file names a policy it was made from: a shipped policy by its name
+    relative to the package (``"distilled/s0"``, never the build machine's absolute path,
+    which would travel into wheels), anything else as given."""
+    text = str(path)
+    try:
+        rel = Path(text).resolve().relative_to(SHIPPED_DIR.resolve())
+    except (ValueError, OSError):
+        return text
+    return rel.as_posix()
+
+
 def policy_names() -> list[str]:
     """Every name ``--policy`` accepts besides a path."""
     return list(CONTROLLERS) + [n for n in shipped_policies() if n not in CONTROLLERS]
