@@ -46,7 +46,7 @@ from bound_env.stride_map import EVAL_RTOL, StrideMap
 from .learn_cli import register_distill as register  # noqa: F401 - as before
 from .learn_config import DistillConfig  # noqa: F401 - importable from here as before
 from .mlp import mlp_forward
-from .policy_files import FINGERPRINT_FILE, file_sha256
+from .policy_files import FINGERPRINT_FILE, file_sha256, source_name
 from .schema import check_choice_config, check_choice_npz, policy_kind
 
 POLICY_FILE = "choice.npz"  # the student's weights and library, in a policy folder
@@ -107,8 +107,6 @@ def _npz_bytes(**arrays) -> bytes:
 
 
 def save_policy(folder: Path, expert: MPCController, layers, rows, config: dict) -> None:
-    from .policy import source_name
-
     folder.mkdir(parents=True, exist_ok=True)
     arrays = {"rows": rows, "n_layers": np.array(len(layers))}
     for k, (W, b) in enumerate(layers):

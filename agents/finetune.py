@@ -40,7 +40,7 @@ from .distill import (
 )
 from .learn_cli import register_finetune as register  # noqa: F401 - as before
 from .learn_config import FinetuneConfig
-from .policy import source_name
+from .policy_files import source_name
 
 
 class ChoiceStrideEnv(gym.Env):

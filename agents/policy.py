@@ -20,7 +20,6 @@ import pickle
 import sys
 from collections.abc import Callable
 from functools import partial
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +33,7 @@ from .policy_files import (  # noqa: F401 - the policy-file API, importable from
     DYNAMICS_KWARGS,
     FINGERPRINT_FILE,
     FINGERPRINTED_SETTINGS,
+    SHIPPED,
     PolicyFiles,
     check_policy_files,
     file_sha256,
@@ -42,13 +42,14 @@ from .policy_files import (  # noqa: F401 - the policy-file API, importable from
     read_run_config,
     resolve_policy_files,
     section_env_kwargs,
+    source_name,
     write_fingerprint,
 )
 from .schema import check_env_kwargs, check_layers, check_obs_stats, policy_kind
 
 # The shipped policies, package data of `agents` (``agents/policies/<name>/``), read with
 # importlib.resources so that an installed wheel finds them too.
-SHIPPED_DIR = Path(str(resources.files("agents") / "policies"))
+SHIPPED_DIR = SHIPPED  # (agents.policy_files, with `source_name`)
 
 # Built-in controllers by name: name -> (factory(gait) -> controller, one-line description).
 # ``--policy NAME`` in ``margins``, ``rollout`` and ``compare`` looks names up here first, then
@@ -109,18 +110,6 @@ def shipped_policies() -> dict[str, Path]:
                 if is_policy(q):
                     out[f"{p.name}/{q.name}"] = q
     return out
-
-
-def source_name(path) -> str:
-    """How a saved file names a policy it was made from: a shipped policy by its name
-    relative to the package (``"distilled/s0"``, never the build machine's absolute path,
-    which would travel into wheels), anything else as given."""
-    text = str(path)
-    try:
-        rel = Path(text).resolve().relative_to(SHIPPED_DIR.resolve())
-    except (ValueError, OSError):
-        return text
-    return rel.as_posix()
 
 
 def policy_names() -> list[str]:
