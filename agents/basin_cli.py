@@ -10,7 +10,7 @@ from .policy_args import POLICY_HELP, policy_label
 
 
 def register(sub) -> None:
-    from bound_env.analysis.basin import (
+    from bound_env.analysis.basin_defaults import (
         DEFAULT_CHUNK,
         DEFAULT_GRID,
         DEFAULT_STRIDES,

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bound_env.params import Z_SI_UNITS
+
 from .distill import VALIDATION_SEED
 
 DEMO_POLICY = "default"  # the shipped learned controller (agents/policies/default)
@@ -143,7 +145,8 @@ def _run(controller, gait, z0, z_star, show_after: int = 0) -> dict:
 def compare_from_start(policy: str = DEMO_POLICY, gait="default", show_after: int = 0) -> dict:
     """The passive gait and ``policy`` from the demo's start (`demo_start`) on ``gait``.
 
-    Returns the summary's ``comparison`` object: ``start`` (``z`` and ``z_star`` in SI,
+    Returns the summary's ``comparison`` object: ``start`` (``z`` and ``z_star`` in SI, their
+    units in ``z_units``,
     ``seed``, ``index``, ``n_directions``, ``r``, ``direction``), ``passive`` (``fell``,
     ``failure``, ``strides``: strides completed before the fall, or before it returned),
     ``learned`` (``policy``, ``returned``, ``strides``: strides to return (or completed before
@@ -161,6 +164,7 @@ def compare_from_start(policy: str = DEMO_POLICY, gait="default", show_after: in
         "start": {
             "z": z0.tolist(),
             "z_star": z_star.tolist(),
+            "z_units": list(Z_SI_UNITS),  # z, z_star (SI; the summary's top-level z_star: deg)
             "seed": DEMO_SEED,
             "index": DEMO_INDEX,
             "n_directions": DEMO_DIRECTIONS,

@@ -44,31 +44,14 @@ from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library
 from bound_env.rescue_env import sample_starts  # noqa: F401  (moved there; re-exported)
 from bound_env.stride_map import EVAL_RTOL, StrideMap
 
+from .learn_cli import register_distill as register  # noqa: F401 - as before
+from .learn_config import DistillConfig  # noqa: F401 - importable from here as before
 from .mlp import mlp_forward
-from .policy_files import FINGERPRINT_FILE, file_sha256
+from .policy_files import FINGERPRINT_FILE, file_sha256, source_name
+from .schema import check_choice_config, check_choice_npz, policy_kind
 
 POLICY_FILE = "choice.npz"  # the student's weights and library, in a policy folder
 VALIDATION_SEED = 777  # validation directions of every design choice (test set: 12345)
-
-
-@dataclass
-class DistillConfig:
-    """Settings of one distillation run (all of them go into its config.json)."""
-
-    expert: str = "mpc"  # controller spec of the expert (its LQR, safe radius and horizon)
-    n_random: int = 48  # random sign rows of the library
-    library_seed: int = 5
-    r_max: float = 0.45  # starts up to this relative size
-    axis_prob: float = 0.25
-    rounds: int = 4  # DAgger rounds (round 0: expert data)
-    starts_first: int = 3000  # starts labelled in round 0
-    starts_round: int = 1500  # starts the student is rolled out from in each later round
-    rollout_strides: int = 6  # strides of a student rollout (states past `safe` are labelled)
-    hidden: tuple = (128, 128)
-    epochs: int = 60
-    batch: int = 256
-    lr: float = 3e-3
-    seed: int = 0
 
 
 # --------------------------------------------------------------------------------------------
@@ -136,7 +119,7 @@ def save_policy(folder: Path, expert: MPCController, layers, rows, config: dict)
     spec = {
         "kind": "choice",
         "expert": {  # the expert's LQR and settings, frozen: later spec edits change nothing
-            "name": str(expert.name),
+            "name": source_name(expert.name),  # a shipped student by its name, not a path
             "gait": lqr.gait,
             "basis": lqr.basis.name,
             "K": lqr.basis.K,
@@ -170,16 +153,13 @@ def check_choice_fingerprint(folder, force: bool = False) -> list[str]:
     ``fingerprint.json`` (changed or cut short since the policy was saved, or files of two
     policies mixed); ``force`` evaluates it as it is, and the mismatch comes back as a
     warning. A folder without a fingerprint (saved before they were written) passes."""
+    from .schema import read_fingerprint
+
     folder = Path(folder)
     fp = folder / FINGERPRINT_FILE
-    if not fp.is_file():
+    want = read_fingerprint(folder)  # a folder or a broken file there is an error
+    if want is None:
         return []
-    try:
-        want = json.loads(fp.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        raise ValueError(f"{fp}: not a readable JSON file") from None
-    if not isinstance(want, dict):
-        raise ValueError(f"{fp}: not a fingerprint (a JSON object of sha256 digests)")
     warnings = []
     for name in FINGERPRINTED:
         path = folder / name
@@ -200,24 +180,24 @@ def check_choice_fingerprint(folder, force: bool = False) -> list[str]:
 def load_choice_policy(folder, gait=None, force: bool = False) -> ChoicePolicyController:
     """A saved student (a folder with ``choice.npz`` and ``config.json``), checked against its
     ``fingerprint.json`` (`check_choice_fingerprint`; ``force`` loads a mismatch with a
-    warning)."""
+    warning) and against the schema of its files (`agents.schema`: types, shapes, finite
+    values, ranges); ValueError naming the file and the field."""
     folder = Path(folder)
     for w in check_choice_fingerprint(folder, force):
         print(f"warning: {w}", file=sys.stderr)
     try:
-        cfg = json.loads((folder / "config.json").read_text())
-        with np.load(folder / POLICY_FILE) as d:
-            n = int(d["n_layers"])
-            layers = [(d[f"W{k}"].astype(float), d[f"b{k}"].astype(float)) for k in range(n)]
-            rows = d["rows"].astype(float)
-    except (OSError, KeyError, ValueError, json.JSONDecodeError) as e:
-        raise ValueError(f"{folder}: not a readable distilled policy ({e})") from None
-    try:
-        expert = expert_of(cfg["expert"], gait)
-    except (KeyError, TypeError) as e:
-        raise ValueError(f"{folder}: not a readable distilled policy (missing {e})") from None
-    if layers[-1][0].shape[0] != rows.shape[0] or rows.shape[1] != expert.basis.K:
-        raise ValueError(f"{folder}: the network's output does not match its library")
+        policy_kind(folder)  # a PPO folder with a choice.npz dropped in: ambiguous
+        cfg = check_choice_config(folder / "config.json")
+        layers, rows = check_choice_npz(folder / POLICY_FILE)
+    except ValueError as e:
+        raise ValueError(f"{e} (not a readable distilled policy)") from None
+    if rows.shape[1] != cfg["expert"]["K"]:
+        raise ValueError(
+            f"{folder / POLICY_FILE}: rows has {rows.shape[1]} columns, but "
+            f"{folder / 'config.json'}: expert.K is {cfg['expert']['K']} (not a readable "
+            "distilled policy)"
+        )
+    expert = expert_of(cfg["expert"], gait)
     s = expert.settings()
     return ChoicePolicyController(
         name=str(folder),
@@ -466,43 +446,6 @@ def write_run_info(folder: Path, seed: int, command: str, seconds: float, made: 
 # --------------------------------------------------------------------------------------------
 # bound-env distill
 # --------------------------------------------------------------------------------------------
-
-
-def register(sub) -> None:
-    from bound_env.cli_args import add_json_arg, add_progress_args, number
-
-    p = sub.add_parser(
-        "distill",
-        help="distill the MPC expert into a stride controller (DAgger; runs/distill_s<seed>/)",
-    )
-    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="(default: 0)")
-    p.add_argument("--out", help="run folder, resumable (default: runs/distill_s<seed>)")
-    p.add_argument(
-        "--expert", default="mpc", help="mpc controller spec: name or .yaml (default: mpc)"
-    )
-    d = DistillConfig()
-    p.add_argument(
-        "--rounds", type=number(int, 1, 100), default=d.rounds, help="(default: %(default)s)"
-    )
-    p.add_argument(
-        "--starts",
-        type=number(int, 10, 10**6),
-        default=d.starts_first,
-        help="starts of round 0; later rounds take half (default: %(default)s)",
-    )
-    p.add_argument(
-        "--epochs", type=number(int, 1, 10**4), default=d.epochs, help="(default: %(default)s)"
-    )
-    p.add_argument(
-        "--export",
-        metavar="DIR",
-        help="copy the final policy there (e.g. agents/policies/distilled/s0); an existing "
-        "folder is refused without --force",
-    )
-    p.add_argument("--force", action="store_true", help="let --export replace a folder")
-    add_progress_args(p)
-    add_json_arg(p)
-    p.set_defaults(func=cmd_distill)
 
 
 def check_export(export, force: bool) -> None:

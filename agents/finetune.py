@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import gymnasium as gym
@@ -36,6 +36,9 @@ from bound_env.cache import atomic_write
 from bound_env.wrappers import LibraryActions
 
 from .distill import ChoicePolicyController, load_choice_policy, save_policy
+from .learn_cli import register_finetune as register  # noqa: F401 - as before
+from .learn_config import FinetuneConfig
+from .policy_files import source_name
 
 gym.register_envs(bound_env)
 
@@ -67,23 +70,6 @@ def rescue_env(policy: ChoicePolicyController, r_max=0.45, horizon=30, axis_prob
 
 
 ChoiceStrideEnv = rescue_env  # the name of the former private env (same starts and strides)
-
-
-@dataclass
-class FinetuneConfig:
-    timesteps: int = 300_000
-    n_envs: int = 8
-    n_steps: int = 256
-    batch_size: int = 256
-    n_epochs: int = 5
-    learning_rate: float = 1e-4
-    clip_range: float = 0.1
-    ent_coef: float = 0.001
-    gamma: float = 0.98
-    critic_warmup: int = 10  # rollouts with the actor frozen
-    r_max: float = 0.45
-    horizon: int = 30
-    seed: int = 0
 
 
 def _copy_actor(model, layers) -> None:
@@ -183,7 +169,7 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
         student,
         layers,
         student.rows,
-        {"finetune": asdict(cfg), "student": str(student_dir)},
+        {"finetune": asdict(cfg), "student": source_name(student_dir)},
     )
     ep = [e["r"] for e in model.ep_info_buffer] if model.ep_info_buffer else []
     summary = {
@@ -194,32 +180,6 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
     }
     atomic_write(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
     return summary
-
-
-def register(sub) -> None:
-    from bound_env.cli_args import add_json_arg, add_progress_args, number
-
-    p = sub.add_parser(
-        "finetune", help="PPO fine-tuning of a distilled stride controller (runs/finetune_s<seed>/)"
-    )
-    p.add_argument("--student", required=True, help="a distilled policy folder or shipped name")
-    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="(default: 0)")
-    p.add_argument("--out", help="run folder, resumable (default: runs/finetune_s<seed>)")
-    p.add_argument(
-        "--timesteps",
-        type=number(int, 1000, 10**9),
-        default=FinetuneConfig.timesteps,
-        help="strides of PPO (default: %(default)s)",
-    )
-    p.add_argument(
-        "--export",
-        metavar="DIR",
-        help="copy the final policy there (refused if it exists, without --force)",
-    )
-    p.add_argument("--force", action="store_true")
-    add_progress_args(p)
-    add_json_arg(p)
-    p.set_defaults(func=cmd_finetune)
 
 
 def cmd_finetune(args) -> int:

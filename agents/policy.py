@@ -20,7 +20,6 @@ import pickle
 import sys
 from collections.abc import Callable
 from functools import partial
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +33,7 @@ from .policy_files import (  # noqa: F401 - the policy-file API, importable from
     DYNAMICS_KWARGS,
     FINGERPRINT_FILE,
     FINGERPRINTED_SETTINGS,
+    SHIPPED,
     PolicyFiles,
     check_policy_files,
     file_sha256,
@@ -42,12 +42,14 @@ from .policy_files import (  # noqa: F401 - the policy-file API, importable from
     read_run_config,
     resolve_policy_files,
     section_env_kwargs,
+    source_name,
     write_fingerprint,
 )
+from .schema import check_env_kwargs, check_layers, check_obs_stats, policy_kind
 
 # The shipped policies, package data of `agents` (``agents/policies/<name>/``), read with
 # importlib.resources so that an installed wheel finds them too.
-SHIPPED_DIR = Path(str(resources.files("agents") / "policies"))
+SHIPPED_DIR = SHIPPED  # (agents.policy_files, with `source_name`)
 
 # Built-in controllers by name: name -> (factory(gait) -> controller, one-line description).
 # ``--policy NAME`` in ``margins``, ``rollout`` and ``compare`` looks names up here first, then
@@ -96,7 +98,9 @@ def shipped_policies() -> dict[str, Path]:
     out = {}
 
     def is_policy(folder: Path) -> bool:  # a PPO model, or a distilled student (agents.distill)
-        return (folder / "model.zip").is_file() or (folder / "choice.npz").is_file()
+        return folder.is_dir() and (
+            (folder / "model.zip").exists() or (folder / "choice.npz").exists()
+        )
 
     for p in sorted(SHIPPED_DIR.iterdir()):
         if is_policy(p):
@@ -151,11 +155,12 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     path = resolve_policy(path)
     if isinstance(path, str):
         return CONTROLLERS[path][0](gait=gait)
-    if Path(path).is_dir() and (Path(path) / "choice.npz").is_file():
+    if Path(path).is_dir() and policy_kind(path) == "choice":  # a PPO + choice.npz: refused
         from .distill import load_choice_policy  # a distilled student (agents/distill.py)
 
         return load_choice_policy(path, gait=gait, force=force)
     files = find_policy_files(path)
+    policy_kind(files.model.parent)  # a choice.npz beside the model: ambiguous, refused
     if files.config is not None and read_policy_section(files)[1] in STRIDE_ENV_IDS:
         from .stride import load_stride_policy  # a stride-level policy (agents/stride.py)
 
@@ -169,7 +174,7 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
         raise ValueError(f"cannot load {model_path} as an SB3 PPO model: {e}") from None
     section, env_id, seed = read_policy_section(files)
-    env_kwargs = section_env_kwargs(section, env_id)
+    env_kwargs = check_env_kwargs(section_env_kwargs(section, env_id), str(files.config))
     wrappers = section.get("env_wrapper") or []
     from .residual import residual_settings
 
@@ -181,6 +186,7 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     for w in check_policy_files(files, section, force):
         print(f"warning: {w}", file=sys.stderr)
     layers, activation = extract_actor(model, model_path)
+    check_layers(layers, str(model_path))
     ctrl = MLPController(
         name=str(path),
         layers=layers,
@@ -217,10 +223,8 @@ def read_vecnormalize(ctrl: MLPController, vecnorm_path: Path | None) -> None:
                     f"{np.shape(getattr(rms, 'mean', None))}, the model expects "
                     f"{ctrl.obs_shape}"
                 )
-            ctrl.obs_mean = np.asarray(rms.mean, dtype=np.float64)
-            ctrl.obs_var = np.asarray(rms.var, dtype=np.float64)
-            ctrl.epsilon = float(vn.epsilon)
-            ctrl.clip_obs = float(vn.clip_obs)
+            stats = check_obs_stats(vn, str(vecnorm_path), ctrl.obs_shape)
+            ctrl.obs_mean, ctrl.obs_var, ctrl.epsilon, ctrl.clip_obs = stats
 
 
 def check_spaces(model, env_kwargs: dict, wrappers, model_path: Path) -> np.ndarray | None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 
 import yaml
@@ -28,6 +29,9 @@ DYNAMICS_KWARGS = (
     "apex_scales",
     "exclude_current_positions_from_observation",
 )
+# the shipped policies, package data of `agents` (read with importlib.resources, so that an
+# installed wheel finds them too); `agents.policy.SHIPPED_DIR`
+SHIPPED = Path(str(resources.files("agents") / "policies"))
 FINGERPRINT_FILE = "fingerprint.json"  # sha256 of the model and its statistics, as one unit
 # Files a fingerprint also covers when they are present: the run config (it sets max_torque, dt,
 # the gait, the observation filter) and a residual policy's base controller. A fingerprint
@@ -242,14 +246,11 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
             f"policy {files.model} was trained with normalize="
             f"{section['normalize']!r} but {where} has no vecnormalize.pkl"
         )
-    fp = files.fingerprint
-    if fp.is_file():
-        import json
+    from .schema import read_fingerprint
 
-        try:
-            want = json.loads(fp.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            raise ValueError(f"{fp}: not a readable JSON file") from None
+    fp = files.fingerprint
+    want = read_fingerprint(fp.parent)  # a folder or a broken file there is an error
+    if want is not None:
         pairs = [("model.zip", files.model), ("vecnormalize.pkl", files.vecnormalize)]
         for key, path in pairs:
             if key in want and (path is None or file_sha256(path) != want[key]):
@@ -276,3 +277,15 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
             "that vecnormalize.pkl belongs to this model"
         )
     return warnings
+
+
+def source_name(path) -> str:
+    """How a saved file names a policy it was made from: a shipped policy by its name
+    relative to the package (``"distilled/s0"``, never the build machine's absolute path,
+    which would travel into wheels), anything else as given."""
+    text = str(path)
+    try:
+        rel = Path(text).resolve().relative_to(SHIPPED.resolve())
+    except (ValueError, OSError):
+        return text
+    return rel.as_posix()

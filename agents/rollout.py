@@ -190,12 +190,14 @@ def write_video(frames, path, fps: int) -> Path:
 
 def summary_text(r: dict) -> str:
     err = r["apex_error"]
-    last = f"{err[-1]:.3g}" if err else "-"
     fell = f"fell: {r['failure']}" if r["fell"] else "no fall"
+    if err:
+        apex = f"apex error (apex_scales units) last {err[-1]:.3g}, max {max(err):.3g}"
+    else:  # no apex reached: there is no apex error to report (not "max nan")
+        apex = "no apex reached, so no apex error"
     return (
         f"{r['policy']} on gait {r['gait']}: {r['strides']}/{r['requested_strides']} "
-        f"strides, {fell}; apex error (apex_scales units) last {last}, max "
-        f"{max(err) if err else float('nan'):.3g}; mean |tau| {r['mean_abs_tau']:.3g} N m "
+        f"strides, {fell}; {apex}; mean |tau| {r['mean_abs_tau']:.3g} N m "
         f"of {r['max_torque']:g}"
     )
 

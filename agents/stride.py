@@ -53,6 +53,13 @@ from bound_env.rescue_env import sample_direction  # noqa: F401  (moved there; r
 from .controllers import check_gait
 from .mlp import extract_actor, mlp_forward
 from .policy_files import check_policy_files, find_policy_files, read_policy_section
+from .schema import (
+    check_base,
+    check_env_kwargs,
+    check_layers,
+    check_obs_stats,
+    check_residual_scale,
+)
 
 BASE_FILE = "base.json"
 # tolerance of the nominal stride that sets the basis' window edges in the step env: that of
@@ -526,11 +533,12 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
         raise ValueError(f"policy {path} was trained on {env_id}, not {STRIDE_ENV_ID}")
     for w in check_policy_files(files, section, force):
         print(f"warning: {w}", file=sys.stderr)
-    env_kwargs = dict(section.get("env_kwargs") or {})
+    env_kwargs = check_env_kwargs(dict(section.get("env_kwargs") or {}), str(files.config))
     wrappers = section.get("env_wrapper") or []
     ctl = wrapper_kwargs(wrappers, "StrideControl")
     if ctl is None:
         raise ValueError(f"{files.config}: no agents.stride.StrideControl in env_wrapper")
+    residual_scale = check_residual_scale(ctl.get("residual_scale", 1.0), str(files.config))
     try:
         model = PPO.load(str(model_path), device="cpu")
     except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
@@ -553,8 +561,9 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
         base_path = model_path.parent / BASE_FILE
         if not base_path.is_file():
             raise FileNotFoundError(f"residual policy {path}: missing {base_path}")
-        base = BaseGain.from_json(json.loads(base_path.read_text()))
+        base = BaseGain.from_json(check_base(base_path, task.K))
     layers, activation = extract_actor(model, model_path)
+    check_layers(layers, str(model_path))
     ctrl = StridePolicyController(
         name=str(path),
         layers=layers,
@@ -564,22 +573,25 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
         phi=task.basis.phi.copy(),
         max_torque=task.max_torque,
         base=base,
-        residual_scale=float(ctl.get("residual_scale", 1.0)),
+        residual_scale=residual_scale,
         gait=trained_gait,
         seed=seed,
         anchored=type(model.policy).__name__ == "AnchoredMlpPolicy",
         gate_scale=float(getattr(model.policy, "gate_scale", 0.0)),
     )
     if vecnorm_path is not None:
-        with vecnorm_path.open("rb") as f:
-            vn = pickle.load(f)
+        try:
+            with vecnorm_path.open("rb") as f:
+                vn = pickle.load(f)
+        except Exception as e:  # noqa: BLE001 - a truncated or foreign pickle
+            raise ValueError(
+                f"cannot read {vecnorm_path} as VecNormalize statistics: {type(e).__name__}: {e}"
+            ) from None
         if getattr(vn, "norm_obs", False):
             if ctrl.anchored:
                 raise ValueError(f"{vecnorm_path}: an AnchoredMlpPolicy needs norm_obs=False")
-            ctrl.obs_mean = np.asarray(vn.obs_rms.mean, dtype=np.float64)
-            ctrl.obs_var = np.asarray(vn.obs_rms.var, dtype=np.float64)
-            ctrl.epsilon = float(vn.epsilon)
-            ctrl.clip_obs = float(vn.clip_obs)
+            stats = check_obs_stats(vn, str(vecnorm_path), (6,))
+            ctrl.obs_mean, ctrl.obs_var, ctrl.epsilon, ctrl.clip_obs = stats
     check_gait(ctrl, gait, force)
     return ctrl
 

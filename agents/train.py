@@ -292,7 +292,8 @@ def train(
         "seed": seed,
         "n_timesteps": spec.n_timesteps,
         "sessions": sessions,
-        "command": " ".join(sys.argv),
+        # the command's name, not the build machine's path to it (run.json travels in wheels)
+        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
     }
     atomic_write(info_path, json.dumps(info, indent=2) + "\n")
 

@@ -27,6 +27,7 @@ import contextlib
 import os
 import sys
 import threading
+import time
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
@@ -300,6 +301,46 @@ class TaskFailure:
         return f"task {self.key} {self.args!r}: {self.error}"
 
 
+class ProgressLines:
+    """Progress for a stderr that is not a terminal (a log file, a pipe): one line such as
+    ``[margins lqr] 12/40 tasks (30 %), 95 s`` every `EVERY_S` seconds or every `EVERY_FRACTION`
+    of the tasks, whichever comes first, and one at the end. The interface of the tqdm bar
+    that `run_tasks` uses (``update``, ``write``, ``close``)."""
+
+    EVERY_S = 30.0
+    EVERY_FRACTION = 0.1
+
+    def __init__(self, total: int, done: int = 0, desc: str = ""):
+        self.total, self.done, self.desc = total, done, desc or "tasks"
+        self.t0 = self.last_t = time.perf_counter()
+        self.last_done = done
+        self._line()
+
+    def _line(self) -> None:
+        pct = 100.0 * self.done / self.total if self.total else 100.0
+        elapsed = time.perf_counter() - self.t0
+        print(
+            f"[{self.desc}] {self.done}/{self.total} tasks ({pct:.0f} %), {elapsed:.0f} s",
+            file=sys.stderr,
+            flush=True,
+        )
+        self.last_t, self.last_done = time.perf_counter(), self.done
+
+    def update(self, n: int = 1) -> None:
+        self.done += n
+        step = max(1, int(self.EVERY_FRACTION * self.total))
+        due = time.perf_counter() - self.last_t >= self.EVERY_S
+        if due or self.done - self.last_done >= step or self.done == self.total:
+            self._line()
+
+    def write(self, msg: str, file=None) -> None:
+        print(msg, file=file or sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.done != self.last_done:
+            self._line()
+
+
 def run_tasks(
     executor,
     tasks: dict,
@@ -321,12 +362,14 @@ def run_tasks(
     if not tasks:
         return results, failures
     bar = None
-    if progress:
+    if progress and sys.stderr.isatty():
         from tqdm.auto import tqdm
 
         bar = tqdm(
             total=len(tasks) + done_before, initial=done_before, desc=desc or None, file=sys.stderr
         )
+    elif progress:  # a log file: a line now and then, not a bar redrawn in place
+        bar = ProgressLines(len(tasks) + done_before, done_before, desc)
     pending = {}
     try:
         for key, (fn, args, *_) in tasks.items():

@@ -223,7 +223,7 @@ def cmd_demo(args) -> int:
     import numpy as np
 
     from .cache import atomic_write
-    from .params import z_to_paper
+    from .params import Z_PAPER_UNITS, z_to_paper
     from .render import write_video
 
     out = out_dir(args.out)
@@ -243,6 +243,7 @@ def cmd_demo(args) -> int:
     summary = {
         "gait": args.gait,
         "z_star": [float(v) for v in z_to_paper(z_ref)],
+        "z_star_units": list(Z_PAPER_UNITS),  # the paper's units (degrees); SI under parts
         "steps": steps,
         "sim_time_s": steps * env.unwrapped.dt,
         "strides": len(apex_err),

@@ -30,11 +30,18 @@ Z_HIGH = np.array([10.0, 2 * np.pi, 2 * np.pi, 100.0, 1000.0, 1000.0], dtype=np.
 
 
 def check_coefficients(action, K: int) -> np.ndarray:
-    """The coefficient vector as float64 of shape (K,); ValueError if NaN/inf or mis-shaped."""
-    u = np.asarray(action, dtype=np.float64)
-    if u.size != K:
-        raise ValueError(f"action must hold K={K} coefficients, got shape {u.shape}")
-    u = u.reshape(K)
+    """The coefficient vector as float64 of shape (K,); ValueError if it is not K real numbers
+    of shape (K,) (no reshape of (1, K) or (K, 1), no cast of complex numbers, strings, bools
+    or objects), or NaN/inf."""
+    try:
+        raw = np.asarray(action)
+    except (TypeError, ValueError):  # ragged nested sequences
+        raise ValueError(f"action must be K={K} real numbers, got {action!r}") from None
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(f"action must be K={K} real numbers, got dtype {raw.dtype}")
+    if raw.shape != (K,):
+        raise ValueError(f"action must have shape ({K},) (K={K} coefficients), got {raw.shape}")
+    u = raw.astype(np.float64)
     if not np.isfinite(u).all():
         raise ValueError(f"action must be finite (no NaN or inf), got {u.tolist()}")
     return u
@@ -221,6 +228,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         self.action_space = spaces.Box(-1.0, 1.0, (self.task.K,), dtype=np.float32)
         self._z = self.task.z_ref.copy()
         self._failure: str | None = None
+        self._ended = False  # the last step terminated: step() needs a reset() first
         self._strides = 0
         self._alpha = self.task.params.alpha  # slope under the robot [rad] (rough terrain)
 
@@ -254,6 +262,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         self._z = self.task.start_state(self.np_random, options)
+        self._ended = False
         self._strides = 0
         self._alpha = self.task.params.alpha
         probe = self.task.step_task.new_batch(1)  # the step task's start check
@@ -262,6 +271,10 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         return self._obs(self._z), {"start_z": self._z.copy(), "failure": self._failure}
 
     def step(self, action):
+        if self._ended:
+            raise ValueError(
+                "step() after the episode terminated (the robot fell): call reset() first"
+            )
         u = np.clip(check_coefficients(action, self.task.K), -1.0, 1.0)
         taus = self.task.basis.torques(u, self.task.max_torque)
         slope = None
@@ -286,6 +299,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
             "tau_windows": taus,
         }
         if failed:
+            self._ended = True
             obs = self._obs(z_from_state(out.y_end))
         else:
             self._strides += 1

@@ -404,6 +404,26 @@ def step_batch_parallel(Y, AUX, FLAGS, S, APEX, OBS, cfg, actions, active):
 # ---------------------------------------------------------------------------------------------
 
 
+# the keys ``reset(options=...)`` of PassiveBound-v0 and PassiveBoundStride-v1 reads
+RESET_OPTIONS = ("apex_state",)
+
+
+def check_reset_options(options) -> dict:
+    """``options`` of ``reset``: None or a dict whose keys are `RESET_OPTIONS`; ValueError
+    otherwise (a typo such as ``apex_sate`` would silently give a random start)."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ValueError(
+            f"options must be a dict (keys: {', '.join(RESET_OPTIONS)}) or None, "
+            f"got {type(options).__name__}"
+        )
+    for key in options:
+        if key not in RESET_OPTIONS:
+            raise ValueError(f"unknown reset option {key!r} (known: {', '.join(RESET_OPTIONS)})")
+    return options
+
+
 def check_number(name, value, minimum, strict=False) -> float:
     """``value`` as a finite float above (``strict``) or at least ``minimum``, else ValueError."""
     try:
@@ -617,8 +637,10 @@ class PassiveBoundTask:
 
     def start_state(self, rng: np.random.Generator, options: dict | None = None) -> np.ndarray:
         """The start apex state z (SI): ``options["apex_state"]`` if given, else
-        z_ref + reset_noise_scale * apex_scales * U(-1, 1) (one draw per component)."""
-        if options and options.get("apex_state") is not None:
+        z_ref + reset_noise_scale * apex_scales * U(-1, 1) (one draw per component).
+        ``options`` is None or a dict of `RESET_OPTIONS` (`check_reset_options`)."""
+        options = check_reset_options(options)
+        if options.get("apex_state") is not None:
             return self.check_apex_state(options["apex_state"])
         noise = rng.uniform(-1.0, 1.0, size=6)
         return self.z_ref + self.reset_noise_scale * self.apex_scales * noise
@@ -626,8 +648,12 @@ class PassiveBoundTask:
     @staticmethod
     def check_apex_state(z) -> np.ndarray:
         msg = f"apex_state must be 6 real numbers {Z_NAMES} in SI units (shape (6,)), got {z!r}"
-        raw = np.asarray(z)
-        if raw.ndim != 1 or np.iscomplexobj(raw):  # no silent reshape of (2, 3) or (6, 1)
+        try:
+            raw = np.asarray(z)
+        except (TypeError, ValueError):  # ragged nested sequences
+            raise ValueError(msg) from None
+        # no silent reshape of (2, 3) or (6, 1), no cast of strings, bools, complex or objects
+        if raw.ndim != 1 or raw.dtype.kind not in "iuf":
             raise ValueError(msg)
         try:
             z = np.array(raw, dtype=float).reshape(6)

@@ -224,7 +224,7 @@ def test_fixed_point_out_folder_and_the_old_save(tmp_path, cli):
 def test_unknown_argument_names_the_sub_command_and_help_gives_defaults(cli, capsys):
     code, _, err = cli("margins", "--set", "kc=1")
     assert code == 2 and "bound-env margins: error: unrecognized arguments: --set kc=1" in err
-    for cmd, default in (("margins", "quick"), ("compare", "full")):
+    for cmd, default in (("margins", "quick"), ("compare", "quick")):  # issue 26: quick
         assert main([cmd, "--help"]) == 0
         text = " ".join(capsys.readouterr().out.split())
         assert f"(default: {default})" in text.split("--budget {test,quick,standard,full}")[-1]

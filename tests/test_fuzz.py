@@ -58,6 +58,23 @@ def files(tmp_path):
     text = (cut / "config.json").read_text()
     (cut / "config.json").write_text(text[: len(text) // 2])
     out["cut_choice"] = str(cut)
+    # the shipped default with dt 1e-7 (ran until killed) and its fingerprint rewritten
+    import json
+
+    from agents.distill import write_choice_fingerprint
+
+    slow = tmp_path / "dt-choice"
+    shutil.copytree(shipped_policies()["default"], slow)
+    cfg = json.loads((slow / "config.json").read_text())
+    cfg["expert"]["dt"] = 1e-7
+    (slow / "config.json").write_text(json.dumps(cfg))
+    write_choice_fingerprint(slow)
+    out["dt_choice"] = str(slow)
+    # a PPO folder with a choice.npz dropped in
+    both = tmp_path / "both"
+    shutil.copytree(shipped_policies()["ppo-v1"], both)
+    shutil.copy(shipped_policies()["default"] / "choice.npz", both)
+    out["both"] = str(both)
     return out
 
 
@@ -261,6 +278,13 @@ def _cases(f):
             ["margins", "--policy", f["cut_choice"], "--budget", "test", "--out", f["dir"] + "/m"],
             "config.json does not match",
         ),
+        # policy files validated at load (issue 26 §2; every class: CHOICE_CASES below)
+        (["rollout", "--policy", f["dt_choice"], "--strides", "1"], "expert.dt"),
+        (
+            ["margins", "--policy", f["both"], "--budget", "test", "--out", f["dir"] + "/m"],
+            "ambiguous",
+        ),
+        (["rollout", "--policy", f["both"], "--strides", "1"], "ambiguous"),
         # overwrites
         (_train(f, "--export", f["cut_policy"]), "--force"),
         (_train(f, "--export-out", f["cut_policy"]), "--force"),
@@ -404,3 +428,194 @@ def test_env_gait_path_that_is_not_a_mapping(files):
 
     with pytest.raises(ValueError, match="mapping"):
         gym.make("PassiveBound-v0", gait=files["list"])
+
+
+# -- policy files (issue 26 §2): each class of bad file, fingerprint rewritten ------------------
+
+
+def _set_npz(**arrays):
+    def f(d):
+        with np.load(d / "choice.npz") as z:
+            a = dict(z)
+        a.update(arrays)
+        np.savez(d / "choice.npz", **a)
+
+    return f
+
+
+def _map_npz(key, fn):
+    def f(d):
+        with np.load(d / "choice.npz") as z:
+            a = dict(z)
+        a[key] = fn(a[key])
+        np.savez(d / "choice.npz", **a)
+
+    return f
+
+
+def _set_cfg(path, value):
+    def f(d):
+        import json
+
+        cfg = json.loads((d / "config.json").read_text())
+        node = cfg
+        for k in path[:-1]:
+            node = node[k]
+        node[path[-1]] = value
+        (d / "config.json").write_text(json.dumps(cfg))
+
+    return f
+
+
+def _write(name, data):
+    def f(d):
+        (d / name).write_bytes(data) if isinstance(data, bytes) else (d / name).write_text(data)
+
+    return f
+
+
+def _nan_safe(d):
+    text = (d / "config.json").read_text().replace('"safe": 0.05', '"safe": NaN')
+    (d / "config.json").write_text(text)
+
+
+def _fingerprint_folder(d):
+    (d / "fingerprint.json").unlink()
+    (d / "fingerprint.json").mkdir()
+
+
+def _add_model_zip(d):
+    from agents.policy import shipped_policies
+
+    shutil.copy(shipped_policies()["ppo-v1"] / "model.zip", d / "model.zip")
+
+
+CHOICE_CASES = {  # name: (change to a copy of the shipped default, words the error must hold)
+    "n_layers 0": (_set_npz(n_layers=np.array(0)), "n_layers"),
+    "n_layers -1": (_set_npz(n_layers=np.array(-1)), "n_layers"),
+    "n_layers list": (_set_npz(n_layers=np.array([3, 3])), "n_layers"),
+    "n_layers float": (_set_npz(n_layers=np.array(3.0)), "n_layers"),
+    "0-byte choice.npz": (_write("choice.npz", b""), "choice.npz: empty"),
+    "garbage choice.npz": (_write("choice.npz", b"PK\x03\x04garbage"), "choice.npz"),
+    "NaN weight": (_map_npz("W0", lambda w: np.where(w == w.flat[0], np.nan, w)), "W0"),
+    "inf bias": (_map_npz("b1", lambda b: b + np.inf), "b1"),
+    "complex weights": (_map_npz("W1", lambda w: w * (1 + 1j)), "W1"),
+    "string weights": (_map_npz("W2", lambda w: w.astype(str)), "W2"),
+    "mis-chained layer": (_map_npz("W1", lambda w: w[:, :-1]), "W1"),
+    "rows out of range": (_map_npz("rows", lambda r: 2 * r), "rows"),
+    "extra array": (_set_npz(W9=np.zeros((2, 2))), "W9"),
+    "dt 0": (_set_cfg(("expert", "dt"), 0), "expert.dt"),
+    "dt 1e-7 (unbounded work)": (_set_cfg(("expert", "dt"), 1e-7), "expert.dt"),
+    "horizon '12'": (_set_cfg(("expert", "settings", "horizon"), "12"), "horizon"),
+    "horizon 10**9": (_set_cfg(("expert", "settings", "horizon"), 10**9), "horizon"),
+    "K '8'": (_set_cfg(("expert", "K"), "8"), "expert.K"),
+    "safe -1": (_set_cfg(("expert", "settings", "safe"), -1), "safe"),
+    "safe NaN": (_nan_safe, "safe"),
+    "rtol 0": (_set_cfg(("expert", "settings", "rtol"), 0), "rtol"),
+    "gain wrong shape": (_set_cfg(("expert", "gain"), [[1.0] * 6]), "expert.gain"),
+    "unknown setting": (_set_cfg(("expert", "settings", "bogus"), 1), "bogus"),
+    "0-byte config.json": (_write("config.json", b""), "config.json: empty"),
+    "deeply nested config.json": (_write("config.json", "[" * 10**5 + "]" * 10**5), "nested"),
+    "config.json a list": (_write("config.json", "[1, 2]"), "mapping"),
+    "fingerprint.json a folder": (_fingerprint_folder, "fingerprint.json: not a file"),
+    "model.zip beside choice.npz": (_add_model_zip, "ambiguous"),
+}
+
+
+@pytest.mark.parametrize("case", list(CHOICE_CASES))
+def test_bad_choice_policy_files_are_refused_by_file_and_field(case, tmp_path):
+    from agents.distill import write_choice_fingerprint
+    from agents.policy import load_controller, shipped_policies
+
+    change, words = CHOICE_CASES[case]
+    d = tmp_path / "pol"
+    shutil.copytree(shipped_policies()["default"], d)
+    change(d)
+    if (d / "fingerprint.json").is_file():  # rewritten: only the schema can catch it
+        write_choice_fingerprint(d)
+    with pytest.raises(ValueError, match=None) as e:
+        load_controller(d)
+    msg = str(e.value)
+    assert words in msg and "\n" not in msg, msg
+
+
+def test_a_ppo_folder_with_a_choice_npz_dropped_in_is_refused(tmp_path):
+    from agents.policy import load_controller, shipped_policies
+
+    d = tmp_path / "ppo"
+    shutil.copytree(shipped_policies()["ppo-v1"], d)
+    shutil.copy(shipped_policies()["default"] / "choice.npz", d)
+    with pytest.raises(ValueError, match="ambiguous"):
+        load_controller(d)
+
+
+@pytest.mark.parametrize(
+    "text, word",
+    [
+        ("dt: 1.0e-7", "dt"),
+        ("horizon: '12'", "horizon"),
+        ("horizon: 100000", "horizon"),
+        ("plan_rtol: 0", "plan_rtol"),
+        ("safe: .nan", "safe"),
+        ("max_torque: 1.0e+9", "max_torque"),
+        ("cem_samples: true", "cem_samples"),
+    ],
+)
+def test_bad_controller_specs_are_refused_by_key(tmp_path, text, word):
+    from bound_env.control.spec import load_spec
+
+    p = tmp_path / "m.yaml"
+    p.write_text(f"controller: mpc\nK: 8\n{text}\n")
+    with pytest.raises(ValueError, match=f"m.yaml: {word}"):
+        load_spec(p)
+
+
+# -- env options and stride actions (issue 26 §2) ---------------------------------------------
+
+
+@pytest.mark.parametrize("env_id", ["PassiveBound-v0", "PassiveBoundStride-v1"])
+@pytest.mark.parametrize(
+    "options, word",
+    [
+        ([("apex_state", [0.25] * 6)], "options must be a dict"),
+        ("apex_state", "options must be a dict"),
+        ({"apex_sate": [0.25] * 6}, "unknown reset option 'apex_sate'"),
+        ({"apex_state": ["0.25"] * 6}, "apex_state"),
+        ({"apex_state": [True] * 6}, "apex_state"),
+        ({"apex_state": [[0.25, 0.5], [1.0]]}, "apex_state"),
+        ({"apex_state": {"y_g": 0.25}}, "apex_state"),
+    ],
+)
+def test_env_reset_rejects_bad_options(env_id, options, word):
+    import gymnasium as gym
+
+    import bound_env
+
+    gym.register_envs(bound_env)
+    with gym.make(env_id) as e, pytest.raises(ValueError, match=word):
+        e.reset(options=options)
+
+
+@pytest.mark.parametrize(
+    "action",
+    [
+        np.zeros((1, 4)),
+        np.zeros((4, 1)),
+        np.zeros(3),
+        np.zeros(4, complex),
+        np.array(["0"] * 4),
+        np.zeros(4, bool),
+        [[0.0, 0.0], [0.0]],
+        None,
+    ],
+)
+def test_stride_env_step_rejects_bad_actions(action):
+    import gymnasium as gym
+
+    import bound_env
+
+    gym.register_envs(bound_env)
+    with gym.make("PassiveBoundStride-v1") as e:
+        e.reset(seed=0)
+        with pytest.raises(ValueError, match="action"):
+            e.step(action)

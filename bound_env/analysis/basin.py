@@ -53,14 +53,14 @@ from ..fast import EVENT_CAPACITY, Options, advance, event_log, recorder
 from ..params import Z_IN_Y, Z_NAMES, Z_PAPER_UNITS, load_gait, z_to_paper, z_to_si
 from ..stride import DEFAULT_T_MAX
 from ..stride_map import EVAL_RTOL, RETURN_TOL, max_intervals
+from .basin_defaults import (  # noqa: F401 - the command line reads them without numba
+    DEFAULT_CHUNK,
+    DEFAULT_GRID,
+    DEFAULT_STRIDES,
+    MAX_GRID,
+    MAX_STRIDES,
+)
 
-DEFAULT_STRIDES = 100  # strides allowed to return (margins' quick budget)
-DEFAULT_GRID = 64
-# Bounds of the command line (a grid of 10^5 per axis grew by 40 MB/s with no output, as sweep's
-# --step is bounded): at most 1000 x 1000 = 10^6 starts, 10^4 strides each.
-MAX_GRID = 1000
-MAX_STRIDES = 10_000
-DEFAULT_CHUNK = 128  # starts per task
 RETURNED, FELL, UNDECIDED = 0, 1, 2
 OUTCOMES = ("returned", "fell", "undecided")
 REASONS = ("",) + FAILURES  # reason code 0: none; k >= 1: FAILURES[k - 1]

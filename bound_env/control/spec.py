@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .. import schema
 from ..resources import controllers_dir
 
 # the repository's configs/controllers, or the wheel's copy (package data, bound_env.resources)
@@ -42,6 +43,21 @@ MPC_DEFAULTS = {
     "library_seed": -1,
 }
 MPC_INTS = ("horizon", "n_random", "n_noise", "cem_iters", "cem_samples", "cem_elites", "seed")
+# the range of each search setting (bounded work per decision): (lo, hi), reals in (lo, hi]
+MPC_LIMITS = {
+    "safe": (0.0, 100.0),  # normalized apex error
+    "horizon": (1, 1000),  # strides
+    "n_random": (0, 10_000),
+    "n_noise": (0, 10_000),
+    "noise": (0.0, 100.0),
+    "cem_iters": (0, 100),
+    "cem_samples": (0, 10_000),
+    "cem_elites": (1, 10_000),
+    "plan_rtol": (0.0, 1e-2),
+    "seed": (0, 2**32 - 1),
+    "library_seed": (-1, 2**32 - 1),
+}
+MAX_TORQUE_LIMIT = 1e4  # [N m]: a saturation above this is certainly a mistake
 SPEC_KEYS = {
     "lqr": COMMON_KEYS + ("basis", "K", "Q", "R", "jacobian", "gain"),
     "deadbeat": COMMON_KEYS + ("basis", "K", "jacobian", "gain"),
@@ -92,14 +108,34 @@ def resolve_spec_path(spec: str | Path) -> Path:
     return cand
 
 
-def _positive(path, key, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{path}: {key} must be a number, got {value!r}") from None
-    if not np.isfinite(v) or v <= 0:
-        raise ValueError(f"{path}: {key} must be finite and positive, got {value!r}")
-    return v
+def _positive(path, key, value, hi: float | None = None) -> float:
+    """A YAML number > 0 (and <= hi). PyYAML reads ``1e-8`` (no dot) as a string, so a
+    string that spells a number is read as that number here (not in JSON files)."""
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise ValueError(f"{path}: {key} must be a number, got {value!r}") from None
+    return schema.real(value, f"{path}: {key}", 0.0, hi, lo_open=True)
+
+
+def check_mpc_settings(values: dict, where, yaml_numbers: bool = True) -> dict:
+    """The search settings of an mpc controller (`MPC_LIMITS`; ``rtol`` as ``plan_rtol``),
+    checked: integers are integers, reals finite, each in its range. ``yaml_numbers``: a
+    string that spells a real is read as it (see `_positive`)."""
+    out = dict(values)
+    for key, (lo, hi) in MPC_LIMITS.items():
+        name = "rtol" if key == "plan_rtol" and "rtol" in values else key
+        if name not in values:
+            continue
+        v = values[name]
+        if isinstance(lo, int):
+            out[name] = schema.integer(v, f"{where}: {name}", lo, hi)
+        elif yaml_numbers:
+            out[name] = _positive(where, name, v, hi)
+        else:
+            out[name] = schema.real(v, f"{where}: {name}", lo, hi, lo_open=True)
+    return out
 
 
 def load_spec(spec: str | Path) -> ControllerSpec:
@@ -109,6 +145,8 @@ def load_spec(spec: str | Path) -> ControllerSpec:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as e:
         raise ValueError(f"{path}: not valid YAML ({str(e).splitlines()[0]})") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a text file") from None
     if not isinstance(data, dict):
         raise ValueError(f"{path}: must be a mapping of keys to values")
     kind = data.get("controller")
@@ -124,8 +162,8 @@ def load_spec(spec: str | Path) -> ControllerSpec:
     out = ControllerSpec(controller=kind, path=path)
     for key, value in data.items():
         setattr(out, key, value)
-    out.max_torque = _positive(path, "max_torque", out.max_torque)
-    out.dt = _positive(path, "dt", out.dt)
+    out.max_torque = _positive(path, "max_torque", out.max_torque, MAX_TORQUE_LIMIT)
+    out.dt = schema.dt_value(_positive(path, "dt", out.dt), f"{path}: dt")
     out.gait = str(out.gait)
     if kind == "damping":
         try:
@@ -141,18 +179,7 @@ def load_spec(spec: str | Path) -> ControllerSpec:
     ):
         raise ValueError(f"{path}: K must be an integer, got {data['K']!r}")
     if kind == "mpc":
-        out.extra = {k: data.get(k, v) for k, v in MPC_DEFAULTS.items()}
-        for k in MPC_INTS:
-            v = out.extra[k]
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ValueError(f"{path}: {k} must be an integer >= 0, got {v!r}")
-        v = out.extra["library_seed"]
-        if isinstance(v, bool) or not isinstance(v, int) or v < -1:
-            raise ValueError(f"{path}: library_seed must be an integer >= -1, got {v!r}")
-        if out.extra["horizon"] < 1 or out.extra["cem_elites"] < 1:
-            raise ValueError(f"{path}: horizon and cem_elites must be >= 1")
-        for k in ("safe", "noise", "plan_rtol"):
-            out.extra[k] = _positive(path, k, out.extra[k])
+        out.extra = check_mpc_settings({k: data.get(k, v) for k, v in MPC_DEFAULTS.items()}, path)
     if out.jacobian not in ("fd", "variational"):
         raise ValueError(f"{path}: jacobian must be 'fd' or 'variational', got {out.jacobian!r}")
     return out
@@ -204,14 +231,15 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
             p = spec.path.parent / p
         if not p.is_file():
             raise FileNotFoundError(f"{spec.path}: gain file {str(p)!r} does not exist")
-        if p.suffix == ".npy":
-            g = np.load(p)
-        elif p.suffix == ".json":
-            import json
-
-            g = json.loads(p.read_text())
-        else:
-            g = np.loadtxt(p, delimiter=",", ndmin=2)
+        try:
+            if p.suffix == ".npy":
+                g = np.load(p, allow_pickle=False)
+            elif p.suffix == ".json":
+                g = schema.read_json(p)
+            else:
+                g = np.loadtxt(p, delimiter=",", ndmin=2)
+        except (OSError, EOFError, UnicodeDecodeError, ValueError) as e:
+            raise ValueError(f"{spec.path}: gain file {str(p)!r} is not readable ({e})") from None
     try:
         G = np.array(g, dtype=float)
     except (TypeError, ValueError):

@@ -1,0 +1,200 @@
+"""Field checkers for the files a user can hand us (policy folders, controller specs).
+
+Each checker takes the value and ``where``, the file and the field it came from
+(``"policies/x/config.json: expert.settings.safe"``), and returns the value in its checked
+type, or raises a one-line ValueError that starts with ``where``. The schema of each kind of
+file lives in one place and is written with these: controller specs in
+`bound_env.control.spec`, the policy folders in `agents.schema`.
+
+Strings are never read as numbers (``horizon: "12"`` is an error, not 12), booleans are never
+read as integers, and numbers must be finite.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+# control interval dt [s] a file may set: below MIN_DT a stride needs more than ~4000
+# intervals (dt = 1e-7 ran until it was killed); above MAX_DT a stride holds fewer than 4
+MIN_DT, MAX_DT = 1e-4, 0.1
+MAX_JSON_BYTES = 10 * 2**20  # a policy's config.json is a few kB
+MAX_JSON_DEPTH = 32  # nesting of a JSON file (the policies' files nest 4 deep)
+
+
+def integer(value, where: str, lo: int | None = None, hi: int | None = None) -> int:
+    """An integer (not a bool, a float or a string) in [lo, hi]."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{where} must be an integer{_range(lo, hi)}, got {_show(value)}")
+    v = int(value)
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise ValueError(f"{where} must be an integer{_range(lo, hi)}, got {v}")
+    return v
+
+
+def real(
+    value,
+    where: str,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+) -> float:
+    """A finite real number (an int or a float, not a bool or a string) in [lo, hi] (``lo_open``:
+    in (lo, hi])."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{where} must be a number{_range(lo, hi, lo_open)}, got {_show(value)}")
+    v = float(value)
+    bad = not math.isfinite(v)
+    bad = bad or (lo is not None and (v < lo or (lo_open and v == lo)))
+    bad = bad or (hi is not None and v > hi)
+    if bad:
+        raise ValueError(f"{where} must be a finite number{_range(lo, hi, lo_open)}, got {v!r}")
+    return v
+
+
+def dt_value(value, where: str) -> float:
+    """A control interval [s] in [MIN_DT, MAX_DT] (bounded work per stride)."""
+    return real(value, where, MIN_DT, MAX_DT)
+
+
+def text(value, where: str, choices=None) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"{where} must be a string, got {_show(value)}")
+    if choices is not None and value not in choices:
+        raise ValueError(f"{where} must be one of {', '.join(map(str, choices))}, got {value!r}")
+    return value
+
+
+def mapping(value, where: str, required=(), allowed=None) -> dict:
+    """A dict with string keys holding every key of ``required`` (and, if ``allowed`` is given,
+    no other)."""
+    if not isinstance(value, dict):
+        raise ValueError(f"{where} must be a mapping, got {_show(value)}")
+    for key in required:
+        if key not in value:
+            raise ValueError(f"{where}: missing key {key!r}")
+    if allowed is not None:
+        for key in value:
+            if key not in allowed:
+                raise ValueError(f"{where}: unknown key {key!r} (allowed: {', '.join(allowed)})")
+    return value
+
+
+def real_array(
+    value,
+    where: str,
+    shape: tuple | None = None,
+    ndim: int | None = None,
+    max_size: int = 10**7,
+    lo: float | None = None,
+    hi: float | None = None,
+) -> np.ndarray:
+    """A float64 array of real, finite numbers (ints and floats; not complex, strings, objects
+    or bools), of ``shape`` (None entries: any length) or ``ndim``, in [lo, hi]."""
+    if isinstance(value, np.ndarray):
+        raw = value
+    else:
+        try:
+            raw = np.asarray(value)
+        except (TypeError, ValueError):  # ragged nested lists
+            raise ValueError(f"{where} must be an array of numbers, got {_show(value)}") from None
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(f"{where} must hold real numbers, got dtype {raw.dtype}")
+    if shape is not None:
+        ok = raw.ndim == len(shape) and all(
+            n is None or n == m for n, m in zip(shape, raw.shape, strict=True)
+        )
+        if not ok:
+            want = "(" + ", ".join("n" if n is None else str(n) for n in shape) + ")"
+            raise ValueError(f"{where} must have shape {want}, got {raw.shape}")
+    elif ndim is not None and raw.ndim != ndim:
+        raise ValueError(f"{where} must be {ndim}-D, got shape {raw.shape}")
+    if raw.size > max_size or raw.size == 0:
+        raise ValueError(f"{where} must hold 1 to {max_size} numbers, got {raw.size}")
+    a = raw.astype(np.float64)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{where} must be finite (no NaN or inf)")
+    if (lo is not None and a.min() < lo) or (hi is not None and a.max() > hi):
+        got = f"[{float(a.min())!r}, {float(a.max())!r}]"
+        raise ValueError(f"{where} must lie in [{lo}, {hi}], got {got}")
+    return a
+
+
+def regular_file(path, what: str = "file") -> Path:
+    """``path`` if it is a non-empty regular file; a folder, a missing or an empty file is an
+    error naming it."""
+    p = Path(path)
+    if not p.exists():
+        raise ValueError(f"{p}: missing ({what})")
+    if not p.is_file():
+        raise ValueError(f"{p}: not a file ({what})")
+    if p.stat().st_size == 0:
+        raise ValueError(f"{p}: empty file ({what})")
+    return p
+
+
+def read_json(path, max_bytes: int = MAX_JSON_BYTES, max_depth: int = MAX_JSON_DEPTH):
+    """A JSON file's value: a regular file of at most ``max_bytes``, nested at most
+    ``max_depth`` deep; ValueError naming the file otherwise."""
+    p = regular_file(path, "a JSON file")
+    if p.stat().st_size > max_bytes:
+        raise ValueError(f"{p}: larger than {max_bytes} bytes, not a policy's JSON file")
+    try:
+        data = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"{p}: not a readable JSON file ({str(e).splitlines()[0]})") from None
+    except RecursionError:
+        raise ValueError(f"{p}: nested deeper than {max_depth} levels") from None
+    if depth(data, max_depth + 1) > max_depth:
+        raise ValueError(f"{p}: nested deeper than {max_depth} levels")
+    return data
+
+
+def depth(value, limit: int) -> int:
+    """The nesting depth of a JSON value (a scalar: 0), counted up to ``limit``."""
+    best, stack = 0, [(value, 0)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, (dict, list)):
+            if d + 1 > best:
+                best = d + 1
+                if best >= limit:
+                    return best
+            stack.extend((x, d + 1) for x in (v.values() if isinstance(v, dict) else v))
+    return best
+
+
+def read_npz(path, max_arrays: int = 256) -> dict[str, np.ndarray]:
+    """The arrays of an ``.npz`` file (no pickled objects); ValueError naming the file."""
+    p = regular_file(path, "an .npz file")
+    try:
+        with np.load(p, allow_pickle=False) as d:
+            if len(d.files) > max_arrays:
+                raise ValueError(f"{p}: more than {max_arrays} arrays")
+            return {k: d[k] for k in d.files}
+    except (zipfile.BadZipFile, OSError, EOFError, KeyError) as e:
+        raise ValueError(f"{p}: not a readable .npz file ({type(e).__name__})") from None
+    except ValueError as e:
+        if str(e).startswith(str(p)):
+            raise
+        raise ValueError(f"{p}: not a readable .npz file ({str(e).splitlines()[0]})") from None
+
+
+def _range(lo, hi, lo_open: bool = False) -> str:
+    if lo is None and hi is None:
+        return ""
+    if hi is None:
+        return f" {'>' if lo_open else '>='} {lo:g}"
+    if lo is None:
+        return f" <= {hi:g}"
+    return f" in {'(' if lo_open else '['}{lo:g}, {hi:g}]"
+
+
+def _show(value) -> str:
+    s = repr(value)
+    s = s if len(s) <= 60 else s[:57] + "..."
+    return f"{s} ({type(value).__name__})"
