@@ -9,9 +9,18 @@ factory and an action function that belong together::
     from agents.rollout import load_policy
 
     make_env, act = load_policy("default")        # a shipped name, or a policy/run folder
-    env = make_env()                               # gym.make(...) + the policy's wrappers
+    env = make_env()                               # or gym.make("PassiveBound-v1")
     obs, info = env.reset(seed=0)
-    obs, reward, terminated, truncated, info = env.step(act(obs))
+    obs, reward, terminated, truncated, info = env.step(act(obs, info))
+
+``act(obs, info)`` is a `bound_env.control.PlainPolicy`: it announces each apex to a stride
+controller itself (the info carries the exact apex state), so this loop gives ``bound-env
+rollout``'s trajectory bit for bit; a stride controller called without ``info`` raises a
+TypeError, and an env whose observation length, ``max_torque`` or ``dt`` is not the policy's
+a ValueError (`bound_env.control.plain`). Feedback policies (PPO, damping, passive) also take
+``act(obs)``. ``PassiveBound-v1`` has the published task's defaults (80 N m), the settings of
+every shipped policy except two families trained at ``rtol`` 1e-8 (``warm-started/*``,
+``ppo-v1-final/*``: `make_env` sets it; the tolerance does not show in what the env returns).
 
 Only the wrappers that change what the policy sees or does (observation and action
 wrappers) are applied; training-only wrappers such as `agents.wrappers.PerturbedStarts`
@@ -26,6 +35,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+from bound_env.control.plain import FULL_OBS_DIM, PlainPolicy
 
 from .controllers import MLPController, check_gait
 from .policy import load_controller, resolve_policy
@@ -58,10 +69,13 @@ def load_policy(path, gait=None, force: bool = False):
 
     ``env_factory(**kwargs)`` makes the environment the policy was trained for (its env kwargs
     and observation wrappers; ``kwargs`` add to or override them, e.g. ``render_mode``,
-    ``reset_noise_scale``, ``max_episode_steps``). ``act(obs)`` is the deterministic action
-    (float32, shape (1,)) for an observation of that environment, normalized with the policy's
-    statistics. ``gait`` evaluates on another gait (refused for a trained policy unless
-    ``force``); built-in controllers (``passive``, ...) run on ``gait`` or the default one.
+    ``reset_noise_scale``, ``max_episode_steps``). ``act(obs, info)`` is the deterministic
+    action (float32, shape (1,)) for an observation of that environment (or of
+    ``PassiveBound-v1``: the full observation is filtered as the policy was trained) and the
+    info returned with it, a `bound_env.control.PlainPolicy` (module docstring; ``act(obs)``
+    for feedback policies); ``act.controller`` is the controller. ``gait`` evaluates on another
+    gait (refused for a trained policy unless ``force``); built-in controllers (``passive``,
+    ...) run on ``gait`` or the default one.
     """
     import gymnasium as gym
 
@@ -74,19 +88,23 @@ def load_policy(path, gait=None, force: bool = False):
     env_kwargs = dict(ctrl.env_kwargs)
     if gait is not None:
         env_kwargs["gait"] = str(gait)
-    if isinstance(ctrl, MLPController):
-        inner = replace(ctrl, obs_index=None)  # the env below applies the ObservationFilter
+    obs_index, full_dim = None, FULL_OBS_DIM
+    if isinstance(ctrl, MLPController) and ctrl.obs_index is not None:
+        # act takes the full observation and the one of the ObservationFilter (make_env's)
+        obs_index = ctrl.obs_index
+        full_dim += 0 if env_kwargs.get("exclude_current_positions_from_observation", True) else 1
+        inner = replace(ctrl, obs_index=None)
+    elif isinstance(ctrl, MLPController):
+        inner, full_dim = ctrl, int(ctrl.obs_shape[0])
     else:
         inner = ctrl
+    act = PlainPolicy(inner, obs_index=obs_index, full_dim=full_dim, name=str(path))
 
     def env_factory(**kwargs):
         env = gym.make(ENV_ID, **{**env_kwargs, **kwargs})
         for cls, kw in wrappers:
             env = cls(env, **kw)
         return env
-
-    def act(obs) -> np.ndarray:
-        return np.array([inner(obs)], dtype=np.float32)
 
     env_factory.env_kwargs = env_kwargs
     act.controller = ctrl
@@ -132,17 +150,13 @@ def rollout(
     frames = []
     task = env.unwrapped.task
     z_ref, scales = np.asarray(task.z_ref), np.asarray(task.apex_scales)
-    # stride-level controllers (bound_env.control) are told every apex state
-    from bound_env.control import notify_apex
-
     obs, info = env.reset(seed=seed)
-    notify_apex(act.controller, obs, info)
     failure, errors, taus, steps = info.get("failure"), [], [], 0
     if video:
         frames.append(env.render())
     while failure is None and len(errors) < strides:
-        obs, _, terminated, truncated, info = env.step(act(obs))
-        notify_apex(act.controller, obs, info)
+        # act announces every apex to a stride controller (bound_env.control.plain)
+        obs, _, terminated, truncated, info = env.step(act(obs, info))
         steps += 1
         taus.append(abs(float(info["tau"])))
         if video:
