@@ -42,7 +42,7 @@ def _add_sample_seed(p, number) -> None:
 
 
 def register(sub) -> None:
-    from bound_env.cli_args import add_progress_args, number
+    from bound_env.cli_args import add_progress_args, name_type, number
     from bound_env.parallel import add_scheduler_args
 
     from .config import DEFAULT_CONFIG, DEFAULT_ENV_ID
@@ -59,7 +59,11 @@ def register(sub) -> None:
         default=DEFAULT_ENV_ID,
         help="section of the config and Gymnasium id (default: %(default)s)",
     )
-    p.add_argument("--name", help="run name: runs/<name>/ (default: <env-id>_s<seed>)")
+    p.add_argument(
+        "--name",
+        type=name_type(),
+        help="run name: runs/<name>/ (default: <env-id>_s<seed>; letters, digits, . _ + -)",
+    )
     p.add_argument(
         "--seed", type=number(int, 0, SEED_MAX), default=0, help="training seed (default: 0)"
     )
@@ -500,6 +504,14 @@ def cmd_margins(args) -> int:
     return 0
 
 
+def _checked(path, flag: str) -> Path:
+    """``path`` once `check_writable` passes (created later, by the command's own work)."""
+    from bound_env.cli_args import check_writable
+
+    check_writable(path, flag)
+    return Path(path)
+
+
 def cmd_compare(args) -> int:
     from .compare import compare, default_entries, parse_entry
 
@@ -514,7 +526,7 @@ def cmd_compare(args) -> int:
         budget=args.budget,
         workers=args.workers,
         out=args.out,
-        docs=out_dir(args.docs or args.out, "--docs"),
+        docs=_checked(args.docs or args.out, "--docs"),  # made once the entries are checked
         progress=sys.stderr.isatty() and not args.no_progress,
         note=args.note,
         scheduler=args.scheduler,
