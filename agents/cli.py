@@ -43,7 +43,7 @@ def _add_sample_seed(p, number) -> None:
 
 def register(sub) -> None:
     from bound_env.cli_args import add_progress_args, name_type, number
-    from bound_env.parallel import add_scheduler_args
+    from bound_env.parallel import MAX_WORKERS, add_scheduler_args
 
     from .config import DEFAULT_CONFIG, DEFAULT_ENV_ID
 
@@ -187,7 +187,10 @@ def register(sub) -> None:
         help="evaluate a policy on a gait or without files it was not trained for",
     )
     p.add_argument(
-        "--workers", type=number(int, 1, 256), default=2, help="worker processes (default: 2)"
+        "--workers",
+        type=number(int, 1, MAX_WORKERS),
+        default=2,
+        help="worker processes (default: 2)",
     )
     add_scheduler_args(p, workers_default=None)
     p.add_argument(
@@ -248,7 +251,7 @@ def register(sub) -> None:
         help=BUDGET_HELP + " (default: %(default)s)",
     )
     _add_sample_seed(p, number)
-    p.add_argument("--workers", type=number(int, 1, 256), default=2)
+    p.add_argument("--workers", type=number(int, 1, MAX_WORKERS), default=2)
     add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", default="out/margins", help="per-entry results and caches")
     p.add_argument(
@@ -481,7 +484,7 @@ def cmd_margins(args) -> int:
     name = policy_label(args.policy)
     if args.seed != 12345:  # a held-out set: not over the test set's outputs
         name += f"-seed{args.seed}"
-    out = out_dir(args.out or Path("out") / "margins" / name)
+    out = _checked(args.out or Path("out") / "margins" / name, "--out")  # made by the run
     progress = (args.budget == "full" or sys.stderr.isatty()) and not args.no_progress
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
     gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"

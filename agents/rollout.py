@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -42,6 +43,7 @@ from .controllers import MLPController, check_gait
 from .policy import load_controller, resolve_policy
 from .policy_files import find_policy_files, read_policy_section
 
+MAX_VIDEO_FRAMES = 2000  # frames a rollout's video holds in memory (~0.7 MB each at 640x360)
 ENV_ID = "PassiveBound-v0"  # the env class; the policy's env id only adds its registered kwargs
 
 
@@ -127,7 +129,8 @@ def rollout(
     ``failure`` (the simulator's reason, or null), ``apex_error`` (per stride: the largest
     |z - z*| / apex_scales component, where z* is the gait's fixed point), ``mean_abs_tau``
     (N m, average over control intervals of equal length), ``max_torque`` (N m), ``steps``,
-    ``time`` (s), ``video`` (path or null).
+    ``time`` (s), ``video`` (path or null), ``video_every`` (a frame of every that many
+    control intervals: 1 unless the video would hold more than `MAX_VIDEO_FRAMES` frames).
     """
     from bound_env.task import NO_APEX_TIME
 
@@ -139,6 +142,10 @@ def rollout(
         raise ValueError(f"--noise must be a number from 0 to 10, got {noise!r}")
     if video is not None and Path(video).suffix.lower() not in (".gif", ".mp4"):
         raise ValueError(f"--video must end in .gif or .mp4, got {str(video)!r}")
+    if video is not None:  # before the run, not after it
+        from bound_env.cli_args import check_writable
+
+        check_writable(video, "--video")
     make_env, act = load_policy(policy, gait=gait, force=force)
     dt = float(make_env.env_kwargs.get("dt", 0.01))
     max_steps = strides * (int(math.ceil(NO_APEX_TIME / dt)) + 2)
@@ -147,20 +154,29 @@ def rollout(
         max_episode_steps=max_steps,
         render_mode="rgb_array" if video else None,
     )
-    frames = []
+    frames, every = [], 1  # a frame of every `every`-th control interval (bounded below)
     task = env.unwrapped.task
     z_ref, scales = np.asarray(task.z_ref), np.asarray(task.apex_scales)
     obs, info = env.reset(seed=seed)
     failure, errors, taus, steps = info.get("failure"), [], [], 0
+
+    def record() -> None:  # at most MAX_VIDEO_FRAMES frames in memory, evenly spaced
+        nonlocal every
+        if steps % every == 0:
+            frames.append(env.render())
+        if len(frames) > MAX_VIDEO_FRAMES:
+            frames[:] = frames[::2]
+            every *= 2
+
     if video:
-        frames.append(env.render())
+        record()
     while failure is None and len(errors) < strides:
         # act announces every apex to a stride controller (bound_env.control.plain)
         obs, _, terminated, truncated, info = env.step(act(obs, info))
         steps += 1
         taus.append(abs(float(info["tau"])))
         if video:
-            frames.append(env.render())
+            record()
         if "apex_z" in info:
             errors.append(float(np.max(np.abs((np.asarray(info["apex_z"]) - z_ref) / scales))))
         if terminated:
@@ -169,7 +185,13 @@ def rollout(
             break
     env.close()
     if video:
-        write_video(frames, video, fps=round(1 / dt))
+        if every > 1:
+            print(
+                f"[rollout] --video: {steps} control intervals, a frame of every {every}th "
+                f"(at most {MAX_VIDEO_FRAMES} frames; it plays in real time)",
+                file=sys.stderr,
+            )
+        write_video(frames, video, fps=max(1, round(1 / dt / every)))
     return {
         "policy": str(policy),
         "gait": str(make_env.env_kwargs.get("gait", "default")),
@@ -186,6 +208,7 @@ def rollout(
         "steps": steps,
         "time": steps * dt,
         "video": str(video) if video else None,
+        "video_every": every if video else None,
     }
 
 
