@@ -134,7 +134,7 @@ def check_entries(entries) -> None:
     from .margins import as_controller
 
     seen: dict[str, str] = {}
-    for label, policies, gait in entries:
+    for label, policies, _gait in entries:
         check_name(label, "--entry", spaces=True)
         key = name_key(label)
         if key in seen:
@@ -152,6 +152,8 @@ def check_entries(entries) -> None:
                     f"folder {sub}; give folders of different names"
                 )
             subs[sub] = policy
+    for label, policies, gait in entries:  # the names first (cheap), then the loads
+        for policy in policies:
             try:
                 as_controller(policy, gait)  # as compute_margins loads it
             except (ValueError, FileNotFoundError, OSError) as e:

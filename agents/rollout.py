@@ -145,7 +145,7 @@ def rollout(
     if video is not None:  # before the run, not after it
         from bound_env.cli_args import check_writable
 
-        check_writable(video, "--video")
+        check_writable(video, "--video", folder=False)
     make_env, act = load_policy(policy, gait=gait, force=force)
     dt = float(make_env.env_kwargs.get("dt", 0.01))
     max_steps = strides * (int(math.ceil(NO_APEX_TIME / dt)) + 2)

@@ -176,20 +176,27 @@ def name_type(spaces: bool = False):
     return parse
 
 
-def check_writable(path, flag: str) -> None:
+def check_writable(path, flag: str, folder: bool = True) -> None:
     """ValueError (one line, naming ``flag``) unless ``path`` could be created or replaced:
-    no file in the way of its folders, and the nearest existing one writable. Nothing is
-    created: a command checks its outputs before its work starts."""
+    no file in the way of its folders (nor at ``path`` itself, a ``folder``), and a file can
+    be made in the nearest existing one (a probe, removed at once: permission bits do not tell
+    root about a read-only mount). A command checks its outputs so before its work starts."""
     import os
+    import tempfile
     from pathlib import Path
 
     p = Path(path).absolute()
-    for q in p.parents:
-        if q.exists():
-            if not q.is_dir():
-                raise ValueError(f"{flag} {path}: {q} exists and is not a folder")
-            if not os.access(q, os.W_OK | os.X_OK):
-                raise ValueError(f"{flag} {path}: the folder {q} is not writable")
-            break
-    if p.exists() and p.is_dir() and not os.access(p, os.W_OK | os.X_OK):
-        raise ValueError(f"{flag} {path}: the folder is not writable")
+    for q in (p, *p.parents):
+        if not q.exists():
+            continue
+        if not q.is_dir():
+            if q == p and not folder:  # a file to replace: its folder must take a new one
+                continue
+            raise ValueError(f"{flag} {path}: {q} exists and is not a folder")
+        try:
+            fd, probe = tempfile.mkstemp(dir=q, prefix=".write-probe-")
+        except OSError as e:
+            raise ValueError(f"{flag} {path}: cannot write in {q} ({e.strerror})") from None
+        os.close(fd)
+        os.unlink(probe)
+        return
