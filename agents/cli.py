@@ -51,8 +51,8 @@ def _add_sample_seed(p, number) -> None:
 
 
 def register(sub) -> None:
-    from bound_env.cli_args import add_progress_args, number
-    from bound_env.parallel import add_scheduler_args
+    from bound_env.cli_args import add_progress_args, name_type, number
+    from bound_env.parallel import MAX_WORKERS, add_scheduler_args
 
     from .config import DEFAULT_CONFIG, DEFAULT_ENV_ID
 
@@ -68,7 +68,11 @@ def register(sub) -> None:
         default=DEFAULT_ENV_ID,
         help="section of the config and Gymnasium id (default: %(default)s)",
     )
-    p.add_argument("--name", help="run name: runs/<name>/ (default: <env-id>_s<seed>)")
+    p.add_argument(
+        "--name",
+        type=name_type(),
+        help="run name: runs/<name>/ (default: <env-id>_s<seed>; letters, digits, . _ + -)",
+    )
     p.add_argument(
         "--seed", type=number(int, 0, SEED_MAX), default=0, help="training seed (default: 0)"
     )
@@ -192,7 +196,10 @@ def register(sub) -> None:
         help="evaluate a policy on a gait or without files it was not trained for",
     )
     p.add_argument(
-        "--workers", type=number(int, 1, 256), default=2, help="worker processes (default: 2)"
+        "--workers",
+        type=number(int, 1, MAX_WORKERS),
+        default=2,
+        help="worker processes (default: 2)",
     )
     add_scheduler_args(p, workers_default=None)
     p.add_argument(
@@ -253,7 +260,7 @@ def register(sub) -> None:
         help=COMPARE_BUDGET_HELP + " (default: %(default)s)",
     )
     _add_sample_seed(p, number)
-    p.add_argument("--workers", type=number(int, 1, 256), default=2)
+    p.add_argument("--workers", type=number(int, 1, MAX_WORKERS), default=2)
     add_scheduler_args(p, workers_default=None)
     p.add_argument("--out", default="out/margins", help="per-entry results and caches")
     p.add_argument(
@@ -485,7 +492,7 @@ def cmd_margins(args) -> int:
     name = policy_label(args.policy)
     if args.seed != 12345:  # a held-out set: not over the test set's outputs
         name += f"-seed{args.seed}"
-    out = out_dir(args.out or Path("out") / "margins" / name)
+    out = _checked(args.out or Path("out") / "margins" / name, "--out")  # made by the run
     # a bar on a terminal, else a line every 30 s or 10 % of the tasks (bound_env.parallel)
     progress = not args.no_progress
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
@@ -509,6 +516,14 @@ def cmd_margins(args) -> int:
     return 0
 
 
+def _checked(path, flag: str) -> Path:
+    """``path`` once `check_writable` passes (created later, by the command's own work)."""
+    from bound_env.cli_args import check_writable
+
+    check_writable(path, flag)
+    return Path(path)
+
+
 def cmd_compare(args) -> int:
     from .compare import compare, default_entries, parse_entry
 
@@ -523,7 +538,7 @@ def cmd_compare(args) -> int:
         budget=args.budget,
         workers=args.workers,
         out=args.out,
-        docs=out_dir(args.docs or args.out, "--docs"),
+        docs=_checked(args.docs or args.out, "--docs"),  # made once the entries are checked
         progress=not args.no_progress,  # a bar on a terminal, else a line now and then
         note=args.note,
         scheduler=args.scheduler,

@@ -115,7 +115,9 @@ def parse_entry(text: str) -> tuple[str, list[str], str]:
 
     name, _, gait = text.partition("@")
     if "=" not in text and is_controller(name.strip()):
-        label = name.strip() if not gait.strip() else f"{name.strip()} {gait.strip()}"
+        # a gait file's path names the column by its stem
+        g = gait.strip() if not any(c in gait for c in "/\\.") else Path(gait.strip()).stem
+        label = name.strip() if not gait.strip() else f"{name.strip()} {g}"
         return label, [name.strip()], (gait.strip() or "default")
     if "=" not in text:
         raise ValueError(f"--entry {text!r} must look like LABEL=PATH[,PATH...][@GAIT]")
@@ -125,6 +127,43 @@ def parse_entry(text: str) -> tuple[str, list[str], str]:
     if not label.strip() or not policies:
         raise ValueError(f"--entry {text!r} needs a label and at least one policy")
     return label.strip(), policies, (gait.strip() or "default")
+
+
+def check_entries(entries) -> None:
+    """ValueError (one line, naming ``--entry``) for entries that would be written wrongly or
+    not run at all, before any column is computed: a label that is not a name (`check_name`:
+    no path, no ``|``), two labels that share a folder or a column name, two policies of one
+    entry that share a folder, and a policy or gait that does not load (`load_controller`,
+    with its checks, as `compute_margins` loads it)."""
+    from bound_env.cli_args import check_name, name_key
+
+    from .margins import as_controller
+
+    seen: dict[str, str] = {}
+    for label, policies, _gait in entries:
+        check_name(label, "--entry", spaces=True)
+        key = name_key(label)
+        if key in seen:
+            raise ValueError(
+                f"--entry {label!r}: the column {seen[key]!r} has the same name or folder "
+                f"({key}); give each column its own label"
+            )
+        seen[key] = label
+        subs: dict[str, str] = {}
+        for policy in policies:
+            sub = name_key(_slug(Path(policy).name))
+            if len(policies) > 1 and sub in subs:
+                raise ValueError(
+                    f"--entry {label!r}: policies {subs[sub]} and {policy} would share the "
+                    f"folder {sub}; give folders of different names"
+                )
+            subs[sub] = policy
+    for label, policies, gait in entries:  # the names first (cheap), then the loads
+        for policy in policies:
+            try:
+                as_controller(policy, gait)  # as compute_margins loads it
+            except (ValueError, FileNotFoundError, OSError) as e:
+                raise ValueError(f"--entry {label!r}: {e}") from None
 
 
 def _slug(text: str) -> str:
@@ -161,6 +200,7 @@ def compare(
         for lab, pol, gait in (entries or default_entries())
     ]
     seed = check_seed(seed)
+    check_entries(entries)  # every column before the first is computed
     out, docs = Path(out), Path(docs)
     if seed != DEFAULT_SEED:
         out = out / f"seed-{seed}"

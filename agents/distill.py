@@ -346,20 +346,21 @@ def fit(X, G, cfg: DistillConfig, scales, z_ref, log=print):
 def distill(cfg: DistillConfig, out_dir: Path, progress: bool = True) -> dict:
     """Run (or resume) DAgger into ``out_dir``; returns the summary (also summary.json)."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
 
     def log(msg):
         if progress:
             print(msg, file=sys.stderr, flush=True)
 
+    # everything that can refuse the run does so before the run folder is written to
+    expert = load_classical(cfg.expert)
+    if not isinstance(expert, MPCController):
+        raise ValueError(f"--expert {cfg.expert!r} is not an mpc controller spec")
     settings = json.dumps(asdict(cfg), sort_keys=True, default=str)
     cfg_path = out_dir / "distill.json"
     if cfg_path.is_file() and json.loads(cfg_path.read_text()) != json.loads(settings):
         raise ValueError(f"{out_dir}: holds a run with other settings; use another --out")
+    out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write(cfg_path, settings + "\n")
-    expert = load_classical(cfg.expert)
-    if not isinstance(expert, MPCController):
-        raise ValueError(f"expert {cfg.expert!r} is not an mpc controller spec")
     K = expert.basis.K
     rows = library(K, np.zeros(K), np.random.default_rng(cfg.library_seed), cfg.n_random, 0, 0.0)
     lab = Labeller(expert, rows)
@@ -449,9 +450,14 @@ def write_run_info(folder: Path, seed: int, command: str, seconds: float, made: 
 
 
 def check_export(export, force: bool) -> None:
-    """``--export`` of distill and finetune: refused if it exists, unless ``force``."""
+    """``--export`` of distill and finetune, before the run: refused if it exists, unless
+    ``force``, and where it could not be written (`bound_env.cli_args.check_writable`)."""
+    from bound_env.cli_args import check_writable
+
     if export and Path(export).exists() and not force:
         raise ValueError(f"--export {export} exists; give --force to replace it")
+    if export:
+        check_writable(export, "--export")
 
 
 def export_folder(src: Path, dest) -> Path:
@@ -474,7 +480,10 @@ def export_folder(src: Path, dest) -> Path:
 
 
 def cmd_distill(args) -> int:
+    from bound_env.cli_args import check_writable
+
     out = Path(args.out or f"runs/distill_s{args.seed}")
+    check_writable(out, "--out")
     check_export(args.export, args.force)
     cfg = DistillConfig(
         expert=args.expert,

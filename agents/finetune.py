@@ -72,6 +72,46 @@ def rescue_env(policy: ChoicePolicyController, r_max=0.45, horizon=30, axis_prob
 ChoiceStrideEnv = rescue_env  # the name of the former private env (same starts and strides)
 
 
+SETTINGS_FILE = "finetune.json"  # the settings of the run in a run folder (checked on resume)
+
+
+def run_settings(student_dir, cfg: FinetuneConfig) -> dict:
+    """What a resumed run must share with the one it resumes: the student (its folder and the
+    sha256 of its choice.npz) and every setting but ``timesteps`` (a rerun may train longer)."""
+    from .policy_files import file_sha256
+
+    student = Path(student_dir)
+    settings = {k: v for k, v in asdict(cfg).items() if k != "timesteps"}
+    return {
+        "student": str(student.resolve()),
+        "student_sha256": file_sha256(student / "choice.npz"),
+        **settings,
+    }
+
+
+def check_settings(out_dir: Path, student_dir, cfg: FinetuneConfig) -> None:
+    """ValueError (one line) when ``out_dir`` holds a run of other settings (`run_settings`),
+    or checkpoints of a run that recorded none, so that a rerun never resumes a foreign one."""
+    path = Path(out_dir) / SETTINGS_FILE
+    want = run_settings(student_dir, cfg)
+    if path.is_file():
+        try:
+            have = json.loads(path.read_text())
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{path}: not a finetune settings file ({e})") from None
+        if have != want:
+            keys = sorted(k for k in want if not isinstance(have, dict) or have.get(k) != want[k])
+            raise ValueError(
+                f"--out {out_dir} holds a run with other settings ({', '.join(keys)}); use "
+                "another --out"
+            )
+    elif any(Path(out_dir).glob("ckpt_*_steps.zip")):
+        raise ValueError(
+            f"--out {out_dir} holds checkpoints without {SETTINGS_FILE} (of which student and "
+            "seed?); use another --out"
+        )
+
+
 def _copy_actor(model, layers) -> None:
     import torch
 
@@ -104,8 +144,21 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
 
     torch.set_num_threads(1)
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     student = load_choice_policy(student_dir)
+    check_settings(out_dir, student_dir, cfg)  # before the run folder is written to
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write(out_dir / SETTINGS_FILE, json.dumps(run_settings(student_dir, cfg)) + "\n")
+    # PPO learns in whole rollouts: --timesteps rounded up to them, the critic's warm-up
+    # (10 rollouts) included in it rather than added to it
+    rollout = cfg.n_steps * cfg.n_envs
+    n_rollouts = max(1, -(-cfg.timesteps // rollout))
+    warm = min(cfg.critic_warmup, max(1, cfg.timesteps // rollout)) * rollout
+    if progress:
+        print(
+            f"[finetune] {n_rollouts * rollout} strides: {n_rollouts} PPO rollouts of "
+            f"{rollout}, the first {warm // rollout} train the critic alone",
+            file=sys.stderr,
+        )
     t0 = time.perf_counter()
 
     def make(i):
@@ -149,8 +202,7 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
         actor += list(model.policy.action_net.parameters())
         for p in actor:
             p.requires_grad_(False)
-        warm = cfg.critic_warmup * cfg.n_steps * cfg.n_envs
-        model.learn(warm, reset_num_timesteps=True)
+        model.learn(warm, reset_num_timesteps=True)  # (at most --timesteps, in whole rollouts)
         for p in actor:
             p.requires_grad_(True)
         if progress:
@@ -191,6 +243,9 @@ def cmd_finetune(args) -> int:
         raise ValueError(f"--student {args.student}: not a distilled policy (no choice.npz)")
     check_export(args.export, args.force)
     out = Path(args.out or f"runs/finetune_s{args.seed}")
+    from bound_env.cli_args import check_writable
+
+    check_writable(out, "--out")
     cfg = FinetuneConfig(timesteps=args.timesteps, seed=args.seed)
     summary = finetune(student, out, cfg, progress=not args.no_progress)
     from .distill import write_run_info

@@ -67,7 +67,8 @@ def register_finetune(sub) -> None:
         "--timesteps",
         type=number(int, 1000, 10**9),
         default=FinetuneConfig.timesteps,
-        help="strides of PPO (default: %(default)s)",
+        help="strides of PPO, in whole rollouts of 2048; the first 10 rollouts (or all, if "
+        "fewer) train the critic alone (default: %(default)s)",
     )
     p.add_argument(
         "--export",

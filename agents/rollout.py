@@ -9,9 +9,18 @@ factory and an action function that belong together::
     from agents.rollout import load_policy
 
     make_env, act = load_policy("default")        # a shipped name, or a policy/run folder
-    env = make_env()                               # gym.make(...) + the policy's wrappers
+    env = make_env()                               # or gym.make("PassiveBound-v1")
     obs, info = env.reset(seed=0)
-    obs, reward, terminated, truncated, info = env.step(act(obs))
+    obs, reward, terminated, truncated, info = env.step(act(obs, info))
+
+``act(obs, info)`` is a `bound_env.control.PlainPolicy`: it announces each apex to a stride
+controller itself (the info carries the exact apex state), so this loop gives ``bound-env
+rollout``'s trajectory bit for bit; a stride controller called without ``info`` raises a
+TypeError, and an env whose observation length, ``max_torque`` or ``dt`` is not the policy's
+a ValueError (`bound_env.control.plain`). Feedback policies (PPO, damping, passive) also take
+``act(obs)``. ``PassiveBound-v1`` has the published task's defaults (80 N m), the settings of
+every shipped policy except two families trained at ``rtol`` 1e-8 (``warm-started/*``,
+``ppo-v1-final/*``: `make_env` sets it; the tolerance does not show in what the env returns).
 
 Only the wrappers that change what the policy sees or does (observation and action
 wrappers) are applied; training-only wrappers such as `agents.wrappers.PerturbedStarts`
@@ -22,15 +31,19 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from bound_env.control.plain import FULL_OBS_DIM, PlainPolicy
+
 from .controllers import MLPController, check_gait
 from .policy import load_controller, resolve_policy
 from .policy_files import find_policy_files, read_policy_section
 
+MAX_VIDEO_FRAMES = 2000  # frames a rollout's video holds in memory (~0.7 MB each at 640x360)
 ENV_ID = "PassiveBound-v0"  # the env class; the policy's env id only adds its registered kwargs
 
 
@@ -58,10 +71,13 @@ def load_policy(path, gait=None, force: bool = False):
 
     ``env_factory(**kwargs)`` makes the environment the policy was trained for (its env kwargs
     and observation wrappers; ``kwargs`` add to or override them, e.g. ``render_mode``,
-    ``reset_noise_scale``, ``max_episode_steps``). ``act(obs)`` is the deterministic action
-    (float32, shape (1,)) for an observation of that environment, normalized with the policy's
-    statistics. ``gait`` evaluates on another gait (refused for a trained policy unless
-    ``force``); built-in controllers (``passive``, ...) run on ``gait`` or the default one.
+    ``reset_noise_scale``, ``max_episode_steps``). ``act(obs, info)`` is the deterministic
+    action (float32, shape (1,)) for an observation of that environment (or of
+    ``PassiveBound-v1``: the full observation is filtered as the policy was trained) and the
+    info returned with it, a `bound_env.control.PlainPolicy` (module docstring; ``act(obs)``
+    for feedback policies); ``act.controller`` is the controller. ``gait`` evaluates on another
+    gait (refused for a trained policy unless ``force``); built-in controllers (``passive``,
+    ...) run on ``gait`` or the default one.
     """
     import gymnasium as gym
 
@@ -74,19 +90,23 @@ def load_policy(path, gait=None, force: bool = False):
     env_kwargs = dict(ctrl.env_kwargs)
     if gait is not None:
         env_kwargs["gait"] = str(gait)
-    if isinstance(ctrl, MLPController):
-        inner = replace(ctrl, obs_index=None)  # the env below applies the ObservationFilter
+    obs_index, full_dim = None, FULL_OBS_DIM
+    if isinstance(ctrl, MLPController) and ctrl.obs_index is not None:
+        # act takes the full observation and the one of the ObservationFilter (make_env's)
+        obs_index = ctrl.obs_index
+        full_dim += 0 if env_kwargs.get("exclude_current_positions_from_observation", True) else 1
+        inner = replace(ctrl, obs_index=None)
+    elif isinstance(ctrl, MLPController):
+        inner, full_dim = ctrl, int(ctrl.obs_shape[0])
     else:
         inner = ctrl
+    act = PlainPolicy(inner, obs_index=obs_index, full_dim=full_dim, name=str(path))
 
     def env_factory(**kwargs):
         env = gym.make(ENV_ID, **{**env_kwargs, **kwargs})
         for cls, kw in wrappers:
             env = cls(env, **kw)
         return env
-
-    def act(obs) -> np.ndarray:
-        return np.array([inner(obs)], dtype=np.float32)
 
     env_factory.env_kwargs = env_kwargs
     act.controller = ctrl
@@ -109,7 +129,8 @@ def rollout(
     ``failure`` (the simulator's reason, or null), ``apex_error`` (per stride: the largest
     |z - z*| / apex_scales component, where z* is the gait's fixed point), ``mean_abs_tau``
     (N m, average over control intervals of equal length), ``max_torque`` (N m), ``steps``,
-    ``time`` (s), ``video`` (path or null).
+    ``time`` (s), ``video`` (path or null), ``video_every`` (a frame of every that many
+    control intervals: 1 unless the video would hold more than `MAX_VIDEO_FRAMES` frames).
     """
     from bound_env.task import NO_APEX_TIME
 
@@ -121,6 +142,10 @@ def rollout(
         raise ValueError(f"--noise must be a number from 0 to 10, got {noise!r}")
     if video is not None and Path(video).suffix.lower() not in (".gif", ".mp4"):
         raise ValueError(f"--video must end in .gif or .mp4, got {str(video)!r}")
+    if video is not None:  # before the run, not after it
+        from bound_env.cli_args import check_writable
+
+        check_writable(video, "--video", folder=False)
     make_env, act = load_policy(policy, gait=gait, force=force)
     dt = float(make_env.env_kwargs.get("dt", 0.01))
     max_steps = strides * (int(math.ceil(NO_APEX_TIME / dt)) + 2)
@@ -129,24 +154,29 @@ def rollout(
         max_episode_steps=max_steps,
         render_mode="rgb_array" if video else None,
     )
-    frames = []
+    frames, every = [], 1  # a frame of every `every`-th control interval (bounded below)
     task = env.unwrapped.task
     z_ref, scales = np.asarray(task.z_ref), np.asarray(task.apex_scales)
-    # stride-level controllers (bound_env.control) are told every apex state
-    from bound_env.control import notify_apex
-
     obs, info = env.reset(seed=seed)
-    notify_apex(act.controller, obs, info)
     failure, errors, taus, steps = info.get("failure"), [], [], 0
+
+    def record() -> None:  # at most MAX_VIDEO_FRAMES frames in memory, evenly spaced
+        nonlocal every
+        if steps % every == 0:
+            frames.append(env.render())
+        if len(frames) > MAX_VIDEO_FRAMES:
+            frames[:] = frames[::2]
+            every *= 2
+
     if video:
-        frames.append(env.render())
+        record()
     while failure is None and len(errors) < strides:
-        obs, _, terminated, truncated, info = env.step(act(obs))
-        notify_apex(act.controller, obs, info)
+        # act announces every apex to a stride controller (bound_env.control.plain)
+        obs, _, terminated, truncated, info = env.step(act(obs, info))
         steps += 1
         taus.append(abs(float(info["tau"])))
         if video:
-            frames.append(env.render())
+            record()
         if "apex_z" in info:
             errors.append(float(np.max(np.abs((np.asarray(info["apex_z"]) - z_ref) / scales))))
         if terminated:
@@ -155,7 +185,13 @@ def rollout(
             break
     env.close()
     if video:
-        write_video(frames, video, fps=round(1 / dt))
+        if every > 1:
+            print(
+                f"[rollout] --video: {steps} control intervals, a frame of every {every}th "
+                f"(at most {MAX_VIDEO_FRAMES} frames; it plays in real time)",
+                file=sys.stderr,
+            )
+        write_video(frames, video, fps=max(1, round(1 / dt / every)))
     return {
         "policy": str(policy),
         "gait": str(make_env.env_kwargs.get("gait", "default")),
@@ -172,6 +208,7 @@ def rollout(
         "steps": steps,
         "time": steps * dt,
         "video": str(video) if video else None,
+        "video_every": every if video else None,
     }
 
 

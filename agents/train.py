@@ -228,7 +228,9 @@ def train(
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
-    name = name or f"{env_id}_s{seed}"
+    from bound_env.cli_args import check_name
+
+    name = check_name(name or f"{env_id}_s{seed}", "--name")  # a folder of runs_dir, no path
     run_dir = Path(runs_dir) / name
     prev_info: dict = {}
     schedule = {"eval_freq": eval_freq, "save_freq": save_freq, "n_eval_episodes": n_eval_episodes}

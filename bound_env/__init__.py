@@ -8,6 +8,12 @@ Importing the package registers these Gymnasium environments:
 - ``PassiveBoundLiteral-v0``: the same classes on the *literal* reading of Table II, started on
   that reading's periodic (passively unstable) gait, ``gait="literal-cycle"``; its own id lets
   rl-zoo3-style configs key hyperparameters by it;
+- ``PassiveBound-v1``, ``PassiveBoundLiteral-v1``: the same envs with the defaults of the
+  published task, the one every shipped policy and controller acts in and every published
+  margin was measured in (`PUBLISHED_TASK`: ``max_torque`` 80 N m; dt 0.01 s, rtol 1e-10 and
+  the full observation as in v0), so that ``gym.make("PassiveBound-v1")`` and a shipped
+  policy (`agents.rollout.load_policy`) fit as they are. v0 stays registered unchanged
+  (40 N m; code and configs name it with their kwargs);
 - ``PassiveBoundStride-v1``: the stride-level `bound_env.stride_env.PassiveBoundStrideEnv`
   (one step = one stride of the step env, through the one stride map `bound_env.stride_map`;
   v0, on exact window edges, is no longer registered: Gymnasium names v1 when v0 is asked);
@@ -22,7 +28,7 @@ Importing the package registers these Gymnasium environments:
     import bound_env
 
     gym.register_envs(bound_env)
-    env = gym.make("PassiveBound-v0")
+    env = gym.make("PassiveBound-v1")  # the published task (v0: the same at 40 N m)
 
 Gymnasium itself is imported lazily by those modules; the simulator (`bound_env.params`,
 `bound_env.stride`, `bound_env.fast`) never needs it.
@@ -41,7 +47,17 @@ STRIDE_ENV_IDS = (STRIDE_ENV_ID, "PassiveBoundStride-v0")
 MAX_STRIDE_EPISODE_STEPS = 100  # time limit of the stride env: 100 strides
 RESCUE_ENV_ID = "PassiveBoundRescue-v0"  # no max_episode_steps: its `horizon` kwarg truncates
 # kwargs of the two control-interval envs (PassiveBoundEnv) registered under their own ids.
-ENV_KWARGS = {ENV_ID: {}, LITERAL_ENV_ID: {"gait": "literal-cycle"}}
+# The published task: v1's defaults (the settings of every shipped policy and controller
+# that differ from v0's); the kwargs of every control-interval env id (PassiveBoundEnv).
+PUBLISHED_TASK = {"max_torque": 80.0}
+ENV_ID_V1 = "PassiveBound-v1"
+LITERAL_ENV_ID_V1 = "PassiveBoundLiteral-v1"
+ENV_KWARGS = {
+    ENV_ID: {},
+    LITERAL_ENV_ID: {"gait": "literal-cycle"},
+    ENV_ID_V1: dict(PUBLISHED_TASK),
+    LITERAL_ENV_ID_V1: {"gait": "literal-cycle", **PUBLISHED_TASK},
+}
 # No reward_threshold in the specs: the return mixes an alive bonus (+1 per step) with a
 # tracking cost whose size depends on the start noise and the apex scales (env kwargs), so no
 # single return means "solved"; policies are judged by their stability margins
@@ -70,6 +86,15 @@ def _register() -> None:
         )
     if RESCUE_ENV_ID not in registry:
         register(id=RESCUE_ENV_ID, entry_point="bound_env.rescue_env:PassiveBoundRescueEnv")
+    # v0 is not out of date: it is the same env at 40 N m, which code, configs and published
+    # commands name with their kwargs; Gymnasium's "consider upgrading to v1" would be noise
+    import warnings
+
+    warnings.filterwarnings(
+        "ignore",
+        message=r".*The environment PassiveBound(Literal)?-v0 is out of date",
+        category=DeprecationWarning,
+    )
 
 
 _register()

@@ -133,10 +133,16 @@ def main(argv=None) -> int:
             sub.error(f"unrecognized arguments: {' '.join(extra)}")
     except SystemExit as e:  # usage errors (2), --help and --version (0), as a return code
         return e.code if isinstance(e.code, int) else 2
-    from .parallel import TasksFailed
+    from .parallel import TasksFailed, Terminated, on_sigterm
 
+    restore = on_sigterm()  # SIGTERM unwinds like Ctrl-C: pools shut down, caches are kept
     try:
         return int(args.func(args) or 0)
+    except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: one line, not a traceback
+        how = "SIGTERM" if isinstance(e, Terminated) else "Ctrl-C"
+        hint = _resume_hint(args)
+        print(f"bound-env {args.command}: interrupted ({how}); {hint}", file=sys.stderr)
+        return 143 if isinstance(e, Terminated) else 130
     except (ValueError, FileNotFoundError, TasksFailed) as e:
         print(f"bound-env {args.command}: error: {e}", file=sys.stderr)
         return 2
@@ -144,6 +150,22 @@ def main(argv=None) -> int:
         where = f": {e.filename}" if getattr(e, "filename", None) else ""
         print(f"bound-env {args.command}: error: {e.strerror or e}{where}", file=sys.stderr)
         return 2
+    finally:
+        restore()
+
+
+# commands whose finished work is cached (bound_env.cache) and resumed by the same command
+RESUMABLE = {"margins", "compare", "reproduce", "continue", "sweep", "basin-map", "distill"}
+
+
+def _resume_hint(args) -> str:
+    if args.command in RESUMABLE:
+        return "finished work is cached: run the same command again to resume"
+    if args.command == "train":
+        return "continue from the last checkpoint with the same command and --resume"
+    if args.command == "finetune":
+        return "run the same command again to resume from its last checkpoint"
+    return "nothing to resume"
 
 
 if __name__ == "__main__":

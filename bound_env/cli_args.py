@@ -131,3 +131,72 @@ def number(kind=float, lo=None, hi=None, lo_open=False, allow_zero=True):
 
     parse.__name__ = kind.__name__  # argparse names the type in its messages
     return parse
+
+
+NAME_MAX = 64  # characters of a name that becomes a file or folder name
+
+
+def check_name(name, flag: str, spaces: bool = False) -> str:
+    """A name that becomes a file or folder name (a run's ``--name``, a ``compare`` column's
+    label), the one check of every such name: 1 to `NAME_MAX` letters, digits and ``. _ + -``
+    (with ``spaces``: single spaces inside, which `name_key` turns into ``_``), starting with
+    a letter or digit; so never a path (``/``, ``..``), a hidden file, or a character that
+    breaks a Markdown table (``|``). ValueError (one line) naming ``flag``."""
+    import re
+
+    text = str(name)
+    inner = r"(?:[A-Za-z0-9._+-]| (?! ))*" if spaces else r"[A-Za-z0-9._+-]*"
+    pattern = r"[A-Za-z0-9]" + inner
+    if len(text) > NAME_MAX or not re.fullmatch(pattern, text) or text.endswith(" "):
+        allowed = "letters, digits and . _ + -" + (" (single spaces inside)" if spaces else "")
+        raise ValueError(
+            f"{flag} {text!r}: a name must be 1 to {NAME_MAX} characters of {allowed}, "
+            "starting with a letter or digit"
+        )
+    return text
+
+
+def name_key(name) -> str:
+    """The folder a checked name (`check_name`) is written to is ``name`` with spaces as
+    ``_``; two names share it, on a case-insensitive file system too, when their keys agree."""
+    return str(name).replace(" ", "_").lower()
+
+
+def name_type(spaces: bool = False):
+    """An argparse ``type`` running `check_name` (a bad name is a usage error, exit 2)."""
+    import argparse
+
+    def parse(text):
+        try:
+            return check_name(text, "name", spaces)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e).split(": ", 1)[1]) from None
+
+    parse.__name__ = "name"
+    return parse
+
+
+def check_writable(path, flag: str, folder: bool = True) -> None:
+    """ValueError (one line, naming ``flag``) unless ``path`` could be created or replaced:
+    no file in the way of its folders (nor at ``path`` itself, a ``folder``), and a file can
+    be made in the nearest existing one (a probe, removed at once: permission bits do not tell
+    root about a read-only mount). A command checks its outputs so before its work starts."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    p = Path(path).absolute()
+    for q in (p, *p.parents):
+        if not q.exists():
+            continue
+        if not q.is_dir():
+            if q == p and not folder:  # a file to replace: its folder must take a new one
+                continue
+            raise ValueError(f"{flag} {path}: {q} exists and is not a folder")
+        try:
+            fd, probe = tempfile.mkstemp(dir=q, prefix=".write-probe-")
+        except OSError as e:
+            raise ValueError(f"{flag} {path}: cannot write in {q} ({e.strerror})") from None
+        os.close(fd)
+        os.unlink(probe)
+        return

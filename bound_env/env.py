@@ -245,6 +245,9 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
 
     * v0: Initial version. `slope_noise_deg` (rough terrain) added later with default 0,
       which leaves every result bit-identical.
+    * v1 (`PassiveBound-v1`, `PassiveBoundLiteral-v1`): the same class with the published
+      task's defaults, `max_torque` 80 N m (`bound_env.PUBLISHED_TASK`), the torque every
+      shipped policy and controller uses; v0 (40 N m) stays registered unchanged.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": round(1 / DEFAULT_DT)}

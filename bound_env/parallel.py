@@ -34,7 +34,38 @@ from dataclasses import dataclass
 DASK_HINT = 'pip install -e ".[dask]"'
 LOCAL = "local"
 CONNECT_TIMEOUT_S = 20  # connecting to a remote scheduler
+MAX_WORKERS = 256  # --workers and 'local:N' alike
 MAX_RESTARTS = 3  # new pools after a dead worker, per run (Dask's allowed-failures is 3 too)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread (`on_sigterm`) so that it unwinds as Ctrl-C does:
+    pools are shut down and their workers stopped (`open_pool`), and the command ends with one
+    line (`bound_env.cli.main`)."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated()
+
+
+def on_sigterm():
+    """Make SIGTERM raise `Terminated` in this (main) thread; returns a function that puts
+    the previous handler back. Nothing is changed outside the main thread."""
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    return lambda: signal.signal(signal.SIGTERM, previous)
+
+
+def _worker_init() -> None:
+    """In each worker process of `RestartingProcessPool`: Ctrl-C is the parent's to handle
+    (the terminal sends it to the whole process group) and SIGTERM ends the worker at once."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 class SerialExecutor(cf.Executor):
@@ -61,7 +92,7 @@ class RestartingProcessPool(cf.Executor):
         self.workers, self.max_restarts = int(workers), int(max_restarts)
         self.restarts = 0
         self._lock = threading.Lock()
-        self._pool = cf.ProcessPoolExecutor(self.workers)
+        self._pool = self._new_pool()
         self._generation = 0
         self._closed = False
 
@@ -112,7 +143,7 @@ class RestartingProcessPool(cf.Executor):
             if self.restarts >= self.max_restarts:
                 return False
             old = self._pool
-            self._pool = cf.ProcessPoolExecutor(self.workers)
+            self._pool = self._new_pool()
             self._generation += 1
             self.restarts += 1
         old.shutdown(wait=False, cancel_futures=True)
@@ -125,11 +156,34 @@ class RestartingProcessPool(cf.Executor):
         )
         return True
 
+    def _new_pool(self) -> cf.ProcessPoolExecutor:
+        return cf.ProcessPoolExecutor(self.workers, initializer=_worker_init)
+
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
         with self._lock:
             self._closed = True
             pool = self._pool
         pool.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+    def terminate(self, timeout: float = 5.0) -> None:
+        """Stop now (an interrupted run): cancel what has not started and end the worker
+        processes (SIGTERM, then SIGKILL after ``timeout`` s) rather than wait for their tasks."""
+        with self._lock:
+            self._closed = True
+            pool = self._pool
+        # the executor keeps its processes in `_processes` (pid -> Process); there is no
+        # public way to stop a running task
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in procs:
+            with contextlib.suppress(Exception):
+                p.terminate()
+        for p in procs:
+            with contextlib.suppress(Exception):
+                p.join(timeout)
+                if p.is_alive():
+                    p.kill()
+                    p.join(timeout)
 
 
 def _settle(fut: cf.Future, exc=None, result=None) -> None:
@@ -161,9 +215,11 @@ def add_scheduler_args(p, workers_default: int | None = 2) -> None:
         f"running scheduler (needs {DASK_HINT}); default: a local process pool",
     )
     if workers_default is not None:
+        from .cli_args import number
+
         p.add_argument(
             "--workers",
-            type=int,
+            type=number(int, 1, MAX_WORKERS),
             default=workers_default,
             help="worker processes of the local pool, without --scheduler (default: %(default)s)",
         )
@@ -177,14 +233,46 @@ def check_scheduler(scheduler: str | None) -> None:
         return
     if scheduler.startswith(LOCAL + ":"):
         n = scheduler.split(":", 1)[1]
-        if not n.isdigit() or int(n) < 1:
-            raise ValueError(f"--scheduler {scheduler!r}: 'local:N' needs N >= 1 workers")
+        if not n.isdigit() or not 1 <= int(n) <= MAX_WORKERS:
+            raise ValueError(
+                f"--scheduler {scheduler!r}: 'local:N' needs 1 <= N <= {MAX_WORKERS} workers"
+            )
         return
     if "://" not in scheduler or not scheduler.split("://", 1)[1]:
         raise ValueError(
             f"--scheduler must be 'local', 'local:N' or an address like "
             f"tcp://HOST:PORT, got {scheduler!r}"
         )
+
+
+def check_listening(scheduler: str, timeout: float = 5.0) -> None:
+    """ValueError naming ``--scheduler`` at once when nothing listens at a ``tcp://`` address
+    (connection refused, an unknown host, a bad port), instead of Dask's retries for
+    `CONNECT_TIMEOUT_S`; other schemes are left to Dask."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if not scheduler.startswith("tcp://"):
+        return
+    try:
+        parts = urlsplit(scheduler)
+        host, port = parts.hostname, parts.port or 8786  # Dask's default port
+    except ValueError as e:  # a port that is not a number or out of range
+        raise ValueError(f"--scheduler {scheduler}: not an address ({e})") from None
+    if not host:
+        raise ValueError(f"--scheduler {scheduler}: no host (tcp://HOST:PORT)")
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except ConnectionRefusedError:
+        raise ValueError(
+            f"--scheduler {scheduler}: connection refused (no scheduler listens on "
+            f"{host}:{port}; start one with `dask scheduler`)"
+        ) from None
+    except socket.gaierror as e:
+        raise ValueError(f"--scheduler {scheduler}: unknown host {host!r} ({e})") from None
+    except OSError:
+        return  # a timeout or a firewall: Dask tries for CONNECT_TIMEOUT_S and says so
 
 
 def _import_distributed():
@@ -232,19 +320,24 @@ def open_pool(scheduler: str | None = None, workers: int = 1, quiet: bool = Fals
     dashboard link when there is one) to stderr unless ``quiet``."""
     check_scheduler(scheduler)
     if scheduler is None:
-        if int(workers) < 1:
-            raise ValueError(f"--workers must be at least 1, got {workers}")
+        if not 1 <= int(workers) <= MAX_WORKERS:
+            raise ValueError(f"--workers must be from 1 to {MAX_WORKERS}, got {workers}")
         if workers == 1:
             yield Pool(SerialExecutor(), "serial", 1)
             return
         ex = RestartingProcessPool(int(workers))
         try:
             yield Pool(ex, "processes", int(workers))
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM (`Terminated`): no waiting for tasks
+            ex.terminate()
+            raise
         finally:
             ex.shutdown(wait=True, cancel_futures=True)
         return
     distributed = _import_distributed()
     cluster = None
+    if not scheduler.startswith(LOCAL):
+        check_listening(scheduler)  # a refused port fails now, not after CONNECT_TIMEOUT_S
     with contextlib.ExitStack() as stack:
         if scheduler.startswith(LOCAL):
             n = int(scheduler.split(":", 1)[1]) if ":" in scheduler else cpu_count()
@@ -261,7 +354,7 @@ def open_pool(scheduler: str | None = None, workers: int = 1, quiet: bool = Fals
         else:
             try:
                 client = distributed.Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
-            except (OSError, TimeoutError) as e:
+            except (OSError, TimeoutError, ValueError, TypeError) as e:
                 raise ValueError(f"--scheduler {scheduler}: cannot connect ({e})") from None
             stack.callback(client.close)
         info = client.scheduler_info()

@@ -293,8 +293,31 @@ def _cases(f):
         # messages
         (["margins", "--set", "kc=1"], "bound-env margins: error: unrecognized arguments"),
         (["rollout", "--policy", "nope"], "stride-residual/s0"),  # the names it knows
+        # issue 26 §3: refused before any work, nothing left behind
+        (["distill", "--expert", "lqr", "--out", f["dir"] + "/d"], "--expert"),
+        (["distill", "--out", f["dir"] + "/d", "--export", "/sys/x/p"], "--export"),
+        (["finetune", "--student", "default", "--out", "/sys/x/ft"], "--out"),
+        (["rollout", "--policy", "passive", "--video", "/sys/x/v.gif"], "--video"),
+        # names that become paths (one checker)
+        (_compare(f, "..=lqr"), "--entry"),
+        (_compare(f, "a|b=lqr"), "--entry"),
+        (_compare(f, "passive=lqr"), "same name"),
+        (_compare(f, "a b=lqr", "a_b=lqr"), "same name or folder"),
+        (_compare(f, "lqr", "x=" + f["dir"] + "/nothing"), "does not exist"),
+        (_train(f, "--name", "../x"), "--name"),
+        # bounded, and named
+        (["margins", "--scheduler", "local:100000", "--out", f["dir"] + "/m"], "--scheduler"),
+        (["margins", "--scheduler", "tcp://127.0.0.1:1", "--out", f["dir"] + "/m"], "--scheduler"),
+        (["margins", "--workers", "100000"], "--workers"),
     ]
     return cases
+
+
+def _compare(f, *entries):
+    argv = ["compare", "--budget", "test", "--workers", "1", "--out", f["dir"] + "/cmp-refused"]
+    for e in entries:
+        argv += ["--entry", e]
+    return argv
 
 
 def _train(f, *extra):
@@ -339,7 +362,11 @@ def test_cli_fuzz(files, capsys):
             failures.append(f"{argv}: error does not name {word!r}: {err.strip()[-300:]}")
     assert not failures, "\n".join(failures)
     # refused before anything was written: no run folder, no sweep rows, no basin map
-    left = [n for n in ("runs", "sweep-kc", "sweep-m1", "b") if (Path(files["dir"]) / n).exists()]
+    left = [
+        n
+        for n in ("runs", "sweep-kc", "sweep-m1", "b", "d", "m", "cmp-refused", "x")
+        if (Path(files["dir"]) / n).exists()
+    ]
     assert not left, left
     assert (Path(files["cut_policy"]) / "model.zip").is_file()  # --export refused, nothing lost
 

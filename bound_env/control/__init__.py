@@ -11,7 +11,8 @@ by name (``bound-env margins``, compare, rollout) find them through `load_contro
 
 In the step env (PassiveBound-v0, unwrapped observation) a loop calls
 ``notify_apex(ctrl, obs, info)`` after ``reset`` and after every ``step``, and ``ctrl(obs)``
-for each action (`bound_env.control.controllers` describes the protocol).
+for each action (`bound_env.control.controllers` describes the protocol), or wraps it in
+`PlainPolicy` and calls ``act(obs, info)``, which does both (`bound_env.control.plain`).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 
 from .controllers import DampingFeedback, StrideFeedback, notify_apex
 from .design import Linearization, deadbeat_gain, linearize, lqr_gain, spectral_radius
+from .plain import PlainPolicy
 from .spec import CONTROLLERS_DIR, ControllerSpec, load_spec, read_gain, weights
 
 __all__ = [
@@ -29,6 +31,7 @@ __all__ = [
     "ControllerSpec",
     "DampingFeedback",
     "Linearization",
+    "PlainPolicy",
     "StrideFeedback",
     "controller_names",
     "deadbeat_gain",

@@ -256,9 +256,6 @@ def compute_margins(
         "cycle": cycle_scale(gait).tolist(),
     }
     out_dir = Path(out) if out is not None else None
-    if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    cache = TaskCache(out_dir / "cache.jsonl" if (out_dir is not None and use_cache) else None)
     setup = Setup(
         controller=controller,
         gait=gait,
@@ -271,6 +268,9 @@ def compute_margins(
     with contextlib.ExitStack() as stack:
         if executor is None:
             executor = stack.enter_context(open_pool(scheduler, workers)).executor
+        if out_dir is not None:  # once the pool is up: a refused --scheduler leaves nothing
+            out_dir.mkdir(parents=True, exist_ok=True)
+        cache = TaskCache(out_dir / "cache.jsonl" if (out_dir is not None and use_cache) else None)
         cyc = _run_all(executor, setup, [("cycle", ())], cache, False, "cycle")[("cycle", ())]
         if "error" in cyc:
             raise RuntimeError(f"no closed-loop cycle: {cyc['error']}")
