@@ -352,8 +352,8 @@ def headline_table(head: dict) -> str:
     the numbers `headline_numbers` made (docs/headline.json): the page's first table and the
     README's results table are this text."""
     lines = [
-        "| controller | what it is | r50 [95 % interval] | σ where MFPT = 100 strides "
-        "[deg] [95 % interval] | interval |",
+        "| controller | what it is | r50 [95 % interval] | σ (deg) where MFPT = 100 "
+        "strides [95 % interval] | interval |",
         "| --- | --- | --- | --- | --- |",
     ]
     for row in head["rows"]:
