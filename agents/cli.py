@@ -277,6 +277,12 @@ def register(sub) -> None:
         default="",
         help="a paragraph for the top of the page (e.g. why the budget is not the full one)",
     )
+    p.add_argument(
+        "--render-only",
+        action="store_true",
+        help="compute nothing: rewrite the page, its plots, paired.json and headline.json "
+        "from the margins.json files an earlier run of the same budget and seed left in --out",
+    )
     p.set_defaults(func=cmd_compare)
 
     from .basin_cli import register as register_basin_map
@@ -543,6 +549,7 @@ def cmd_compare(args) -> int:
         note=args.note,
         scheduler=args.scheduler,
         seed=args.seed,
+        render_only=args.render_only,
     )
     say(args, f"wrote {path}")
     if args.json:

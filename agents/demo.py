@@ -5,12 +5,13 @@ robot falls and the shipped ``default`` controller brings the gait back to its c
 DEMO_SEED)[DEMO_INDEX]`` (`bound_env.analysis.margins.random_directions`, max |xi_i| = 1) and r =
 ``DEMO_SIZE``, chosen on the *validation* directions (seed 777), never on the test set's (seed
 12345): at r = 0.2 it is the first of the 16 directions of seed 777 from which the passive gait
-falls and both shipped distilled seeds (``distilled/s0``, the current ``default``, and
+falls and both shipped distilled seeds (``distilled/s0``, then the shipped ``default``, and
 ``distilled/s1``) return within ``DEMO_STRIDES`` strides (direction 0 fails all three: the
 learned ones fall in 2 strides). From it the passive gait falls in its third stride
 (leg_overcompressed_front) and the distilled seeds return in 7 strides (``distilled/s2``,
 shipped after the choice, too); they return from the same direction at r = 0.15 and 0.25 as
-well, so the choice is not on a knife's edge.
+well, so the choice is not on a knife's edge. The shipped ``default`` is now the fine-tuned
+``finetuned/s0`` (its policy files byte-identical to that seed's), which returns from it too.
 ``tests/test_demo.py`` checks that passive falls and ``default`` returns from it.
 
 **The runs** are those of the margins (`bound_env.analysis.margins.ClosedLoop.run`, the

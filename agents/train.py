@@ -26,10 +26,12 @@ appended to, ``run.json`` gets one session per start or resume (a killed session
 written after the resumed checkpoint are dropped and computed again, so the curve has neither
 gaps nor duplicates. A truncated ``config.yaml`` or ``run.json`` is a one-line error.
 
-``--export DIR`` (CLI) copies the policy files to DIR, taking the model from ``best/`` when
-the run kept one. ``--resume`` continues from the last checkpoint with its ``VecNormalize``
-statistics and its timestep count (the curriculum is a function of the timestep count, so it
-resumes too); it reads the run's own ``config.yaml`` and ignores ``--config``/``--set``.
+``--export-out DIR`` (CLI; old spelling ``--export``) copies the policy files to DIR: the
+final model and its statistics (no selection); ``--export-from best`` takes the checkpoint in
+``best/`` instead (the one ``BasinValidationCallback`` selected), when the run kept one.
+``--resume`` continues from the last checkpoint with its ``VecNormalize`` statistics and its
+timestep count (the curriculum is a function of the timestep count, so it resumes too); it
+reads the run's own ``config.yaml`` and ignores ``--config``/``--set``.
 """
 
 from __future__ import annotations

@@ -87,7 +87,7 @@ def main() -> None:
     ap.add_argument(
         "--policy",
         default="ppo-v1",
-        help="shipped policy name or path (default: ppo-v1, the PPO policy of the README's row)",
+        help="shipped policy name or path (default: ppo-v1, PPO, docs/analysis.md's table)",
     )
     ap.add_argument(
         "--also",

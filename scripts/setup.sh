@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Create or reuse .venv at the repo root and install the project with its dev tools and the
-# optional Dask and rl-zoo3 extras (the tests run real Dask clusters and rl-zoo3's own config
-# preprocessing).
+# optional Dask, rl-zoo3 and docs extras (the tests run real Dask clusters, rl-zoo3's own config
+# preprocessing and `mkdocs build --strict`).
 # Re-running is cheap: the install is skipped while pyproject.toml and the extras are unchanged.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
-EXTRAS="dev,dask,zoo"
+EXTRAS="dev,dask,zoo,docs"
 if [ ! -x .venv/bin/python ]; then
   echo "[setup] creating .venv" >&2
   "$PY" -m venv .venv

@@ -383,7 +383,7 @@ def test_gait_file_errors_name_the_file_and_the_key(files):
 
 
 def test_fold_is_a_result_exit_0(tmp_path, capsys, monkeypatch):
-    """A branch that ends at a fold (the README's arclength example, near k_c = 303) exits 0
+    """A branch that ends at a fold (docs/analysis.md's arclength example, near k_c = 303) exits 0
     and reports it; only a branch that cannot start is an error."""
     from types import SimpleNamespace
 

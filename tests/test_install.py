@@ -176,7 +176,7 @@ def test_installed_package_runs_outside_the_checkout(installed):
             env=env,
         )
     )
-    assert 0.8 < margins["emax"] < 0.95  # the passive gait's e_max is 0.878 (README)
+    assert 0.8 < margins["emax"] < 0.95  # the passive gait's e_max is 0.878 (docs/analysis.md)
     assert (cwd / "out" / "margins" / "passive" / "margins.json").is_file()
 
     # the acceptance run of the shipped default controller (a distilled stride controller):

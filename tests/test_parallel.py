@@ -224,9 +224,9 @@ def warm_cache(tmp_path_factory):
     """Compile (or load) every kernel the basin map and the margins run, once, in one process
     that writes Numba's cache, before any run that compares processes bit for bit. With a
     cold cache (a fresh clone) the first process compiles in-session while the others load
-    the cache, and the two can differ by round-off (fast-math; README, "Round-off depends on
-    the compile"): a comparison of two executors must compare the same machine code. It also
-    keeps a worker killed on purpose from dying while it writes the cache."""
+    the cache, and the two can differ by round-off (fast-math; docs/developers.md, "Round-off
+    depends on the compile"): a comparison of two executors must compare the same machine
+    code. It also keeps a worker killed on purpose from dying while it writes the cache."""
     tmp = tmp_path_factory.mktemp("warm")
     for argv in (
         ["basin-map", "--grid", "2", "--strides", "3", "--out", tmp / "b", "--no-overlay"],

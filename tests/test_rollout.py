@@ -61,16 +61,16 @@ def test_rollout_records_a_gif(tmp_path):
     assert Path(r["video"]).stat().st_size > 1000
 
 
-def test_load_policy_matches_plain_sb3_and_readme_example_runs():
+def test_load_policy_matches_plain_sb3_and_docs_example_runs():
     from stable_baselines3 import PPO
 
-    text = (ROOT / "README.md").read_text()
+    text = (ROOT / "docs" / "learned.md").read_text()  # the docs page "Running a trained policy"
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
     example = next(b for b in blocks if "VecNormalize.load" in b)
     scope: dict = {}
-    exec(example.replace("range(400)", "range(60)"), scope)  # noqa: S102 - the README's code
+    exec(example.replace("range(400)", "range(60)"), scope)  # noqa: S102 - the docs' code
     assert scope["done"].shape == (1,)
-    # the README's SB3 route and load_policy's act give the same actions
+    # the docs' SB3 route and load_policy's act give the same actions
     make_env, act = load_policy("ppo-v1")
     venv = scope["venv"]
     model = PPO.load(scope["folder"] / "model.zip", device="cpu")

@@ -357,8 +357,8 @@ class BasinSpec:
         return -(-self.n_starts // self.chunk)
 
     def starts(self, i: int | None = None) -> np.ndarray:
-        """Start apex states (SI), row-major: row r of the grid is values[1][r], column c is
-        values[0][c]; chunk ``i`` only if given."""
+        """Start apex states (SI), row-major: row r of the grid is ``values[1][r]``, column c
+        is ``values[0][c]``; chunk ``i`` only if given."""
         vx, vy = (np.asarray(v, dtype=float) for v in self.values)
         gx, gy = np.meshgrid(vx, vy)
         Z = np.tile(np.asarray(self.z_slice, dtype=float), (gx.size, 1))

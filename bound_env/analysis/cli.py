@@ -350,7 +350,7 @@ def cmd_continue(args) -> int:
 
     gait, z0 = _setup(args)
     start = float(gait.params.to_gait_dict()[args.param])
-    # --step is a size (unsigned, as in the README); a negative one must point to --to
+    # --step is a size (unsigned, as in docs/analysis.md); a negative one must point to --to
     if args.step is not None and args.step < 0 and args.to > start:
         raise ValueError(
             f"--step {args.step:g} points away from --to {args.to:g} (the gait's "

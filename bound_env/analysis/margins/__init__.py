@@ -183,7 +183,7 @@ from .closed_loop import (
 from .curve import decision_summary, task_curve
 from .cycle import FD_FLOOR, FD_REL, fd_steps, task_cycle
 from .push import Y_TH1DOT, Y_XDOT, task_push
-from .report import Z_LABELS, Z_UNITS, plot_margins, summary_text, write_outputs
+from .report import Z_LABELS, Z_UNITS, column_styles, plot_margins, summary_text, write_outputs
 from .run import (
     CYCLE_RECORD_DT,
     SETTINGS,
@@ -249,6 +249,7 @@ __all__ = [
     "loop_for",
     "mfpt_curve",
     "physical_cap",
+    "column_styles",
     "plot_margins",
     "random_directions",
     "rough_episodes",

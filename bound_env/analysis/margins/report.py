@@ -123,8 +123,52 @@ def write_outputs(result: dict, out_dir: Path) -> None:
     plot_margins([result], out_dir)
 
 
-def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[Path]:
-    """basin, curve and push plots of one or more results (one colour each)."""
+# Colours for columns without a style of their own (`column_styles`): matplotlib's tab10
+# and then tab20's lighter halves, so that up to 20 columns never share one.
+_PALETTE = (
+    *(f"tab:{c}" for c in "blue orange green red purple brown pink gray olive cyan".split()),
+    "#aec7e8",
+    "#ffbb78",
+    "#98df8a",
+    "#ff9896",
+    "#c5b0d5",
+    "#c49c94",
+    "#f7b6d2",
+    "#c7c7c7",
+    "#dbdb8d",
+    "#9edae5",
+)
+_LINESTYLES = ("-", "--", ":", "-.")
+# the hatch of a bar drawn for a column whose line style is not solid (the basin plot)
+_HATCH = {"-": None, "--": "//", ":": "..", "-.": "\\\\"}
+
+
+def column_styles(labels, styles: dict | None = None) -> dict:
+    """One (colour, line style) per label, the same in every plot: ``styles`` (label ->
+    ``{"color": ..., "ls": ...}``) first, then the palette's colours not used yet, solid; past
+    the palette, its colours again with the next line style. No two labels share a pair."""
+    styles = dict(styles or {})
+    out, used = {}, set()
+    for lab in labels:
+        if lab in styles and lab not in out:
+            st = {"color": styles[lab]["color"], "ls": styles[lab].get("ls", "-")}
+            out[lab] = st
+            used.add((st["color"], st["ls"]))
+    free = [(c, ls) for ls in _LINESTYLES for c in _PALETTE if (c, ls) not in used]
+    used_colours = {c for c, _ in used}
+    free.sort(key=lambda cl: (_LINESTYLES.index(cl[1]), cl[0] in used_colours))
+    for lab in labels:
+        if lab not in out:
+            color, ls = free.pop(0)
+            out[lab] = {"color": color, "ls": ls}
+    return out
+
+
+def plot_margins(
+    results: list[dict], out_dir: Path, prefix: str = "", styles: dict | None = None
+) -> list[Path]:
+    """basin, curve and push plots of one or more results: one colour and line style per
+    result's label, the same in every plot (`column_styles`; ``styles`` fixes some)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -133,6 +177,7 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
     out_dir = Path(out_dir)
     paths = []
     labels = [r.get("label") or r["policy"] for r in results]
+    sty = column_styles(labels, styles)
 
     fig, ax = plt.subplots(figsize=(7.0, 3.6), dpi=100)
     names = [f"{lab}{s}" for lab in Z_LABELS for s in ("+", "-")]
@@ -140,7 +185,16 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
     wbar = 0.8 / len(results)
     for k, (r, lab) in enumerate(zip(results, labels, strict=True)):
         vals = [r["basin"][c][s]["rel"] for c in Z_LABELS for s in ("+", "-")]
-        ax.bar(x + (k - (len(results) - 1) / 2) * wbar, vals, wbar, label=lab)
+        st = sty[lab]
+        ax.bar(
+            x + (k - (len(results) - 1) / 2) * wbar,
+            vals,
+            wbar,
+            label=lab,
+            color=st["color"],
+            hatch=_HATCH.get(st["ls"]),
+            edgecolor="white" if _HATCH.get(st["ls"]) else None,
+        )
     if any(r["basin"][c][s]["rel"] > 0 for r in results for c in Z_LABELS for s in "+-"):
         ax.set_yscale("log")  # an empty basin (all zero) has nothing to put on a log axis
     ax.set_xticks(x, names, rotation=45, ha="right")
@@ -155,7 +209,7 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
     fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
     for r, lab in zip(results, labels, strict=True):
         c = r["basin_curve"]
-        line = ax.plot(c["sizes"], c["success"], "o-", label=lab, ms=3)[0]
+        line = ax.plot(c["sizes"], c["success"], marker="o", label=lab, ms=3, **_line(sty[lab]))[0]
         if "ci_low" in c:
             ax.fill_between(
                 c["sizes"], c["ci_low"], c["ci_high"], color=line.get_color(), alpha=0.15
@@ -173,7 +227,13 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
     fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.4), dpi=100)
     for ax, kind, unit in ((axes[0], "xdot", "m/s"), (axes[1], "th1dot", "rad/s")):
         for r, lab in zip(results, labels, strict=True):
-            ax.plot(r["push"][kind]["sizes"], r["push"][kind]["success"], "o-", label=lab)
+            ax.plot(
+                r["push"][kind]["sizes"],
+                r["push"][kind]["success"],
+                marker="o",
+                label=lab,
+                **_line(sty[lab]),
+            )
         ax.set_xlabel(f"kick in {kind} [{unit}]")
         ax.set_ylabel("success rate")
         ax.set_ylim(-0.05, 1.05)
@@ -187,7 +247,9 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
         fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
         for r, lab in zip(results, labels, strict=True):
             t = r["terrain"]
-            line = ax.plot(t["sigmas_deg"], t["survival"], "o-", label=lab, ms=3)[0]
+            line = ax.plot(
+                t["sigmas_deg"], t["survival"], marker="o", label=lab, ms=3, **_line(sty[lab])
+            )[0]
             ax.fill_between(
                 t["sigmas_deg"], t["ci_low"], t["ci_high"], color=line.get_color(), alpha=0.15
             )
@@ -212,7 +274,7 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
             sig = np.array([e["sigma_deg"] for e in m])
             val = np.array([e["mfpt"] for e in m], dtype=float)
             lb = np.array([e["lower_bound"] for e in m], dtype=bool)
-            line = ax.plot(sig, val, "-", label=lab)[0]
+            line = ax.plot(sig, val, label=lab, **_line(sty[lab]))[0]
             ax.plot(sig[~lb], val[~lb], "o", ms=3, color=line.get_color())
             ax.plot(sig[lb], val[lb], "^", ms=5, mfc="none", color=line.get_color())
             lo = np.array([e["ci"][0] for e in m], dtype=float)
@@ -234,6 +296,10 @@ def plot_margins(results: list[dict], out_dir: Path, prefix: str = "") -> list[P
         fig.savefig(paths[-1])
         plt.close(fig)
     return paths
+
+
+def _line(st: dict) -> dict:
+    return {"color": st["color"], "linestyle": st["ls"]}
 
 
 def summary_text(r: dict) -> str:

@@ -426,7 +426,8 @@ def _hips(d: Derived) -> list[str]:
         "",
         "The model keeps a leg swinging when its hip is below l̄ cos γ_td at liftoff or at the "
         "start apex, and touches down only after the hip rises above that height and falls "
-        "through it again (README). Margins of each hip above its touchdown height (negative "
+        'through it again (docs/model.md, "The hybrid simulation"). Margins of each hip '
+        "above its touchdown height (negative "
         "would trigger the rule):",
         "",
         "| stride | back hip | front hip |",

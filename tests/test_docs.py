@@ -1,0 +1,227 @@
+"""The documentation: the site builds strictly, every sub-command is on the command-line page,
+and the README's and the results page's headline tables are the numbers of docs/headline.json
+(which the page's full table shows too)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from agents.compare import (
+    HEADLINE,
+    headline_numbers,
+    headline_table,
+    load_result,
+    mfpt_sigma_100_interval,
+)
+from agents.headline import END, START, load_headline, main, render_block, update_readme
+from bound_env.analysis.margins import column_styles
+from bound_env.analysis.margins.stats import t_interval
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = ROOT / "docs"
+
+
+@pytest.mark.slow  # 5-9 s on the shared 2-core machine
+def test_mkdocs_build_strict(tmp_path):
+    """`mkdocs build --strict`: a broken link, a page missing from the nav's files or a bad
+    API reference fails. Skipped only where MkDocs is absent outside CI (CI=1 in .ci/run)."""
+    if importlib.util.find_spec("mkdocs") is None:
+        if os.environ.get("CI"):
+            pytest.fail("mkdocs is not installed but CI is set: install the [docs] extra")
+        pytest.skip("mkdocs not installed (the [docs] extra)")
+    t0 = time.perf_counter()
+    env = dict(os.environ, PYTHONPATH=str(ROOT), NO_MKDOCS_2_WARNING="1")
+    r = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(tmp_path / "site")],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+    for page in ("envs/passive-bound-v0", "envs/passive-bound-stride-v1", "cli", "MARGINS"):
+        assert (tmp_path / "site" / page / "index.html").is_file(), page
+    html = (tmp_path / "site" / "envs" / "passive-bound-v0" / "index.html").read_text()
+    assert "Version History" in html and "Observation Space" in html  # the class docstring
+    print(f"mkdocs build: {time.perf_counter() - t0:.1f} s")
+
+
+def _subcommands() -> set[str]:
+    from bound_env.cli import build_parser
+
+    action = build_parser()._subparsers._group_actions[0]
+    return set(action.choices)
+
+
+def test_every_subcommand_is_on_the_cli_page():
+    text = (DOCS / "cli.md").read_text()
+    rows = set(re.findall(r"^\| `([a-z-]+)` \|", text, re.M))  # the sub-commands table
+    examples = set(re.findall(r"^bound-env ([a-z-]+)", text, re.M))
+    commands = _subcommands()
+    assert len(commands) >= 14
+    assert commands <= rows, f"not in docs/cli.md's table: {sorted(commands - rows)}"
+    assert commands <= examples, f"no example in docs/cli.md: {sorted(commands - examples)}"
+
+
+def test_every_registered_env_id_has_a_page():
+    import gymnasium as gym
+
+    import bound_env  # noqa: F401 - registers the ids
+
+    ids = [i for i in gym.registry if i.startswith("PassiveBound")]
+    assert "PassiveBound-v0" in ids and "PassiveBoundStride-v1" in ids
+    nav = (ROOT / "mkdocs.yml").read_text()
+    for env_id in ids:
+        slug = re.sub(
+            r"(?<!^)(?=[A-Z])", "-", env_id
+        ).lower()  # PassiveBound-v0 -> passive-bound-v0
+        page = DOCS / "envs" / f"{slug}.md"
+        assert page.is_file() and env_id in page.read_text(), env_id
+        assert f"envs/{slug}.md" in nav, env_id
+
+
+# ---------------------------------------------------------------- the headline and its JSON
+
+
+def test_readme_and_page_headline_are_the_json():
+    head = load_headline()
+    assert head["budget"] == "full" and head["seed"] == 12345
+    assert [r["role"] for r in head["rows"]] == [h[0] for h in HEADLINE]
+    readme = (ROOT / "README.md").read_text()
+    block = readme[readme.index(START) : readme.index(END) + len(END)]
+    assert block == render_block(head)  # the README's table is the JSON, rendered
+    page = (DOCS / "MARGINS.md").read_text()
+    table = headline_table(head)
+    assert table in page
+    assert page.index(table) < page.index("## All columns")  # first, the full table after it
+    assert len(readme.splitlines()) <= 250
+    for line in ("bash scripts/demo.sh", "bash scripts/test.sh"):  # the quick start, first
+        assert readme.index(line) < readme.index("## Results")
+
+
+def _full_table_row(page: str, title_start: str) -> list[str]:
+    head = next(ln for ln in page.splitlines() if ln.startswith("| measure | "))
+    labels = [c.strip().split(" (")[0] for c in head.strip("|").split("|")][1:]
+    row = next(ln for ln in page.splitlines() if ln.startswith(f"| {title_start}"))
+    cells = [c.strip() for c in row.strip("|").split("|")][1:]
+    return dict(zip(labels, cells, strict=True))
+
+
+def test_headline_json_is_what_the_full_table_shows():
+    """Each headline number is the page's full-table cell of its column (3 significant
+    digits), and a seed column's interval is the t interval of its per-seed values."""
+    head = load_headline()
+    page = (DOCS / "MARGINS.md").read_text()
+    r50 = _full_table_row(page, "random-direction **r50**")
+    mfpt = _full_table_row(page, "rough terrain σ at which the **MFPT**")
+    for row in head["rows"]:
+        for key, cells in (("r50", r50), ("mfpt_sigma_100_deg", mfpt)):
+            m, cell = row[key], cells[row["label"]]
+            assert cell.startswith(f"{m['value']:.3g}"), (row["label"], key, cell)
+            if "per_seed" in m:
+                ti = t_interval(m["per_seed"])
+                assert (ti["mean"], ti["low"], ti["high"]) == (m["value"], m["low"], m["high"])
+                assert cell.startswith(f"{m['value']:.3g} [{m['low']:.3g}, {m['high']:.3g}]")
+            elif key == "r50":
+                assert f"Wilson-based [{m['low']:.3g}, {m['high']:.3g}]" in cell
+            assert m["low"] <= m["value"] <= m["high"]
+
+
+def test_headline_cli_check(tmp_path, capsys):
+    readme = tmp_path / "README.md"
+    readme.write_text((ROOT / "README.md").read_text())
+    assert main(["--readme", str(readme), "--check"]) == 0
+    text = readme.read_text()
+    readme.write_text(text.replace("| **lqr** |", "| **lqr (edited)** |"))
+    assert main(["--readme", str(readme), "--check"]) == 1
+    assert main(["--readme", str(readme)]) == 0 and readme.read_text() == text
+    readme.write_text("no markers\n")
+    assert main(["--readme", str(readme)]) == 2
+    assert "README.md: no <!-- headline:start -->" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="no <!-- headline:start -->"):
+        update_readme("text", load_headline())
+    bad = tmp_path / "h.json"
+    bad.write_text("{}")
+    with pytest.raises(ValueError, match="h.json: no 'rows'"):
+        load_headline(bad)
+
+
+def _run(r50, ci, mfpt=None, label="x"):
+    return {
+        "label": label,
+        "basin_curve": {"r50": r50, "r50_ci": ci},
+        "mfpt_sigma_100_deg": mfpt,
+        "mfpt": [],
+    }
+
+
+def test_headline_numbers_from_groups():
+    groups = [
+        {"label": "passive", "gait": "default", "policies": ["passive"],
+         "runs": [_run(0.05, [0.04, 0.06], 0.2)]},
+        {"label": "passive", "gait": "literal-cycle", "policies": ["passive"],
+         "runs": [_run(0.0, [0.0, 0.0])]},
+        {"label": "fine-tuned", "gait": "default", "policies": ["a", "b", "c"],
+         "runs": [_run(0.26, None, 0.7), _run(0.27, None, 0.8), _run(0.25, None, 0.75)]},
+    ]  # fmt: skip
+    head = headline_numbers(groups, "quick", 7)
+    assert [r["label"] for r in head["rows"]] == ["passive", "fine-tuned"]  # order of HEADLINE
+    p, f = head["rows"]
+    assert (p["r50"]["value"], p["r50"]["low"], p["r50"]["high"]) == (0.05, 0.04, 0.06)
+    assert p["mfpt_sigma_100_deg"]["low"] is None  # no MFPT curve: no interval
+    ti = t_interval([0.26, 0.27, 0.25])
+    assert f["r50"]["value"] == ti["mean"] and f["r50"]["high"] == ti["high"]
+    assert f["r50"]["interval"] == "Student-t over 3 seeds"
+    table = headline_table(head)
+    assert table.count("\n") == 3 and "| **passive** |" in table and "[—, —]" in table
+
+
+def test_mfpt_interval_brackets_the_estimate():
+    from bound_env.analysis.margins.stats import mfpt_crossing, mfpt_estimate
+
+    sig = [0.1, 0.2, 0.4, 0.8]
+    m = []
+    for s, k in zip(sig, (0, 3, 40, 200), strict=True):
+        e = mfpt_estimate(4000, k)
+        m.append({"sigma_deg": s, **e})
+    r = {"mfpt": m}
+    est = mfpt_crossing(sig, [e["mfpt"] for e in m], [e["lower_bound"] for e in m])
+    lo, hi = mfpt_sigma_100_interval(r)
+    assert lo < est < hi and 0.2 < lo and hi < 0.8
+    assert mfpt_sigma_100_interval({"mfpt": []}) == [None, None]
+
+
+def test_load_result_refuses(tmp_path):
+    with pytest.raises(ValueError, match="margins.json: no margins.json"):
+        load_result(tmp_path / "margins.json", "full", 12345)
+    f = tmp_path / "margins.json"
+    f.write_text(json.dumps({"budget": "quick", "seed": 12345, "basin_curve": {}}))
+    with pytest.raises(ValueError, match="budget 'quick'"):
+        load_result(f, "full", 12345)
+    f.write_text("[")
+    with pytest.raises(ValueError, match="not a margins result"):
+        load_result(f, "full", 12345)
+
+
+def test_column_styles_unique_and_fixed():
+    from agents.compare import COLUMN_STYLES, default_entries
+
+    labels = [e[0] for e in default_entries()] + ["extra one", "extra two"]
+    st = column_styles(labels, COLUMN_STYLES)
+    pairs = [(st[lab]["color"], st[lab]["ls"]) for lab in labels]
+    assert len(set(pairs)) == len(labels)  # one colour and line style per column
+    assert st["passive"] == COLUMN_STYLES["passive"]
+    if "lqr literal" in st:
+        assert st["lqr literal"]["color"] != st["passive"]["color"]
+    many = column_styles([f"c{k}" for k in range(50)])
+    assert len({(s["color"], s["ls"]) for s in many.values()}) == 50
