@@ -176,9 +176,7 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     section, env_id, seed = read_policy_section(files)
     env_kwargs = check_env_kwargs(section_env_kwargs(section, env_id), str(files.config))
     wrappers = section.get("env_wrapper") or []
-    from .residual import residual_settings
-
-    residual = residual_settings(wrappers)
+    residual = controller_wrapper(wrappers)
     if residual is None:
         obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
     else:
@@ -197,12 +195,26 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
         obs_index=obs_index,
     )
     read_vecnormalize(ctrl, vecnorm_path)
-    if residual is not None:
-        from .residual import residual_controller
-
-        ctrl = residual_controller(ctrl, residual, model, model_path)
+    if residual is not None:  # e.g. agents.residual.ResidualOver: the actor acts through it
+        cls, kwargs = residual
+        ctrl = cls.policy_controller(ctrl, kwargs, model, model_path)
     check_gait(ctrl, gait, force)
     return ctrl
+
+
+def controller_wrapper(env_wrappers) -> tuple | None:
+    """(class, kwargs) of the run's ``env_wrapper`` through which its actor acts (a wrapper
+    class with ``policy_controller``: `agents.residual.ResidualOver`), or None."""
+    from .config import class_entries, get_class_by_name
+
+    found = []
+    for name, kwargs in class_entries(env_wrappers):
+        cls = get_class_by_name(name)
+        if callable(getattr(cls, "policy_controller", None)):
+            found.append((cls, dict(kwargs or {})))
+    if len(found) > 1:
+        raise ValueError(f"more than one controller wrapper in env_wrapper: {env_wrappers!r}")
+    return found[0] if found else None
 
 
 def read_vecnormalize(ctrl: MLPController, vecnorm_path: Path | None) -> None:

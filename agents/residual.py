@@ -134,6 +134,12 @@ class ResidualOver(gym.Wrapper):
         self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
         self.x, self.gate, self.base_action, self.k = np.zeros(6), 0.0, 0.0, 0
 
+    @classmethod
+    def policy_controller(cls, net, settings: dict, model, model_path) -> ResidualController:
+        """The evaluation controller of a PPO actor trained through this wrapper
+        (`agents.policy.load_controller` calls it; `residual_controller`)."""
+        return residual_controller(net, settings, model, model_path)
+
     def _apex(self, obs, info) -> bool:
         """Tell the base about an apex; returns whether this step (or reset) had one."""
         z = info.get("apex_z", info.get("start_z"))
@@ -226,16 +232,6 @@ class ResidualController:
         state = dict(self.__dict__)
         state["_x"], state["_gate"] = None, 0.0
         return state
-
-
-def residual_settings(env_wrappers) -> dict | None:
-    """The `ResidualOver` keyword arguments of an ``env_wrapper`` list, or None."""
-    from .config import class_entries
-
-    found = [kw for n, kw in class_entries(env_wrappers) if n.rsplit(".", 1)[-1] == "ResidualOver"]
-    if len(found) > 1:
-        raise ValueError("more than one ResidualOver in env_wrapper")
-    return dict(found[0] or {}) if found else None
 
 
 def residual_controller(net, settings: dict, model, model_path) -> ResidualController:

@@ -204,6 +204,7 @@ def test_interrupted_margins_stops_its_workers_and_says_how_to_resume(tmp_path, 
         "2",
         "--out",
         str(tmp_path / "m"),
+        "--no-progress",  # (a log gets progress lines; the interruption is one line)
     ]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
