@@ -1,18 +1,17 @@
 """The main job's comparison (``bound-env demo``): from one perturbed apex start, the passive
-robot falls and the shipped ``default`` controller brings the gait back to its cycle.
+robot falls, the stride LQR (``lqr``) falls too, and the shipped learned controller
+(``default``) brings the gait back to its cycle: why learning.
 
 **The start** is z* + r |z*| xi with xi = ``random_directions(DEMO_DIRECTIONS,
 DEMO_SEED)[DEMO_INDEX]`` (`bound_env.analysis.margins.random_directions`, max |xi_i| = 1) and r =
 ``DEMO_SIZE``, chosen on the *validation* directions (seed 777), never on the test set's (seed
-12345): at r = 0.2 it is the first of the 16 directions of seed 777 from which the passive gait
-falls and both shipped distilled seeds (``distilled/s0``, then the shipped ``default``, and
-``distilled/s1``) return within ``DEMO_STRIDES`` strides (direction 0 fails all three: the
-learned ones fall in 2 strides). From it the passive gait falls in its third stride
-(leg_overcompressed_front) and the distilled seeds return in 7 strides (``distilled/s2``,
-shipped after the choice, too); they return from the same direction at r = 0.15 and 0.25 as
-well, so the choice is not on a knife's edge. The shipped ``default`` is now the fine-tuned
-``finetuned/s0`` (its policy files byte-identical to that seed's), which returns from it too.
-``tests/test_demo.py`` checks that passive falls and ``default`` returns from it.
+12345): it is the first of the 16 directions of seed 777 from which, at each of r = 0.15, 0.2
+and 0.25, the passive gait falls, ``lqr`` falls and ``default`` returns within
+``DEMO_STRIDES`` strides (direction 6; so the choice is not on a knife's edge). At r = 0.2 the
+passive gait falls in its first stride (ground contact), ``lqr`` in its third, and ``default``
+returns in 10 strides. (The demo's earlier start, direction 1, showed passive vs learned only:
+the LQR alone returns from it as fast as ``default``, which picks the LQR's own plan there.)
+``tests/test_demo.py`` checks the three outcomes.
 
 **The runs** are those of the margins (`bound_env.analysis.margins.ClosedLoop.run`, the
 closed-loop apex map at the evaluation tolerance): *returned* means within 1e-4 (SI) of z*
@@ -20,7 +19,7 @@ within ``DEMO_STRIDES`` strides. ``bound_env`` never imports ``agents`` (tests/t
 `agents.cli.register` adds `demo_comparison` to `bound_env.render_cli`'s demo parts when
 ``bound-env`` builds its parser (the ``bound_env.commands`` entry point).
 
-**The animation** (``compare.gif``) shows the two robots side by side, one frame pair per two
+**The animation** (``compare.gif``) shows the three robots side by side, one frame pair per two
 control intervals (50 frames per second of simulated time, played in real time), drawn by
 `bound_env.render.render_frame`; a fallen robot holds its last frame. The learned robot is
 shown for ``SHOW_AFTER`` more strides once it has returned. The one-stride episodes of the
@@ -39,9 +38,10 @@ from bound_env.params import Z_SI_UNITS
 from .distill import VALIDATION_SEED
 
 DEMO_POLICY = "default"  # the shipped learned controller (agents/policies/default)
+DEMO_BASELINE = "lqr"  # the classical controller that falls from the start
 DEMO_SEED = VALIDATION_SEED  # 777: validation directions (the test set's seed is 12345)
-DEMO_DIRECTIONS = 16  # xi = random_directions(16, 777)[1] (a row does not depend on n)
-DEMO_INDEX = 1
+DEMO_DIRECTIONS = 16  # xi = random_directions(16, 777)[6] (a row does not depend on n)
+DEMO_INDEX = 6
 DEMO_SIZE = 0.2  # r, in units of |z*_i|
 DEMO_STRIDES = 100  # strides allowed to return (the margins' basin_strides, quick budget)
 SHOW_AFTER = 2  # strides the animation shows after the learned robot's return
@@ -149,17 +149,19 @@ def compare_from_start(policy: str = DEMO_POLICY, gait="default", show_after: in
     Returns the summary's ``comparison`` object: ``start`` (``z`` and ``z_star`` in SI, their
     units in ``z_units``,
     ``seed``, ``index``, ``n_directions``, ``r``, ``direction``), ``passive`` (``fell``,
-    ``failure``, ``strides``: strides completed before the fall, or before it returned),
+    ``failure``, ``strides``: strides completed before the fall, or before it returned,
+    ``mean_abs_tau``), ``lqr`` (the same, and ``returned``, ``policy``, ``max_torque``),
     ``learned`` (``policy``, ``returned``, ``strides``: strides to return (or completed before
     a fall), ``failure``, ``mean_abs_tau``: mean |tau| [N m] over the control intervals up to
     the return, ``max_torque`` [N m]); and, under the private keys ``_states`` and ``_dt``,
-    the recorded runs (passive, learned) and the control interval, for the animation."""
+    the recorded runs (passive, lqr, learned) and the control interval, for the animation."""
     from .controllers import ZeroController
     from .policy import load_controller
 
     z0, z_star, xi = demo_start(gait)
     ctrl = load_controller(policy, gait=gait)
     p = _run(ZeroController(), gait, z0, z_star)
+    lq = _run(load_controller(DEMO_BASELINE, gait=gait), gait, z0, z_star)
     q = _run(ctrl, gait, z0, z_star, show_after=show_after)
     return {
         "start": {
@@ -177,6 +179,16 @@ def compare_from_start(policy: str = DEMO_POLICY, gait="default", show_after: in
             "fell": not p["returned"] and p["failure"] is not None,
             "failure": p["failure"],
             "strides": p["strides"] - (0 if p["returned"] else 1),
+            "mean_abs_tau": p["mean_abs_tau"],
+        },
+        "lqr": {
+            "policy": DEMO_BASELINE,
+            "fell": not lq["returned"] and lq["failure"] is not None,
+            "returned": lq["returned"],
+            "failure": lq["failure"],
+            "strides": lq["strides"] - (0 if lq["returned"] else 1),
+            "mean_abs_tau": lq["mean_abs_tau"],
+            "max_torque": lq["max_torque"],
         },
         "learned": {
             "policy": str(policy),
@@ -186,7 +198,7 @@ def compare_from_start(policy: str = DEMO_POLICY, gait="default", show_after: in
             "mean_abs_tau": q["mean_abs_tau"],
             "max_torque": q["max_torque"],
         },
-        "_states": (p["states"], q["states"]),
+        "_states": (p["states"], lq["states"], q["states"]),
         "_dt": q["dt"],
     }
 
@@ -201,25 +213,30 @@ def _panel(state, label: str, note: str, size=PANEL) -> np.ndarray:
 
 def comparison_frames(comparison: dict, progress: bool = False) -> tuple[list, float]:
     """(side-by-side frames, simulated seconds per frame) of `compare_from_start`'s runs:
-    passive on the left, learned on the right; a fallen robot holds its last frame."""
-    passive, learned = comparison["_states"]
-    labels = ("passive", f"learned ({comparison['learned']['policy']})")
-    outcome = (comparison["passive"], comparison["learned"])
-    runs = [passive[::FRAME_STEPS], learned[::FRAME_STEPS]]
-    for k, states in enumerate((passive, learned)):  # always show the last state
-        if (len(states) - 1) % FRAME_STEPS:
-            runs[k].append(states[-1])
+    passive on the left, lqr in the middle, learned on the right; a fallen robot holds its
+    last frame."""
+    states = comparison["_states"]
+    labels = (
+        "passive",
+        comparison["lqr"]["policy"],
+        f"learned ({comparison['learned']['policy']})",
+    )
+    outcome = (comparison["passive"], comparison["lqr"], comparison["learned"])
+    runs = [list(s[::FRAME_STEPS]) for s in states]
+    for k, st in enumerate(states):  # always show the last state
+        if (len(st) - 1) % FRAME_STEPS:
+            runs[k].append(st[-1])
     n = max(len(r) for r in runs)
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=n, desc="compare.gif", unit="frame", file=sys.stderr)
-    frames, held = [], [None, None]
+    frames, held = [], [None] * len(runs)
     gap = np.full((PANEL[1], 4, 3), 255, dtype=np.uint8)
     for i in range(n):
         halves = []
-        for k in range(2):
+        for k in range(len(runs)):
             if i < len(runs[k]):
                 note, o = "", outcome[k]
                 if i == len(runs[k]) - 1 and o["failure"] is not None:
@@ -228,7 +245,10 @@ def comparison_frames(comparison: dict, progress: bool = False) -> tuple[list, f
                     note = ": back on the cycle"
                 held[k] = _panel(runs[k][i], labels[k], note)
             halves.append(held[k])
-        frames.append(np.concatenate([halves[0], gap, halves[1]], axis=1))
+        parts = [halves[0]]
+        for h in halves[1:]:
+            parts += [gap, h]
+        frames.append(np.concatenate(parts, axis=1))
         if bar is not None:
             bar.update()
     if bar is not None:
@@ -237,16 +257,18 @@ def comparison_frames(comparison: dict, progress: bool = False) -> tuple[list, f
 
 
 def table_lines(comparison: dict) -> list[str]:
-    """The three-line table: header, passive, learned."""
-    p, q = comparison["passive"], comparison["learned"]
+    """The table: header, passive, lqr, learned, with the torque each used."""
+    p, lq, q = comparison["passive"], comparison["lqr"], comparison["learned"]
+
+    def outcome(r) -> str:
+        if r.get("returned"):
+            return "returned to the cycle"
+        return f"fell: {r['failure']}" if r.get("fell") else f"did not return: {r['failure']}"
+
     rows = [
-        ("passive", f"fell: {p['failure']}" if p["fell"] else "did not fall", p["strides"], 0.0),
-        (
-            f"learned ({q['policy']})",
-            "returned to the cycle" if q["returned"] else f"did not return: {q['failure']}",
-            q["strides"],
-            q["mean_abs_tau"],
-        ),
+        ("passive", outcome(p), p["strides"], p.get("mean_abs_tau", 0.0)),
+        (lq["policy"], outcome(lq), lq["strides"], lq["mean_abs_tau"]),
+        (f"learned ({q['policy']})", outcome(q), q["strides"], q["mean_abs_tau"]),
     ]
     w = max(len(r[0]) for r in rows)
     v = max(len(r[1]) for r in rows)
@@ -272,7 +294,8 @@ def demo_comparison(gait="default", out=None, progress: bool = False):
     frames, frame_dt = comparison_frames(c, progress=progress)
     del c["_states"], c["_dt"]
     lines = [
-        f"Passive vs the shipped {DEMO_POLICY!r} controller from z* + {DEMO_SIZE:g} |z*| xi "
+        f"Passive vs {DEMO_BASELINE} vs the shipped {DEMO_POLICY!r} controller from z* + "
+        f"{DEMO_SIZE:g} |z*| xi "
         f"(xi: validation direction {DEMO_INDEX} of seed {DEMO_SEED})"
     ]
     if out is not None and frames:

@@ -1,6 +1,6 @@
 """The main job's comparison (``bound-env demo``, agents/demo.py): a start chosen on the
-validation directions from which the passive gait falls and the shipped ``default``
-controller returns; the ``comparison`` object of summary.json, compare.gif and the table; and
+validation directions from which the passive gait falls, ``lqr`` falls and the shipped
+``default`` controller returns; the ``comparison`` object of summary.json, compare.gif and the table; and
 bound_env's demo without the agents part (the core does not need agents)."""
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import pytest
 
 from agents.controllers import ZeroController
 from agents.demo import (
+    DEMO_BASELINE,
     DEMO_DIRECTIONS,
     DEMO_INDEX,
     DEMO_POLICY,
@@ -39,11 +40,15 @@ def test_passive_falls_and_the_default_controller_returns_from_the_start():
     z0, z_star, _ = demo_start("default")
     ok, _, failure = ClosedLoop(ZeroController(), "default").run(z0, z_star, DEMO_STRIDES)
     assert not ok and failure is not None  # passive falls
+    lqr = load_controller(DEMO_BASELINE)
+    ok, _, failure = ClosedLoop(lqr, "default").run(z0, z_star, DEMO_STRIDES)
+    assert not ok and failure is not None  # the LQR falls too
     ctrl = load_controller(DEMO_POLICY)
     ok, strides, failure = ClosedLoop(ctrl, "default").run(z0, z_star, DEMO_STRIDES)
     assert ok and failure is None and strides <= DEMO_STRIDES  # default returns
     c = compare_from_start()
     assert c["passive"]["fell"] and c["passive"]["failure"] is not None
+    assert c["lqr"]["fell"] and c["lqr"]["failure"] is not None and not c["lqr"]["returned"]
     assert c["learned"]["returned"] and c["learned"]["strides"] == strides
     assert 0.0 < c["learned"]["mean_abs_tau"] <= c["learned"]["max_torque"]
     # the recorded runs read as one run: time and position only go forward
@@ -62,22 +67,24 @@ def test_bound_env_demo_writes_the_comparison(tmp_path, capsys):
     assert printed.err == ""  # --no-progress: no bars
     summary = json.loads((out / "summary.json").read_text())
     c = summary["comparison"]
-    assert set(c) >= {"start", "passive", "learned"}
+    assert set(c) >= {"start", "passive", "lqr", "learned"}
     assert set(c["start"]) >= {"z", "seed", "index", "r", "direction"}
-    assert (c["start"]["seed"], c["start"]["index"], c["start"]["r"]) == (777, 1, 0.2)
+    assert (c["start"]["seed"], c["start"]["index"], c["start"]["r"]) == (777, 6, 0.2)
     assert set(c["passive"]) >= {"fell", "failure", "strides"}
     assert set(c["learned"]) >= {"returned", "strides", "mean_abs_tau"}
+    assert set(c["lqr"]) >= {"fell", "failure", "strides", "mean_abs_tau"}
     assert c["passive"]["fell"] is True and c["learned"]["returned"] is True
+    assert c["lqr"]["fell"] is True
     assert summary["max_apex_error_si"] < 1e-8  # the passive cycle part is unchanged
     from PIL import Image
 
     with Image.open(out / "compare.gif") as im:
-        assert im.n_frames > 50 and im.size[0] > 2 * im.size[1]  # two panels side by side
-    # the three-line table closes the output
-    last = printed.out.strip().splitlines()[-3:]
+        assert im.n_frames > 50 and im.size[0] > 3 * im.size[1]  # three panels side by side
+    # the four-line table closes the output
+    last = printed.out.strip().splitlines()[-4:]
     assert last == table_lines(c)
     assert last[0].startswith("controller") and last[1].startswith("passive")
-    assert last[2].startswith("learned")
+    assert last[2].startswith("lqr") and last[3].startswith("learned")
 
 
 def test_the_core_demo_runs_without_the_agents_part(tmp_path, monkeypatch, capsys):
