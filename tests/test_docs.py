@@ -49,10 +49,21 @@ def test_mkdocs_build_strict(tmp_path):
         timeout=300,
     )
     assert r.returncode == 0, r.stdout + r.stderr
-    for page in ("envs/passive-bound-v0", "envs/passive-bound-stride-v1", "cli", "MARGINS"):
+    pages = (
+        "envs/passive-bound-v0",
+        "envs/passive-bound-v1",
+        "envs/passive-bound-literal-v1",
+        "envs/passive-bound-stride-v1",
+        "envs/passive-bound-rescue-v0",
+        "cli",
+        "MARGINS",
+    )
+    for page in pages:
         assert (tmp_path / "site" / page / "index.html").is_file(), page
     html = (tmp_path / "site" / "envs" / "passive-bound-v0" / "index.html").read_text()
     assert "Version History" in html and "Observation Space" in html  # the class docstring
+    html = (tmp_path / "site" / "envs" / "passive-bound-rescue-v0" / "index.html").read_text()
+    assert "Version History" in html and "Starting State" in html and "TO FILL" not in html
     print(f"mkdocs build: {time.perf_counter() - t0:.1f} s")
 
 
@@ -88,6 +99,60 @@ def test_every_registered_env_id_has_a_page():
         page = DOCS / "envs" / f"{slug}.md"
         assert page.is_file() and env_id in page.read_text(), env_id
         assert f"envs/{slug}.md" in nav, env_id
+
+
+# The pages that show a shipped policy in the plain Gymnasium loop (the same code on each)
+PLAIN_LOOP_PAGES = (
+    "README.md",
+    "docs/getting-started.md",
+    "docs/learned.md",
+    "docs/envs/passive-bound-v1.md",
+)
+
+
+def _python_blocks(text: str) -> list[str]:
+    return re.findall(r"^```python\n(.*?)^```", text, re.S | re.M)
+
+
+def test_plain_loop_example_runs():
+    """The README's (and the site's) plain-loop example, run as written: a shipped stride
+    controller on `gym.make("PassiveBound-v1")` with `act(obs, info)` bounds a whole episode
+    (it falls within a few strides when the apex states do not reach it)."""
+    examples = {}
+    for name in PLAIN_LOOP_PAGES:
+        blocks = [b for b in _python_blocks((ROOT / name).read_text()) if "act(obs, info)" in b]
+        assert blocks, f"{name}: no plain-loop example"
+        for b in blocks:
+            assert 'gym.make("PassiveBound-v1")' in b and "obs, info = env.reset(" in b, name
+            examples.setdefault(b, name)
+    assert len(examples) == 1, "the plain-loop examples differ between pages"
+    scope: dict = {}
+    exec(next(iter(examples)), scope)  # noqa: S102 - the docs' code
+    info = scope["info"]
+    assert scope["truncated"] and not scope["terminated"] and info["failure"] is None
+    assert info["stride"] >= 70  # 3000 control intervals of ~39 ms strides: ~76 strides
+    assert scope["env"].unwrapped.task.max_torque == 80.0  # the published task
+
+
+def test_results_page_commands_name_the_full_budget():
+    """`compare` defaults to the quick budget: every command shown that writes the results
+    page (`compare ... --docs docs`) names `--budget full`."""
+    pages = [ROOT / "README.md", *sorted(DOCS.glob("*.md")), *sorted(DOCS.glob("*/*.md"))]
+    found = 0
+    for page in pages:
+        if page.name in ("MARGINS.md", "REPRODUCTION.md"):
+            continue
+        for line in page.read_text().splitlines():
+            if re.search(r"bound-env compare\b.*--docs docs\b", line):
+                found += 1
+                assert "--budget full" in line, f"{page.name}: {line.strip()}"
+    assert found >= 3
+
+
+def test_no_unfinished_pages():
+    for page in [ROOT / "README.md", *DOCS.rglob("*.md")]:
+        assert "TO FILL" not in page.read_text(), page
+    assert not (DOCS / "changes").exists()  # folded into the site
 
 
 # ---------------------------------------------------------------- the headline and its JSON
