@@ -93,8 +93,8 @@ COLUMN_STYLES = {
     "lqr literal": {"color": "tab:olive", "ls": "--"},
 }
 # The headline table (the page's first table and the README's): (role, column label, what it
-# is). The step-level PPO row is the column of final-model ppo-v1 seeds; give it another label
-# here when a better step-level recipe replaces it.
+# is). The step-level PPO row is the shipped step-level recipe's column (`step-ppo`: residual
+# PPO on PassiveBound-v0; ppo-v1's plain recipe is the `ppo-v1` column of the full table).
 HEADLINE = (
     ("passive", "passive", "zero spine torque"),
     ("lqr", "lqr", "stride-to-stride LQR (classical)"),
@@ -104,7 +104,12 @@ HEADLINE = (
         "fine-tuned",
         "`default`: distilled from `mpc`, fine-tuned by PPO (3 seeds; `default` = s0)",
     ),
-    ("step-level PPO", "ppo-v1", "PPO on the step env, ppo-v1's recipe (3 final-model seeds)"),
+    (
+        "step-level PPO",
+        "step-ppo",
+        "PPO on PassiveBound-v0: a residual on `default`'s torques past its safe radius "
+        "(configs/ppo-residual.yaml, 3 final-model seeds)",
+    ),
 )
 HEADLINE_FILE = "headline.json"  # beside MARGINS.md and paired.json
 

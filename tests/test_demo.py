@@ -1,7 +1,7 @@
 """The main job's comparison (``bound-env demo``, agents/demo.py): a start chosen on the
 validation directions from which the passive gait falls, ``lqr`` falls and the shipped
-``default`` controller returns; the ``comparison`` object of summary.json, compare.gif and the table; and
-bound_env's demo without the agents part (the core does not need agents)."""
+``default`` controller returns; the ``comparison`` object of summary.json, compare.gif and
+the table; and bound_env's demo without the agents part (the core does not need agents)."""
 
 from __future__ import annotations
 
