@@ -57,9 +57,11 @@ def residual_features(obs, keep, base_action: float, x_apex, gate: float) -> np.
 
 
 class _Gate:
-    """The base's safe radius: x = (z - z*) / s and whether max |x| > safe."""
+    """The base's safe radius: x = (z - z*) / s and the gate g: 0 within max |x| <= safe;
+    past it 1 (``ramp`` 0), or min(1, (max |x| - safe) / ramp) (a residual that fades
+    towards the safe radius cannot hold the robot on a cycle just outside it)."""
 
-    def __init__(self, base):
+    def __init__(self, base, ramp: float = 0.0):
         for attr in ("z_ref", "scales", "safe"):
             if getattr(base, attr, None) is None:
                 raise ValueError(
@@ -69,10 +71,14 @@ class _Gate:
         self.z_ref = np.asarray(base.z_ref, dtype=float)
         self.scales = np.asarray(base.scales, dtype=float)
         self.safe = float(base.safe)
+        self.ramp = float(ramp)
 
     def __call__(self, z) -> tuple[np.ndarray, float]:
         x = (np.asarray(z, dtype=float) - self.z_ref) / self.scales
-        return x, float(np.max(np.abs(x)) > self.safe)
+        e = float(np.max(np.abs(x)))
+        if e <= self.safe:
+            return x, 0.0
+        return x, (1.0 if self.ramp <= 0 else min(1.0, (e - self.safe) / self.ramp))
 
 
 def load_base(base: str):
@@ -96,6 +102,7 @@ class ResidualOver(gym.Wrapper):
     :param end_on_return: end an episode at the first apex inside the safe radius, with
         ``alive_reward`` for each step left to ``max_steps`` as a bonus.
     :param residual_cost: cost per step of r^2.
+    :param ramp: the gate's ramp past the safe radius (0: a step from 0 to 1; `_Gate`).
     """
 
     def __init__(
@@ -109,6 +116,7 @@ class ResidualOver(gym.Wrapper):
         max_steps: int = 800,
         alive_reward: float = 1.0,
         residual_cost: float = 0.05,
+        ramp: float = 0.0,
     ):
         super().__init__(env)
         if not (np.isfinite(scale) and 0 < scale <= 2):
@@ -124,7 +132,9 @@ class ResidualOver(gym.Wrapper):
                 raise ValueError(
                     f"ResidualOver base {base!r} acts with {key} {kw[key]}, the env has {have}"
                 )
-        self.gate_of = _Gate(self.base_ctrl)
+        if not (np.isfinite(ramp) and 0 <= ramp <= 10):
+            raise ValueError(f"ResidualOver ramp must lie in [0, 10], got {ramp!r}")
+        self.gate_of = _Gate(self.base_ctrl, ramp)
         self.keep = _keep_index(task.obs_names)
         self.scale, self.r_max, self.axis_prob = float(scale), r_max, float(axis_prob)
         self.end_on_return, self.max_steps = bool(end_on_return), int(max_steps)
@@ -197,11 +207,12 @@ class ResidualController:
     keep: np.ndarray
     env_kwargs: dict = field(default_factory=dict)
     seed: int | None = None
+    ramp: float = 0.0  # the gate's ramp (`_Gate`)
     _x: np.ndarray | None = field(default=None, repr=False)
     _gate: float = field(default=0.0, repr=False)
 
     def __post_init__(self):
-        self.gate_of = _Gate(self.base)
+        self.gate_of = _Gate(self.base, self.ramp)
 
     # the base's record of who made each apex decision (margins' decision shares)
     decision_kinds = property(lambda self: getattr(self.base, "decision_kinds", None))
@@ -219,13 +230,16 @@ class ResidualController:
         a0 = float(self.base(obs))
         if not self._gate:
             return a0
-        return float(np.clip(a0 + self.scale * self.residual(obs, a0), -1.0, 1.0))
+        r = self.residual(obs, a0)
+        return float(np.clip(a0 + self.scale * self._gate * r, -1.0, 1.0))
 
     def fingerprint(self) -> str:
         h = hashlib.sha256(b"residual")
         h.update(self.base.fingerprint().encode())
         h.update(self.net.fingerprint().encode())
         h.update(repr((self.scale, self.keep.tolist())).encode())
+        if self.ramp:
+            h.update(repr(("ramp", self.ramp)).encode())
         return h.hexdigest()[:16]
 
     def __getstate__(self):  # the per-stride state is not part of the controller
@@ -246,7 +260,7 @@ def residual_controller(net, settings: dict, model, model_path) -> ResidualContr
     try:
         wrapped = ResidualOver(env, **settings)
         want, keep = wrapped.observation_space.shape, wrapped.keep
-        base, scale = wrapped.base_ctrl, wrapped.scale
+        base, scale, ramp = wrapped.base_ctrl, wrapped.scale, wrapped.gate_of.ramp
     finally:
         env.close()
     if tuple(model.observation_space.shape) != want or tuple(model.action_space.shape) != (1,):
@@ -263,6 +277,7 @@ def residual_controller(net, settings: dict, model, model_path) -> ResidualContr
         keep=keep,
         env_kwargs=dict(net.env_kwargs),
         seed=net.seed,
+        ramp=ramp,
     )
 
 

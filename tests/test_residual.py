@@ -163,3 +163,18 @@ def test_train_config_runs_and_loads_as_a_residual_controller(tmp_path):
     zs = ctrl.base.z_ref
     ok, n, _ = ClosedLoop(ctrl).run(zs, zs, 3)
     assert ok or n == 3
+
+
+def test_the_gate_ramps_from_the_safe_radius(base):
+    from agents.residual import _Gate
+
+    g = _Gate(base, ramp=0.2)
+    s = base.scales
+    assert g(base.z_ref)[1] == 0.0
+    e = base.safe + 0.1  # half the ramp past the safe radius, along y
+    z = base.z_ref + np.array([e, 0, 0, 0, 0, 0]) * s
+    assert g(z)[1] == pytest.approx(0.5)
+    z = base.z_ref + np.array([base.safe + 0.3, 0, 0, 0, 0, 0]) * s
+    assert g(z)[1] == 1.0 and _Gate(base)(z)[1] == 1.0  # ramp 0: a step
+    with pytest.raises(ValueError, match="ramp"):
+        ResidualOver(gym.make("PassiveBound-v0", **ENV_KW), ramp=-1.0)
