@@ -9,8 +9,9 @@ DEMO_SEED)[DEMO_INDEX]`` (`bound_env.analysis.margins.random_directions`, max |x
 and 0.25, the passive gait falls, ``lqr`` falls and ``default`` returns within
 ``DEMO_STRIDES`` strides (direction 6; so the choice is not on a knife's edge). At r = 0.2 the
 passive gait falls in its first stride (its back hip touches the ground), ``lqr`` in its
-second (front hip), and ``default`` returns in 10 strides. (The demo's earlier start, direction 1, showed passive vs learned only:
-the LQR alone returns from it as fast as ``default``, which picks the LQR's own plan there.)
+second (front hip), and ``default`` returns in 10 strides. (The demo's earlier start,
+direction 1, showed passive vs learned only: the LQR alone returns from it as fast as
+``default``, which picks the LQR's own plan there.)
 ``tests/test_demo.py`` checks the three outcomes.
 
 **The runs** are those of the margins (`bound_env.analysis.margins.ClosedLoop.run`, the

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Regenerate the results page (docs/MARGINS.md, --budget full) through a Dask cluster on this
 # machine, reached as a remote one is: `compare --scheduler tcp://127.0.0.1:PORT`.
-#   bash scripts/page_on_dask.sh [WORKERS] [OUT]     (default: 2 workers, out/margins)
+#   bash scripts/page_on_dask.sh [WORKERS] [OUT] [DOCS]
+#   (default: 2 workers, out/margins, docs: the repository's page)
 # Starts a scheduler and WORKERS single-threaded workers on 127.0.0.1, runs the page, stops
 # them (also on Ctrl-C or an error), and writes the wall time to OUT/page_timing.json.
 # A rerun resumes: finished columns and tasks are cached under OUT.
@@ -9,6 +10,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 WORKERS=${1:-2}
 OUT=${2:-out/margins}
+DOCS=${3:-docs}
 PORT=${PORT:-8799}
 BIN=.venv/bin
 mkdir -p "$OUT"
@@ -27,7 +29,7 @@ done
 sleep 3
 start=$(date +%s.%N)
 "$BIN/bound-env" compare --budget full --scheduler "tcp://127.0.0.1:$PORT" --workers "$WORKERS" \
-  --out "$OUT" --docs docs
+  --out "$OUT" --docs "$DOCS"
 end=$(date +%s.%N)
 python3 - "$OUT/page_timing.json" "$start" "$end" "$WORKERS" <<'EOF'
 import json, os, platform, sys, time
