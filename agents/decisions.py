@@ -101,7 +101,7 @@ def shares_rows(groups) -> list[tuple[str, str, dict]]:
     for g in groups:
         shares = g["runs"][0].get("decision_shares") or {}
         for where in ("curve", "terrain"):
-            if shares.get(where):
+            if shares.get(where) and shares[where].get("n"):  # no decisions: no row
                 rows.append((g["label"], where, shares[where]))
     return rows
 

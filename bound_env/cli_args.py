@@ -139,16 +139,18 @@ NAME_MAX = 64  # characters of a name that becomes a file or folder name
 def check_name(name, flag: str, spaces: bool = False) -> str:
     """A name that becomes a file or folder name (a run's ``--name``, a ``compare`` column's
     label), the one check of every such name: 1 to `NAME_MAX` letters, digits and ``. _ + -``
-    (with ``spaces``: single spaces inside, which `name_key` turns into ``_``), starting with
+    (with ``spaces``, a label: also single spaces inside, which `name_key` turns into ``_``,
+    and parentheses, e.g. ``tiny (2 seeds)``), starting with
     a letter or digit; so never a path (``/``, ``..``), a hidden file, or a character that
     breaks a Markdown table (``|``). ValueError (one line) naming ``flag``."""
     import re
 
     text = str(name)
-    inner = r"(?:[A-Za-z0-9._+-]| (?! ))*" if spaces else r"[A-Za-z0-9._+-]*"
+    inner = r"(?:[A-Za-z0-9._+()-]| (?! ))*" if spaces else r"[A-Za-z0-9._+-]*"
     pattern = r"[A-Za-z0-9]" + inner
     if len(text) > NAME_MAX or not re.fullmatch(pattern, text) or text.endswith(" "):
-        allowed = "letters, digits and . _ + -" + (" (single spaces inside)" if spaces else "")
+        extra = " (and, inside, single spaces and parentheses)" if spaces else ""
+        allowed = "letters, digits and . _ + -" + extra
         raise ValueError(
             f"{flag} {text!r}: a name must be 1 to {NAME_MAX} characters of {allowed}, "
             "starting with a letter or digit"

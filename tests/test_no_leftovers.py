@@ -199,7 +199,7 @@ def test_interrupted_margins_stops_its_workers_and_says_how_to_resume(tmp_path, 
         "--policy",
         "passive",
         "--budget",
-        "test",
+        "quick",  # (the test budget can finish before the signal on an idle machine)
         "--workers",
         "2",
         "--out",
