@@ -59,14 +59,9 @@ def time_decisions(ctrl, Z) -> dict | None:
         t0 = time.perf_counter()
         planner.coefficients(z)
         ts.append(time.perf_counter() - t0)
-    a = np.asarray(ts)
-    return {
-        "p50": float(np.median(a)),
-        "p99": float(np.quantile(a, 0.99)),
-        "mean": float(a.mean()),
-        "max": float(a.max()),
-        "n": int(a.size),
-    }
+    from bound_env.analysis.margins.curve import time_stats
+
+    return time_stats(ts)
 
 
 def fair_decision_times(groups, load_controller, seed: int) -> dict:

@@ -16,7 +16,6 @@ student (``choice.npz``) is loaded by `agents.distill`, a stride-level policy by
 
 from __future__ import annotations
 
-import pickle
 import sys
 from collections.abc import Callable
 from functools import partial
@@ -38,6 +37,7 @@ from .policy_files import (  # noqa: F401 - the policy-file API, importable from
     check_policy_files,
     file_sha256,
     find_policy_files,
+    load_vecnormalize,
     read_policy_section,
     read_run_config,
     resolve_policy_files,
@@ -220,13 +220,7 @@ def controller_wrapper(env_wrappers) -> tuple | None:
 def read_vecnormalize(ctrl: MLPController, vecnorm_path: Path | None) -> None:
     """Set ``ctrl``'s observation normalization from a ``vecnormalize.pkl`` (if any)."""
     if vecnorm_path is not None:
-        try:
-            with vecnorm_path.open("rb") as f:
-                vn = pickle.load(f)
-        except Exception as e:  # noqa: BLE001 - a truncated or foreign pickle
-            raise ValueError(
-                f"cannot read {vecnorm_path} as VecNormalize statistics: {type(e).__name__}: {e}"
-            ) from None
+        vn = load_vecnormalize(vecnorm_path)
         if getattr(vn, "norm_obs", False):
             rms = getattr(vn, "obs_rms", None)
             if rms is None or tuple(np.shape(rms.mean)) != ctrl.obs_shape:

@@ -289,3 +289,17 @@ def source_name(path) -> str:
     except (ValueError, OSError):
         return text
     return rel.as_posix()
+
+
+def load_vecnormalize(path: Path):
+    """The ``VecNormalize`` object pickled at ``path`` (ValueError naming the file when it is
+    truncated or foreign)."""
+    import pickle
+
+    try:
+        with Path(path).open("rb") as f:
+            return pickle.load(f)
+    except Exception as e:  # noqa: BLE001 - a truncated or foreign pickle
+        raise ValueError(
+            f"cannot read {path} as VecNormalize statistics: {type(e).__name__}: {e}"
+        ) from None

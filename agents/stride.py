@@ -37,7 +37,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import pickle
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,7 +51,12 @@ from bound_env.rescue_env import sample_direction  # noqa: F401  (moved there; r
 
 from .controllers import check_gait
 from .mlp import extract_actor, mlp_forward
-from .policy_files import check_policy_files, find_policy_files, read_policy_section
+from .policy_files import (
+    check_policy_files,
+    find_policy_files,
+    load_vecnormalize,
+    read_policy_section,
+)
 from .schema import (
     check_base,
     check_env_kwargs,
@@ -580,13 +584,7 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
         gate_scale=float(getattr(model.policy, "gate_scale", 0.0)),
     )
     if vecnorm_path is not None:
-        try:
-            with vecnorm_path.open("rb") as f:
-                vn = pickle.load(f)
-        except Exception as e:  # noqa: BLE001 - a truncated or foreign pickle
-            raise ValueError(
-                f"cannot read {vecnorm_path} as VecNormalize statistics: {type(e).__name__}: {e}"
-            ) from None
+        vn = load_vecnormalize(vecnorm_path)
         if getattr(vn, "norm_obs", False):
             if ctrl.anchored:
                 raise ValueError(f"{vecnorm_path}: an AnchoredMlpPolicy needs norm_obs=False")

@@ -66,12 +66,19 @@ def decision_summary(curve: list) -> dict | None:
     ts = [t for c in curve for t in c.get("decision_seconds", [])]
     if not any("decision_seconds" in c for c in curve) or not ts:
         return None
-    a = np.asarray(ts)
+    return {
+        **time_stats(ts),
+        "measured_on": "every decision of the random-direction curve's closed loops",
+    }
+
+
+def time_stats(ts) -> dict:
+    """p50, p99, mean, max and count of decision times [s]."""
+    a = np.asarray(ts, dtype=float)
     return {
         "p50": float(np.median(a)),
         "p99": float(np.quantile(a, 0.99)),
         "mean": float(a.mean()),
         "max": float(a.max()),
         "n": int(a.size),
-        "measured_on": "every decision of the random-direction curve's closed loops",
     }
