@@ -6,10 +6,12 @@ Residual policy learning: the env's action on every 10 ms control interval is
 
 with a_base the base controller's interval torque (by default the shipped `default`: the LQR
 inside its safe radius, a library profile chosen by a network outside it), r in [-1, 1] the
-learned residual and g the gate: 1 while the last apex state lies past the base's safe radius
-(max |z - z*| / s > safe, where the base itself hands over from its LQR to its network), else
-0. So inside the safe radius, and on the cycle, the controller *is* the base (zero torque on
-the cycle), and outside it the residual adds feedback *within* a stride, which a planner that
+learned residual and g the gate: 0 while the last apex state lies within the base's safe
+radius (max |z - z*| / s <= safe, where the base's own LQR acts alone), past it 1, or with
+``ramp`` > 0 min(1, (max |z - z*| / s - safe) / ramp) (`_Gate`: the shipped recipe ramps over
+0.25, so that a residual cannot hold the robot on a cycle just outside the safe radius). So
+inside the safe radius, and on the cycle, the controller *is* the base (zero torque on the
+cycle), and outside it the residual adds feedback *within* a stride, which a planner that
 decides once per apex cannot have. ``agents.stride.ZeroActionNet`` zeroes the action layer
 before the first update, so training starts exactly at the base controller.
 
@@ -21,9 +23,11 @@ gate g.
 **Training task** (`ResidualOver`, an rl-zoo3 ``env_wrapper``): episodes start at an apex
 z* + r |z*| xi past the safe radius (r ~ U(0, ``r_max``), the distillation's starts,
 `agents.distill.sample_starts`); a return inside the safe radius ends the episode with
-``alive_reward`` for every step left to ``max_steps`` (a rescue is worth surviving them all:
-the base's LQR keeps the robot from there), a fall ends it. ``residual_cost`` r^2 per step
-keeps the residual off where it does not help.
+``alive_reward`` for every step left to ``max_steps``, a fall ends it. With the env's own
+alive reward and costs at 0 (the shipped ``configs/ppo-residual.yaml``) that bonus is the only
+reward: surviving without returning earns as little as falling (a survival reward taught the
+residual to hold the robot on another stable cycle). ``residual_cost`` r^2 per step keeps the
+residual off where it does not help; `CriticWarmup` fits the critic before the actor moves.
 
 **Evaluation** (`ResidualController`, loaded by `agents.policy.load_controller` from a run or
 policy folder whose ``config.yaml`` wraps the env in `ResidualOver`): the same computation in
