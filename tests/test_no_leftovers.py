@@ -207,7 +207,17 @@ def test_interrupted_margins_stops_its_workers_and_says_how_to_resume(tmp_path, 
         "--no-progress",  # (a log gets progress lines; the interruption is one line)
     ]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    # a Ctrl-C as from a terminal: SIGINT handled by default in the child, even when this
+    # test runs in a background job (whose children start with SIGINT ignored, so Python
+    # would never raise KeyboardInterrupt)
+    p = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     t0, kids = time.time(), []
     while time.time() - t0 < 60 and p.poll() is None and len(kids) < 2:
         kids = _children(p.pid)
