@@ -254,6 +254,13 @@ def register(sub) -> None:
         "(default: the shipped policies and lqr, deadbeat, damping)",
     )
     p.add_argument(
+        "--keep-defaults",
+        action="store_true",
+        help="with --entry: keep every default column (passive, lqr, mpc, the shipped "
+        "policies, ...) and add the entries (an entry named like a default column replaces "
+        "it); without it, --entry keeps only passive",
+    )
+    p.add_argument(
         "--budget",
         choices=("test", "quick", "standard", "full"),
         default="quick",  # what a first-time user should run; docs/MARGINS.md is --budget full
@@ -531,14 +538,10 @@ def _checked(path, flag: str) -> Path:
 
 
 def cmd_compare(args) -> int:
-    from .compare import compare, default_entries, parse_entry
+    from .compare import chosen_entries, compare, parse_entry
 
-    entries = default_entries()
-    if args.entry:
-        parsed = [parse_entry(t) for t in args.entry]
-        entries = (
-            [] if any(e[1] == ["passive"] and e[2] == "default" for e in parsed) else [entries[0]]
-        ) + parsed
+    parsed = [parse_entry(t) for t in args.entry or ()]
+    entries = chosen_entries(parsed, keep_defaults=args.keep_defaults)
     path = compare(
         entries,
         budget=args.budget,

@@ -40,6 +40,7 @@ from .margins import compute_margins
 from .page import BASIN_MAPS as BASIN_MAPS
 from .page import BASIN_SLICES as BASIN_SLICES
 from .page import COLUMN_STYLES, basin_maps, render_markdown
+from .page_inputs import check_margins_result, read_decision_times
 from .page_tables import MEASURES as MEASURES
 from .policy import SHIPPED_DIR
 from .provenance import CLASSICAL_SELECTION as CLASSICAL_SELECTION
@@ -109,6 +110,26 @@ def parse_entry(text: str) -> tuple[str, list[str], str]:
     if not label.strip() or not policies:
         raise ValueError(f"--entry {text!r} needs a label and at least one policy")
     return label.strip(), policies, (gait.strip() or "default")
+
+
+def chosen_entries(parsed, keep_defaults: bool = False) -> list[tuple[str, list[str], str]]:
+    """The columns of ``compare --entry ...``: the default passive column (unless an entry is
+    the default-gait passive) and the ``parsed`` entries; with ``keep_defaults`` every default
+    column (`default_entries`) stays, and an entry of the same label (or folder) replaces the
+    default column of that name. No entries: the default columns."""
+    from bound_env.cli_args import name_key
+
+    defaults = default_entries()
+    if not parsed:
+        return defaults
+    mine = {name_key(e[0]) for e in parsed}
+    if keep_defaults:
+        kept = [e for e in defaults if name_key(e[0]) not in mine]
+    elif any(e[1] == ["passive"] and e[2] == "default" for e in parsed):
+        kept = []
+    else:
+        kept = [defaults[0]]
+    return kept + list(parsed)
 
 
 def check_entries(entries) -> None:
@@ -239,7 +260,7 @@ def compare(
 
     old = path.with_name("paired.json")
     if render_only and old.is_file():  # measured by the run that computed the columns
-        times = json.loads(old.read_text()).get("decision_times")
+        times = read_decision_times(old)  # checked: one line naming the file and the key
     else:
         times = fair_decision_times(groups, load_controller, seed)  # the workers are done
     page = render_markdown(groups, plots, curves, budget, note, pairs, basin_maps(docs), head)
@@ -253,7 +274,9 @@ def compare(
 
 def load_result(path: Path, budget: str, seed: int) -> dict:
     """A column's ``margins.json`` as `compute_margins` wrote it, for ``render_only``: it must
-    exist and be of ``budget`` and ``seed`` (else a ValueError naming the file)."""
+    exist, be of ``budget`` and ``seed`` and hold every key the page reads
+    (`agents.page_inputs.check_margins_result`), else a ValueError naming the file (and the
+    key)."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no margins.json to render (run compare without --render-only)")
@@ -268,7 +291,7 @@ def load_result(path: Path, budget: str, seed: int) -> dict:
             f"{path}: budget {r.get('budget')!r}, seed {r.get('seed')!r}; "
             f"the page asks for budget {budget!r}, seed {seed}"
         )
-    return r
+    return check_margins_result(r, path)  # every key the page reads, or one line naming it
 
 
 def _reference(groups, name: str, gait: str):

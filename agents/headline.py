@@ -13,7 +13,6 @@ against the JSON.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -22,6 +21,7 @@ from bound_env.analysis.margins.stats import t_interval
 from bound_env.cache import atomic_write
 
 from .formatting import ROOT, num3, rel, value
+from .page_inputs import check_fields, read_json_object
 
 # The headline table (the page's first table and the README's): (role, column label, what it
 # is). The step-level PPO row is the shipped step-level recipe's column (`step-ppo`: residual
@@ -145,14 +145,30 @@ README = ROOT / "README.md"
 HEADLINE_JSON = ROOT / "docs" / HEADLINE_FILE
 
 
+# What the README's block and the table read of headline.json (`agents.page_inputs`)
+HEADLINE_FIELDS = [
+    (("budget",), "str"),
+    (("seed",), "int"),
+    (("rows",), "list"),
+    (("rows", "*"), "map"),
+    *[(("rows", "*", k), "str") for k in ("role", "label", "what")],
+    *[(("rows", "*", m), "map") for m in ("r50", "mfpt_sigma_100_deg")],
+    *[
+        (("rows", "*", m, k), "num|null")
+        for m in ("r50", "mfpt_sigma_100_deg")
+        for k in ("value", "low", "high")
+    ],
+    *[(("rows", "*", m, "interval"), "str") for m in ("r50", "mfpt_sigma_100_deg")],
+]
+
+
 def load_headline(path: Path = HEADLINE_JSON) -> dict:
-    """docs/headline.json, checked for its keys (a ValueError naming the file otherwise)."""
-    try:
-        head = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise ValueError(f"{path}: cannot read the headline ({e})") from None
-    if not isinstance(head, dict) or not isinstance(head.get("rows"), list):
+    """docs/headline.json, checked for every key the table reads (a ValueError of one line
+    naming the file and the key otherwise)."""
+    head = read_json_object(path)
+    if not isinstance(head.get("rows"), list):
         raise ValueError(f"{path}: no 'rows' list (write it with bound-env compare --docs)")
+    check_fields(head, HEADLINE_FIELDS, path)
     return head
 
 
