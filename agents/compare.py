@@ -52,19 +52,22 @@ from .provenance import trained as _trained
 POLICIES_DIR = SHIPPED_DIR
 DEFAULT_DOCS = ROOT / "docs"
 DEFAULT_OUT = Path("out") / "margins"
-CLASSICAL = ("lqr", "deadbeat", "damping", "mpc")  # controller specs in configs/controllers/
+# The page's classical columns (configs/controllers/; `damping`, the trivial baseline, is a
+# name still: add it with --entry damping)
+CLASSICAL = ("lqr", "deadbeat", "mpc")
 
 # Learned columns with one folder per training seed, shipped in agents/policies/<group>/s<k>:
-# the page's (SEED_GROUPS), and the ablations a user can add with --entry (EXTRA_GROUPS)
+# the page's (SEED_GROUPS), and the archived ones a user can add with --entry (EXTRA_GROUPS,
+# in agents/policies/archive/: agents.policy_table.ARCHIVED says why each left the page)
 SEED_GROUPS = (
     ("fine-tuned", "finetuned"),  # agents/finetune.py: PPO from the distilled (`default`: s0)
     ("step-ppo", "step-ppo"),  # agents/residual.py: step-level residual PPO over `default`
-    ("warm-started", "warm-started"),  # step-level PPO cloned from `default` first
-    ("ppo-v1", "ppo-v1-final"),  # ppo-v1's recipe (step-level PPO), final models
+    ("ppo-v1", "ppo-v1-final"),  # plain PPO: ppo-v1's recipe (step-level PPO), final models
 )
 EXTRA_GROUPS = (
-    ("distilled", "distilled"),  # agents/distill.py: DAgger from mpc, before fine-tuning
-    ("stride-residual", "stride-residual"),  # agents/stride.py: PPO residual on the LQR
+    ("distilled", "archive/distilled"),  # agents/distill.py: DAgger from mpc, before fine-tuning
+    ("stride-residual", "archive/stride-residual"),  # agents/stride.py: PPO residual on the LQR
+    ("warm-started", "archive/warm-started"),  # step-level PPO cloned from `default` first
 )
 
 
@@ -76,8 +79,8 @@ def seed_group(group: str) -> list[str]:
 def default_entries() -> list[tuple[str, list[str], str]]:
     """(label, policies, gait) for the passive gait and every shipped policy."""
     entries = [("passive", ["passive"], "default")]
-    # learned columns, one policy per seed (the shipped `default` is fine-tuned/s0; the
-    # selected checkpoint `agents/policies/ppo-v1` is left out: its final-model seeds are in)
+    # learned columns, one policy per seed (the name `default` is fine-tuned/s0; the archived
+    # checkpoint `ppo-v1` is left out: its recipe's final-model seeds are in)
     for label, group in SEED_GROUPS:
         if seed_group(group):
             entries.append((label, seed_group(group), "default"))

@@ -44,7 +44,6 @@ from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library
 from bound_env.rescue_env import sample_starts  # noqa: F401  (moved there; re-exported)
 from bound_env.stride_map import EVAL_RTOL, StrideMap
 
-from .learn_cli import register_distill as register  # noqa: F401 - as before
 from .learn_config import DistillConfig  # noqa: F401 - importable from here as before
 from .mlp import mlp_forward
 from .policy_files import FINGERPRINT_FILE, file_sha256, source_name

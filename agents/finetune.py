@@ -36,7 +36,6 @@ from bound_env.cache import atomic_write
 from bound_env.wrappers import LibraryActions
 
 from .distill import ChoicePolicyController, load_choice_policy, save_policy
-from .learn_cli import register_finetune as register  # noqa: F401 - as before
 from .learn_config import FinetuneConfig
 from .policy_files import source_name
 

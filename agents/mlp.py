@@ -4,7 +4,7 @@ reading of an SB3 actor into NumPy layers.
 The layers are ``[(W, b), ...]``: hidden layers ``act(W h + b)``, then a linear output layer
 ``W h + b`` (float64). `mlp_forward` is the one forward pass of `agents.controllers.MLPController`
 (a PPO actor), `agents.distill.ChoicePolicyController` (the student's logits) and
-`agents.stride.StridePolicyController` (the stride residual); no torch is needed to run it.
+`agents.stride_policy.StridePolicyController` (the stride residual); no torch is needed to run it.
 """
 
 from __future__ import annotations

@@ -11,23 +11,29 @@ arguments it was trained with: ``max_torque``, ``dt``, ...; `agents.policy_files
 ``model.predict(obs, deterministic=True)`` returns after ``VecNormalize.normalize_obs``, but
 evaluated with NumPy in float64 (~10 us instead of ~150 us per call), picklable, and free of
 torch in the worker processes of the margins (`bound_env.analysis.margins`). A distilled
-student (``choice.npz``) is loaded by `agents.distill`, a stride-level policy by `agents.stride`.
+student (``choice.npz``) is loaded by `agents.distill`, a stride-level policy by
+`agents.stride_policy` (both through `agents.names.load_apex_controller`).
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
-from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from bound_env import STRIDE_ENV_IDS
-from bound_env.resources import controllers_dir
-
 from .controllers import MLPController, ZeroController, check_gait, same_gait  # noqa: F401 - re-exported
 from .mlp import extract_actor
+from .names import (  # noqa: F401 - the names API, importable from here as before
+    CONTROLLERS,
+    SHIPPED_DIR,
+    classical_controller,
+    load_apex_controller,
+    policy_names,
+    register_controller,
+    resolve_policy,
+    shipped_policies,
+)
 from .policy_files import (  # noqa: F401 - the policy-file API, importable from here as before
     DYNAMICS_KWARGS,
     FINGERPRINT_FILE,
@@ -45,94 +51,7 @@ from .policy_files import (  # noqa: F401 - the policy-file API, importable from
     source_name,
     write_fingerprint,
 )
-from .schema import check_env_kwargs, check_layers, check_obs_stats, policy_kind
-
-# The shipped policies, package data of `agents` (``agents/policies/<name>/``), read with
-# importlib.resources so that an installed wheel finds them too.
-SHIPPED_DIR = SHIPPED  # (agents.policy_files, with `source_name`)
-
-# Built-in controllers by name: name -> (factory(gait) -> controller, one-line description).
-# ``--policy NAME`` in ``margins``, ``rollout`` and ``compare`` looks names up here first, then
-# among the shipped policies, and only then reads NAME as a path. Modules that add classical
-# controllers call `register_controller`.
-CONTROLLERS: dict[str, tuple[Callable, str]] = {}
-
-
-def register_controller(name: str, factory: Callable, description: str) -> None:
-    """Make ``--policy name`` build ``factory(gait=...)`` (gait: name or path, or None)."""
-    CONTROLLERS[name] = (factory, description)
-
-
-register_controller("passive", lambda gait=None: ZeroController(), "zero spine torque")
-
-
-def _classical(name: str, gait=None):
-    """A classical controller of `bound_env.control` (a name or a spec .yaml), designed for
-    ``gait`` (default: the spec's)."""
-    from bound_env.control import load_controller as load_classical
-
-    return load_classical(name, gait=None if gait is None else str(gait))
-
-
-# the classical stride-level controllers: every spec in configs/controllers/ (the wheel's copy
-# when installed), by its file name
-_CLASSICAL_WHAT = {
-    "lqr": "stride-to-stride LQR on the linearized stride map",
-    "deadbeat": "one-stride deadbeat on the linearized stride map",
-    "damping": "extra spine damping tau = -c theta2dot",
-}
-for _name in list(_CLASSICAL_WHAT) + sorted(
-    p.stem for p in controllers_dir().glob("*.yaml") if p.stem not in _CLASSICAL_WHAT
-):
-    register_controller(
-        _name, partial(_classical, _name), _CLASSICAL_WHAT.get(_name, f"controller spec {_name}")
-    )
-
-
-def shipped_policies() -> dict[str, Path]:
-    """{name: folder} of the policies shipped in ``agents/policies/``: ``<name>/`` (e.g.
-    ``default``) and one level of groups, ``<group>/<name>/`` named ``group/name`` (e.g.
-    ``stride-residual/s0``, one folder per training seed)."""
-    if not SHIPPED_DIR.is_dir():
-        return {}
-    out = {}
-
-    def is_policy(folder: Path) -> bool:  # a PPO model, or a distilled student (agents.distill)
-        return folder.is_dir() and (
-            (folder / "model.zip").exists() or (folder / "choice.npz").exists()
-        )
-
-    for p in sorted(SHIPPED_DIR.iterdir()):
-        if is_policy(p):
-            out[p.name] = p
-        elif p.is_dir():
-            for q in sorted(p.iterdir()):
-                if is_policy(q):
-                    out[f"{p.name}/{q.name}"] = q
-    return out
-
-
-def policy_names() -> list[str]:
-    """Every name ``--policy`` accepts besides a path."""
-    return list(CONTROLLERS) + [n for n in shipped_policies() if n not in CONTROLLERS]
-
-
-def resolve_policy(spec: str | Path) -> str | Path:
-    """A built-in controller's name (returned as is), a shipped policy's folder, or a path."""
-    text = str(spec)
-    if text in CONTROLLERS:
-        return text
-    shipped = shipped_policies()
-    if text in shipped:
-        return shipped[text]
-    p = Path(spec)
-    if not p.exists():
-        raise FileNotFoundError(
-            f"policy {text!r} does not exist (give a name: {', '.join(policy_names())}; or a "
-            "run or policy directory with model.zip, or a model .zip)"
-        )
-    return p
-
+from .schema import check_env_kwargs, check_layers, check_obs_stats
 
 _INFERENCE_ONLY = {
     "learning_rate": 0.0,
@@ -150,21 +69,11 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     policy for PassiveBound's observation space, or would be evaluated wrongly
     (`check_policy_files`).
     """
-    if Path(str(path)).suffix in (".yaml", ".yml"):  # a classical controller's spec file
-        return _classical(str(path), gait)
-    path = resolve_policy(path)
-    if isinstance(path, str):
-        return CONTROLLERS[path][0](gait=gait)
-    if Path(path).is_dir() and policy_kind(path) == "choice":  # a PPO + choice.npz: refused
-        from .distill import load_choice_policy  # a distilled student (agents/distill.py)
-
-        return load_choice_policy(path, gait=gait, force=force)
+    ctrl = load_apex_controller(path, gait, force)  # names, specs, choice and stride policies
+    if ctrl is not None:
+        return ctrl
+    path = resolve_policy(path)  # a step-level PPO policy's folder or zip
     files = find_policy_files(path)
-    policy_kind(files.model.parent)  # a choice.npz beside the model: ambiguous, refused
-    if files.config is not None and read_policy_section(files)[1] in STRIDE_ENV_IDS:
-        from .stride import load_stride_policy  # a stride-level policy (agents/stride.py)
-
-        return load_stride_policy(path, gait=gait, force=force)
     model_path, vecnorm_path = files.model, files.vecnormalize
     from stable_baselines3 import PPO
 

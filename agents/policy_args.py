@@ -7,16 +7,16 @@ from pathlib import Path
 
 from bound_env.resources import controllers_dir
 
+from .policy_table import names_text
+
 # the classical controllers by name: the specs in configs/controllers/ (a cheap glob: the help
 # is built on every start of bound-env)
 _CONTROLLER_NAMES = ", ".join(sorted(p.stem for p in controllers_dir().glob("*.yaml")))
 POLICY_HELP = (
-    "'passive', a shipped policy ('default': the learned controller chosen on validation, "
-    "'ppo-v1', 'literal-cycle', 'finetuned/s0' .. 's2', 'distilled/s0' .. 's2', "
-    "'ppo-v1-final/s0' .. 's2', 'stride-residual/s0' .. 's2'), a "
-    "classical controller (" + _CONTROLLER_NAMES + ": "
+    "'passive', a shipped policy (" + names_text("'") + "; 'default' is the learned "
+    "controller chosen on validation), a classical controller (" + _CONTROLLER_NAMES + ": "
     "bound_env.control, or a controller spec .yaml), or a path: a run/policy folder, a "
-    "model .zip, an rl-zoo3 run folder"
+    "model .zip, an rl-zoo3 run folder (archived policies: agents/policies/archive/NAME)"
 )
 
 

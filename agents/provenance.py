@@ -40,9 +40,10 @@ CLASSICAL_SELECTION = {
 LEARNED_SELECTION = {
     "finetuned": "recipe **chosen on the validation seed 777** (96 random directions, r = "
     "0.15-0.35), never on this page's test set: each seed is PPO (1.5e6 strides) from the "
-    "student distilled by DAgger from `mpc` with the same seed (`agents/policies/distilled/sS`);"
-    " fine-tuning was chosen over the distilled students and 1.5e6 strides over 3e5 there; "
-    "`agents/policies/default` is seed 0 (no choice among seeds)",
+    "student distilled by DAgger from `mpc` with the same seed "
+    "(`agents/policies/archive/distilled/sS`); fine-tuning was chosen over the distilled "
+    "students and 1.5e6 strides over 3e5 there; "
+    "the name `default` is seed 0 (no choice among seeds)",
     "step-ppo": "recipe (configs/ppo-residual.yaml) **chosen on the validation seed 777** "
     "(agents/residual.py `validation_curve`: 64 random directions, r = 0.2-0.4), never on this "
     "page's test set: step-level PPO on PassiveBound-v0 (`bound-env train --config "
@@ -53,7 +54,7 @@ LEARNED_SELECTION = {
     "(`train --init-from default`, agents/warmstart.py); final models, nothing chosen on any "
     "yardstick",
     "ppo-v1-final": "ppo-v1's recipe (configs/ppo.yaml) unchanged, its final models (the "
-    "shipped `agents/policies/ppo-v1` is a checkpoint selected on axis basins, left out here)",
+    "archived `ppo-v1` is a checkpoint selected on axis basins, left out here)",
 }
 
 

@@ -43,8 +43,7 @@ from dataclasses import dataclass, field
 import gymnasium as gym
 import numpy as np
 
-from bound_env.control import notify_apex
-from bound_env.control.controllers import OBS_TIME, OBS_Z
+from bound_env.stride_protocol import OBS_TIME, OBS_Z, notify_apex
 
 from .wrappers import ObservationFilter
 
@@ -86,9 +85,13 @@ class _Gate:
 
 
 def load_base(base: str):
-    from .policy import load_controller
+    """The base controller: a controller that decides at the apex (`agents.names`: a classical
+    controller, a choice policy or a stride-level policy), never a step-level PPO policy."""
+    from .names import load_apex_controller
 
-    ctrl = load_controller(base)
+    ctrl = load_apex_controller(base)
+    if ctrl is None:
+        raise ValueError(f"base {base!r}: not a stride controller (a step-level PPO policy)")
     if not hasattr(ctrl, "on_apex"):
         raise ValueError(f"base {base!r}: not a stride controller (no on_apex)")
     return ctrl

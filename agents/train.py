@@ -306,9 +306,9 @@ def train(
     venv = make_vec(
         env_id, spec, spec.n_envs, seed, vec_env, run_dir / "monitor", append=ckpt is not None
     )
-    from .stride import write_base
+    from .stride_policy import write_base
 
-    write_base(run_dir, venv)  # a residual stride policy's base controller (agents/stride.py)
+    write_base(run_dir, venv)  # a residual stride policy's base controller
     eval_env = make_vec(env_id, spec, 1, seed + 10_000, "dummy")
     callbacks, curriculum_end = [], math.nan
     for cls, kwargs in spec.callbacks:

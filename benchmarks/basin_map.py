@@ -86,8 +86,8 @@ def main() -> None:
     ap.add_argument("--policy-grid", type=int, default=64, help="policy grid (0: skip)")
     ap.add_argument(
         "--policy",
-        default="ppo-v1",
-        help="shipped policy name or path (default: ppo-v1, PPO, docs/analysis.md's table)",
+        default="agents/policies/archive/ppo-v1",
+        help="policy name or path (default: the archived ppo-v1, docs/analysis.md's table)",
     )
     ap.add_argument(
         "--also",

@@ -30,7 +30,7 @@ from bound_env.params import load_gait
 SIZES = (0.02, 0.05)  # relative perturbation sizes (the passive basin_min is ~0.02)
 N_DIRS = 12
 STRIDES = 10  # strides over which the recovery effort is averaged
-DEFAULT_POLICIES = ("passive", "agents/policies/ppo-v1", "lqr", "deadbeat", "damping")
+DEFAULT_POLICIES = ("passive", "agents/policies/archive/ppo-v1", "lqr", "deadbeat", "damping")
 
 
 def recovery(loop: ClosedLoop, z0, z_cl) -> tuple[float, bool]:

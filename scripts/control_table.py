@@ -29,7 +29,8 @@ from bound_env.control import ControllerSpec, load_controller
 XD = [1.0, 1.0, 1.0, 10.0, 1.0, 1.0]  # Q weighting forward speed 10x
 SETTINGS = [  # (label, spec keyword arguments)
     ("passive", None),
-    ("learned (agents/policies/ppo-v1)", "agents/policies/ppo-v1"),  # the PPO policy
+    # the PPO policy (archived since; its label as in the tables made before)
+    ("learned (agents/policies/ppo-v1)", "agents/policies/archive/ppo-v1"),
     ("lqr windows K=4 R=1", dict(basis="windows", K=4, R=1.0)),
     ("lqr windows K=6 R=0.1", dict(basis="windows", K=6, R=0.1)),
     ("lqr windows K=8 R=1", dict(basis="windows", K=8, R=1.0)),

@@ -23,7 +23,7 @@ from bound_env.analysis.numerics import (
 )
 
 # the shipped PPO policy (the `default` controller is a distilled choice policy: test_distill)
-SHIPPED = Path(__file__).resolve().parent.parent / "agents" / "policies" / "ppo-v1"
+SHIPPED = Path(__file__).resolve().parent.parent / "agents" / "policies" / "archive" / "ppo-v1"
 MARGIN_KEYS = (
     "basin",
     "basin_min",

@@ -230,7 +230,7 @@ def test_unknown_argument_names_the_sub_command_and_help_gives_defaults(cli, cap
         assert f"(default: {default})" in text.split("--budget {test,quick,standard,full}")[-1]
     assert main(["basin-map", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split()).replace("- ", "-")  # argparse's wrapping
-    assert all(name in text for name in ("lqr", "deadbeat", "damping", "stride-residual/s0"))
+    assert all(name in text for name in ("lqr", "deadbeat", "damping", "step-ppo/s0"))
     assert main(["sweep", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     assert "gait's own value" in text and "spacing of the values" in text

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agents.policy_table import ARCHIVE_DIR
 from bound_env.cli import main
 
 BAD_GAITS = {
@@ -46,7 +47,7 @@ def files(tmp_path):
     from agents.policy import shipped_policies
 
     cut = tmp_path / "cut-policy"
-    shutil.copytree(shipped_policies()["ppo-v1"], cut)
+    shutil.copytree(ARCHIVE_DIR / "ppo-v1", cut)
     lines = (cut / "config.yaml").read_text().splitlines(keepends=True)
     end = next(i for i, line in enumerate(lines) if line.lstrip().startswith("env_kwargs"))
     (cut / "config.yaml").write_text("".join(lines[:end]))
@@ -72,7 +73,7 @@ def files(tmp_path):
     out["dt_choice"] = str(slow)
     # a PPO folder with a choice.npz dropped in
     both = tmp_path / "both"
-    shutil.copytree(shipped_policies()["ppo-v1"], both)
+    shutil.copytree(ARCHIVE_DIR / "ppo-v1", both)
     shutil.copy(shipped_policies()["default"] / "choice.npz", both)
     out["both"] = str(both)
     return out
@@ -292,7 +293,7 @@ def _cases(f):
         (["fixed-point", "--out", f["file"]], "not a folder"),
         # messages
         (["margins", "--set", "kc=1"], "bound-env margins: error: unrecognized arguments"),
-        (["rollout", "--policy", "nope"], "stride-residual/s0"),  # the names it knows
+        (["rollout", "--policy", "nope"], "step-ppo/s0"),  # the names it knows
         # issue 26 §3: refused before any work, nothing left behind
         (["distill", "--expert", "lqr", "--out", f["dir"] + "/d"], "--expert"),
         (["distill", "--out", f["dir"] + "/d", "--export", "/sys/x/p"], "--export"),
@@ -512,9 +513,8 @@ def _fingerprint_folder(d):
 
 
 def _add_model_zip(d):
-    from agents.policy import shipped_policies
 
-    shutil.copy(shipped_policies()["ppo-v1"] / "model.zip", d / "model.zip")
+    shutil.copy(ARCHIVE_DIR / "ppo-v1" / "model.zip", d / "model.zip")
 
 
 CHOICE_CASES = {  # name: (change to a copy of the shipped default, words the error must hold)
@@ -570,7 +570,7 @@ def test_a_ppo_folder_with_a_choice_npz_dropped_in_is_refused(tmp_path):
     from agents.policy import load_controller, shipped_policies
 
     d = tmp_path / "ppo"
-    shutil.copytree(shipped_policies()["ppo-v1"], d)
+    shutil.copytree(ARCHIVE_DIR / "ppo-v1", d)
     shutil.copy(shipped_policies()["default"] / "choice.npz", d)
     with pytest.raises(ValueError, match="ambiguous"):
         load_controller(d)

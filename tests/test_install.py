@@ -107,17 +107,17 @@ def test_wheel_and_sdist_hold_data_and_license(installed):
         "bound_env/configs/ppo.yaml",
         "bound_env/configs/gaits/default.yaml",
         "bound_env/configs/gaits/literal-cycle.yaml",
-        "agents/policies/ppo-v1/model.zip",
-        "agents/policies/ppo-v1/vecnormalize.pkl",
-        "agents/policies/default/choice.npz",
-        "agents/policies/default/config.json",
-        "agents/policies/default/fingerprint.json",
+        "agents/policies/ppo-v1-final/s0/model.zip",
+        "agents/policies/ppo-v1-final/s0/vecnormalize.pkl",
+        "agents/policies/finetuned/s0/choice.npz",
+        "agents/policies/finetuned/s0/config.json",
+        "agents/policies/finetuned/s0/fingerprint.json",
         "agents/policies/literal-cycle/config.yaml",
         "bound_env/configs/ppo-stride.yaml",
-        "agents/policies/stride-residual/s0/model.zip",
-        "agents/policies/stride-residual/s0/base.json",
+        "agents/policies/step-ppo/s0/model.zip",
     ):
         assert want in names, want
+    assert not [n for n in names if "policies/archive/" in n]  # not shipped (policy_table)
     # every controller spec, gait and config of the checkout is in the wheel
     for f in (ROOT / "configs").rglob("*.yaml"):
         assert f"bound_env/configs/{f.relative_to(ROOT / 'configs').as_posix()}" in names, f
@@ -133,8 +133,8 @@ def test_wheel_and_sdist_hold_data_and_license(installed):
         "LICENSE",
         "configs/ppo.yaml",
         "configs/gaits/paper.yaml",
-        "agents/policies/ppo-v1/model.zip",
-        "agents/policies/default/choice.npz",
+        "agents/policies/ppo-v1-final/s0/model.zip",
+        "agents/policies/finetuned/s0/choice.npz",
         "setup.py",
         "pyproject.toml",
     ):
@@ -210,9 +210,9 @@ def test_installed_package_runs_outside_the_checkout(installed):
     )
     want = {p.stem for p in (ROOT / "configs" / "controllers").glob("*.yaml")}
     assert set(names[1]) == want and want <= set(names[0])
-    assert {"passive", "stride-residual/s0", "stride-residual/s2"} <= set(names[0])
+    assert {"passive", "default", "step-ppo/s0", "step-ppo/s2"} <= set(names[0])
     assert Path(names[2]).resolve().is_relative_to(site.resolve())
-    for name in sorted(want) + ["stride-residual/s1"]:
+    for name in sorted(want) + ["step-ppo/s1"]:
         r = json.loads(
             _run(
                 [installed["exe"], "rollout", "--policy", name, "--strides", "2", "--json"],

@@ -1,12 +1,17 @@
 """Layering of the packages, read from the source with `ast`: imports point down only.
 
-Every import counts, also those inside functions (deferred imports) and string imports through
-``importlib.import_module`` / ``__import__``. A file's ``if __name__ == "__main__":`` block runs
-only when the file is executed as a script (``python -m``), as the module ``__main__``, never
-when the module is imported: its imports belong to a node of their own, ``<module> as
-__main__``, that imports the module (nothing imports a script). Neither `bound_env` nor
-`agents` has an import cycle, `bound_env` never imports `agents`, and no module imports
-another one's private (underscore) name. One check runs a command instead of reading
+Every import counts, also those inside functions (deferred imports), those of a file's
+``if __name__ == "__main__":`` block (they count as the module's own: a script block that
+imports from above would hide a circle), and imports by name at run time: through
+``importlib.import_module`` / ``__import__`` with a literal, with an f-string whose literal
+prefix and one of the module's string constants name a module (``f"agents.{module}"``), and
+through `agents.config.get_class_by_name` / `agents.config.preprocess`, which import the
+classes the run configs name (``env_wrapper``, ``callback``, ``policy`` in configs/ and in the
+shipped policies' config.yaml): the module that calls them imports those modules. Neither
+`bound_env` nor `agents` has an import cycle, `bound_env` never imports `agents`,
+`bound_env.analysis` never imports `bound_env.control` (the stride protocol they share is
+`bound_env.stride_protocol`, below both), and no module imports another one's private
+(underscore) name. One check runs a command instead of reading
 imports: the classical margins path (``bound-env margins --policy lqr``) never loads torch.
 """
 
@@ -19,7 +24,16 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("bound_env", "agents")
-SCRIPT = " as __main__"  # the node of a module's ``if __name__ == "__main__":`` block
+# Where the run configs live whose class paths `agents.config` imports by name
+CONFIG_GLOBS = ("configs/**/*.yaml", "agents/policies/**/config.yaml")
+# Functions of agents.config that import classes by name: the caller imports those modules
+# (env_wrapper entries only for get_class_by_name's callers outside agents.config, which
+# resolve a run's wrappers; every kind for preprocess, which builds a whole training run).
+# agents.config itself is the resolver, not a user: its own calls count for its callers.
+BY_NAME = {
+    "get_class_by_name": ("env_wrapper",),
+    "preprocess": ("env_wrapper", "callback", "policy"),
+}
 
 
 def _modules(*packages: str) -> dict[str, tuple[Path, bool]]:
@@ -62,15 +76,15 @@ def _script_blocks(tree: ast.Module) -> list[ast.If]:
     ]
 
 
-def _imported_names(mod: str, path: Path, is_pkg: bool, script: bool = False) -> set[str]:
-    """Every dotted name ``mod`` imports, absolute, including ``from X import submodule``;
-    with ``script``, those of its ``if __name__ == "__main__":`` block instead."""
+def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
+    """Every dotted name ``mod`` imports, absolute, including ``from X import submodule``,
+    its script block's and its imports by name (module docstring)."""
     tree = _tree(path)
-    in_script = {id(n) for block in _script_blocks(tree) for n in ast.walk(block)}
     names = set()
+    constants = {
+        n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, str)
+    }
     for node in ast.walk(tree):
-        if (id(node) in in_script) != script:
-            continue
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -84,7 +98,45 @@ def _imported_names(mod: str, path: Path, is_pkg: bool, script: bool = False) ->
                 arg = node.args[0]
                 if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
                     names.add(arg.value)
+                elif isinstance(arg, ast.JoinedStr) and arg.values:
+                    first = arg.values[0]
+                    if isinstance(first, ast.Constant) and isinstance(first.value, str):
+                        names.update(first.value + c for c in constants)  # f"agents.{x}"
+            if fname in BY_NAME and mod != "agents.config":
+                names.update(_config_modules(BY_NAME[fname]))
     return names
+
+
+def _config_entries(value, key=None):
+    """(config key, class path) of every ``env_wrapper``, ``callback`` and ``policy`` entry in
+    a loaded YAML value."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if k in ("env_wrapper", "callback"):
+                for entry in v if isinstance(v, list) else [v]:
+                    for name in entry if isinstance(entry, dict) else [entry]:
+                        if isinstance(name, str):
+                            yield k, name
+            elif k == "policy" and isinstance(v, str) and "." in v:
+                yield k, v
+            else:
+                yield from _config_entries(v, k)
+    elif isinstance(value, list):
+        for v in value:
+            yield from _config_entries(v, key)
+
+
+def _config_modules(keys) -> set[str]:
+    """The modules of the classes the run configs name under ``keys``."""
+    import yaml
+
+    out = set()
+    for pattern in CONFIG_GLOBS:
+        for f in sorted(ROOT.glob(pattern)):
+            for k, name in _config_entries(yaml.safe_load(f.read_text())):
+                if k in keys:
+                    out.add(name.rsplit(".", 1)[0])
+    return out
 
 
 def _private_imports(mod: str, tree: ast.AST, is_pkg: bool, mods) -> list[str]:
@@ -112,10 +164,6 @@ def _all_private_imports() -> dict[str, list[str]]:
 def _graph(*packages: str):
     mods = _modules(*packages)
     imports = {m: _imported_names(m, *mods[m]) for m in mods}
-    for m in mods:  # a script runs its module's code, then its own block
-        block = _imported_names(m, *mods[m], script=True)
-        if block:
-            imports[m + SCRIPT] = block | {m}
     edges = {m: sorted(n for n in names if n in mods and n != m) for m, names in imports.items()}
     return mods, imports, edges
 
@@ -159,13 +207,20 @@ def test_the_walker_sees_deferred_and_string_imports():
     assert "bound_env.params" in edges["bound_env.dynamics"]
     assert _cycles({"a": ["b"], "b": ["c"], "c": ["a"], "d": ["a"]}) == [["a", "b", "c"]]
     assert _cycles({"a": ["b"], "b": []}) == []
-    # agents: deferred imports, and a script block on a node of its own
+    # agents: deferred imports, script blocks and imports by name
     _, _, edges = _graph("agents")
-    assert "agents.stride" in edges["agents.policy"]  # inside load_controller
-    assert "agents.config" in edges["agents.stride"]  # inside wrapper_kwargs
-    assert "agents.policy" in edges["agents.stride" + SCRIPT]  # python -m agents.stride
-    assert "agents.policy" not in edges["agents.stride"]
-    assert "agents.stride" in edges["agents.stride" + SCRIPT]  # it runs the module's code too
+    assert "agents.stride_policy" in edges["agents.names"]  # inside load_apex_controller
+    assert "agents.config" in edges["agents.stride_policy"]  # inside wrapper_kwargs
+    assert "agents.policy" in edges["agents.stride_validation"]
+    assert {"agents.distill", "agents.finetune"} <= set(edges["agents.learn_cli"])  # f-string
+    # the controller wrapper agents.residual.ResidualOver, named in configs/ppo-residual.yaml
+    assert "agents.residual" in edges["agents.policy"]  # get_class_by_name in controller_wrapper
+    assert {"agents.stride", "agents.train", "agents.residual"} <= set(
+        edges["agents.train"] + ["agents.train"]
+    )
+    assert "agents.residual" not in edges["agents.config"]  # the resolver: counted for callers
+    tree = ast.parse("if __name__ == '__main__':\n    import agents.policy\n")
+    assert _script_blocks(tree)  # and such a block's imports are the module's own
 
 
 def test_the_walker_sees_private_imports():
@@ -188,6 +243,38 @@ def test_nothing_in_bound_env_imports_agents():
         for m, names in imports.items()
     }
     assert {m: v for m, v in offenders.items() if v} == {}
+
+
+# An import of bound_env.control that bound_env.analysis keeps until the module that has it is
+# changed by its owner (the names it imports are those of bound_env.stride_protocol, re-exported
+# by bound_env.control.controllers): the test checks that this is all it takes from control.
+PENDING = {"bound_env.analysis.margins.closed_loop": {"bound_env.control.controllers.StridePlans"}}
+
+
+def test_analysis_never_imports_control():
+    """bound_env.analysis (the Poincaré tools and the margins) never imports bound_env.control
+    (whose design imports the analysis numerics), directly or through other modules."""
+    import bound_env.control.controllers as controllers
+    import bound_env.stride_protocol as protocol
+
+    _, imports, edges = _graph()
+    for m, names in PENDING.items():
+        assert {n for n in imports[m] if n.startswith("bound_env.control")} <= names | {
+            n.rsplit(".", 1)[0] for n in names
+        }
+        for n in names:  # a re-export of the protocol, nothing of control's own
+            assert getattr(controllers, n.rsplit(".", 1)[1]) is getattr(
+                protocol, n.rsplit(".", 1)[1]
+            )
+        edges[m] = [e for e in edges[m] if not e.startswith("bound_env.control")]
+    for start in (m for m in edges if m.startswith("bound_env.analysis")):
+        seen, todo = set(), [start]
+        while todo:
+            for n in edges[todo.pop()]:
+                if n not in seen:
+                    seen.add(n)
+                    todo.append(n)
+        assert not [n for n in seen if n.startswith("bound_env.control")], start
 
 
 @pytest.mark.parametrize("package", PACKAGES)
@@ -292,3 +379,18 @@ def test_flat_array_layouts_are_contiguous_and_exported():
     assert wide.constants() == {"X_A": 2, "X_B": 3, "X_C": 6, "N_X": 7}
     with pytest.raises(ValueError, match="unique"):
         Layout("X_", ("a", "A"), "N_X")
+
+
+# The longest a module may be, per package: a module longer than that holds more than one
+# concept and is split along them (agents/compare.py was 1,147 lines, agents/stride.py 724)
+MAX_LINES = {"agents": 600, "bound_env": 900}
+
+
+@pytest.mark.parametrize("package", sorted(MAX_LINES))
+def test_no_module_is_too_long(package):
+    lines = {
+        str(f.relative_to(ROOT)): len(f.read_text().splitlines())
+        for f in sorted((ROOT / package).rglob("*.py"))
+    }
+    long = {f: n for f, n in lines.items() if n > MAX_LINES[package]}
+    assert long == {}, f"over {MAX_LINES[package]} lines: split them along their concepts"

@@ -172,20 +172,24 @@ def test_compare_entries_take_several_policies():
 
 
 def test_compare_default_columns_are_the_pages():
-    """The page's columns: passive, the fine-tuned seeds (the shipped `default` is s0, not a
-    column of its own), ppo-v1's final-model seeds, the classical controllers with mpc, and
-    the literal cycle; the distilled and stride-residual seeds are ablations added by
-    --entry."""
-    from agents.compare import CLASSICAL, default_entries
+    """The page's columns are the curated set (issue 30): passive, lqr, deadbeat, mpc, the
+    best learned (the fine-tuned seeds; `default` is s0, not a column of its own), step-level
+    PPO (step-ppo), plain PPO (ppo-v1's final-model seeds) and the literal-cycle pair; the
+    archived policies (distilled, stride-residual, warm-started, the ppo-v1 checkpoint) and
+    damping are added by --entry only."""
+    from agents.compare import CLASSICAL, EXTRA_GROUPS, default_entries, seed_group
 
     entries = {label: (policies, gait) for label, policies, gait in default_entries()}
     assert [p.split("/")[-1] for p in entries["fine-tuned"][0]] == ["s0", "s1", "s2"]
+    assert [p.split("/")[-1] for p in entries["step-ppo"][0]] == ["s0", "s1", "s2"]
     assert all("ppo-v1-final/s" in p for p in entries["ppo-v1"][0])
-    if "warm-started" in entries:
-        assert all("warm-started/s" in p for p in entries["warm-started"][0])
-    assert set(CLASSICAL) <= set(entries) and "mpc" in entries
-    assert "distilled" not in entries and "learned" not in entries
+    assert CLASSICAL == ("lqr", "deadbeat", "mpc") and set(CLASSICAL) <= set(entries)
+    learned = {"fine-tuned", "step-ppo", "ppo-v1"}
+    literal = {"passive literal", "learned literal", "lqr literal"}
+    assert set(entries) == {"passive", *CLASSICAL, *learned, *literal}
     assert not any(p.rstrip("/").endswith("default") for e in entries.values() for p in e[0])
+    for _label, group in EXTRA_GROUPS:  # the archived seed groups still load by path
+        assert group.startswith("archive/") and len(seed_group(group)) == 3
 
 
 def test_the_page_shows_the_basin_maps_in_its_folder(tmp_path):

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from agents.policy_table import ARCHIVE_DIR
 from bound_env.cli import main
 from bound_env.cli_args import check_name, check_writable, name_key
 
@@ -89,7 +90,7 @@ def test_refused_distill_leaves_nothing(tmp_path, capsys):
         (["a b=lqr", "a_b=lqr"], "same name or folder"),
         (["lqr", "LQR=deadbeat"], "same name or folder"),
         (["lqr", "x=" + "nothing-here"], "does not exist"),  # after a good column
-        (["x=ppo-v1-final/s0,warm-started/s0"], "share the folder"),
+        (["x=ppo-v1-final/s0,step-ppo/s0"], "share the folder"),
     ],
 )
 def test_compare_checks_every_entry_before_any_column(tmp_path, capsys, entries, word):
@@ -113,9 +114,8 @@ def test_train_name_cannot_leave_the_runs_folder(tmp_path, capsys):
 
 def test_finetune_refuses_to_resume_another_run(tmp_path):
     from agents.finetune import SETTINGS_FILE, FinetuneConfig, check_settings, run_settings
-    from agents.policy import shipped_policies
 
-    s0, s1 = shipped_policies()["distilled/s0"], shipped_policies()["distilled/s1"]
+    s0, s1 = ARCHIVE_DIR / "distilled" / "s0", ARCHIVE_DIR / "distilled" / "s1"
     out = tmp_path / "ft"
     check_settings(out, s0, FinetuneConfig(seed=0))  # a new folder: nothing to check
     out.mkdir()

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agents.policy_table import ARCHIVE_DIR
 from bound_env.cli import main
 from bound_env.parallel import (
     MAX_RESTARTS,
@@ -630,7 +631,7 @@ def test_per_observation_controllers_run_one_copy_per_robot():
         def fingerprint(self):
             return "row-by-row " + self.inner.fingerprint()
 
-    ctrl = load_controller("ppo-v1")
+    ctrl = load_controller(ARCHIVE_DIR / "ppo-v1")
     zs = np.asarray(load_gait("default").z0)
     vals = (zs[3] + np.linspace(-0.2, 0.2, 3), zs[0] + np.linspace(-0.01, 0.01, 2))
     a = run_chunk(BasinSpec((3, 0), vals, zs, zs, controller=ctrl, max_strides=30), 0)

@@ -17,10 +17,15 @@ import pytest
 
 import bound_env
 from agents.policy import load_controller, policy_names
+from agents.policy_table import ARCHIVE_DIR
 from agents.rollout import load_policy, rollout
 from bound_env.control import PlainPolicy, notify_apex
 
 gym.register_envs(bound_env)
+
+# archived policies, loaded by their path (agents/policies/archive/)
+PPO_V1 = str(ARCHIVE_DIR / "ppo-v1")
+STRIDE_RESIDUAL = str(ARCHIVE_DIR / "stride-residual" / "s0")
 
 STRIDES, SEED, NOISE = 5, 3, 0.5
 
@@ -87,7 +92,7 @@ def test_v1_is_the_published_task_and_v0_is_unchanged():
     assert v1.task.config == replace(v0.task.config, max_torque=80.0)  # the only change
     lit = gym.make("PassiveBoundLiteral-v1").unwrapped
     assert lit.task.max_torque == 80.0
-    for name in ("lqr", "default", "ppo-v1", "damping"):  # every shipped policy's torque
+    for name in ("lqr", "default", PPO_V1, "damping"):  # every shipped policy's torque
         assert load_policy(name)[0].env_kwargs["max_torque"] == 80.0
 
 
@@ -97,7 +102,7 @@ def _reset(env_id="PassiveBound-v1", **kw):
     return env, obs, info
 
 
-@pytest.mark.parametrize("name", ["lqr", "default", "stride-residual/s0"])
+@pytest.mark.parametrize("name", ["lqr", "default", STRIDE_RESIDUAL])
 def test_a_stride_controller_without_info_fails_loudly(name):
     _, act = load_policy(name)
     env, obs, info = _reset()
@@ -109,7 +114,7 @@ def test_a_stride_controller_without_info_fails_loudly(name):
     assert a.shape == (1,) and a.dtype == np.float32
 
 
-@pytest.mark.parametrize("name", ["ppo-v1", "damping", "passive"])
+@pytest.mark.parametrize("name", [PPO_V1, "damping", "passive"])
 def test_feedback_policies_take_obs_alone(name):
     make_env, act = load_policy(name)
     env, obs, info = _reset()
@@ -153,7 +158,7 @@ def test_misused_info_is_refused():
         ("PassiveBound-v1", {"exclude_current_positions_from_observation": False}, "obs"),
     ],
 )
-@pytest.mark.parametrize("name", ["lqr", "ppo-v1"])
+@pytest.mark.parametrize("name", ["lqr", PPO_V1])
 def test_an_env_of_other_settings_is_refused(env_id, kw, word, name):
     _, act = load_policy(name)
     env, obs, info = _reset(env_id, reset_noise_scale=1.0, **kw)

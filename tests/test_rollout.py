@@ -14,29 +14,32 @@ import pytest
 import yaml
 
 from agents.policy import find_policy_files, load_controller, shipped_policies
+from agents.policy_table import ARCHIVE_DIR
 from agents.rollout import load_policy, rollout
 from bound_env.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
+
+PPO_V1 = ARCHIVE_DIR / "ppo-v1"  # the archived PPO policy, loaded by its path
 
 
 @pytest.fixture
 def policy_copy(tmp_path):
     """A writable copy of the shipped PPO policy (ppo-v1; `default` is a choice policy)."""
     dest = tmp_path / "pol"
-    shutil.copytree(shipped_policies()["ppo-v1"], dest)
+    shutil.copytree(PPO_V1, dest)
     return dest
 
 
 def test_shipped_policies_by_name_and_fingerprinted():
     shipped = shipped_policies()
-    assert set(shipped) >= {"default", "literal-cycle", "ppo-v1"}
+    assert set(shipped) >= {"default", "literal-cycle", "ppo-v1-final/s0"}
     for folder in shipped.values():
         assert (folder / "fingerprint.json").is_file()
         load_controller(folder)  # passes every check (fingerprint, normalization, config)
 
 
-@pytest.mark.parametrize("policy", ["ppo-v1", "default"])
+@pytest.mark.parametrize("policy", [str(PPO_V1), "default"])
 def test_rollout_reports_strides_torque_and_apex_error(tmp_path, capsys, policy):
     """The PPO policy and the shipped default (a distilled stride controller)."""
     out = tmp_path / "r"
@@ -71,7 +74,7 @@ def test_load_policy_matches_plain_sb3_and_docs_example_runs():
     exec(example.replace("range(400)", "range(60)"), scope)  # noqa: S102 - the docs' code
     assert scope["done"].shape == (1,)
     # the docs' SB3 route and load_policy's act give the same actions
-    make_env, act = load_policy("ppo-v1")
+    make_env, act = load_policy(scope["folder"])
     venv = scope["venv"]
     model = PPO.load(scope["folder"] / "model.zip", device="cpu")
     env = make_env()
@@ -126,13 +129,13 @@ def test_refuses_another_gait_unless_forced(capsys):
     assert "--force" in capsys.readouterr().err
     ctrl = load_controller("literal-cycle", gait="default", force=True)
     assert ctrl.env_kwargs["gait"] == "literal-cycle"
-    load_controller("ppo-v1", gait=ROOT / "configs" / "gaits" / "default.yaml")  # same gait
+    load_controller(PPO_V1, gait=ROOT / "configs" / "gaits" / "default.yaml")  # same gait
 
 
 def test_rl_zoo3_run_folder_is_read(tmp_path):
     """rl-zoo3's layout: <run>/<env id>.zip and <run>/<env id>/{config.yml, vecnormalize.pkl},
     the config dumped as an OrderedDict by PyYAML."""
-    src = shipped_policies()["ppo-v1"]
+    src = PPO_V1
     run = tmp_path / "PassiveBound-v0_1"
     params = run / "PassiveBound-v0"
     params.mkdir(parents=True)
@@ -143,7 +146,7 @@ def test_rl_zoo3_run_folder_is_read(tmp_path):
     assert "OrderedDict" in (params / "config.yml").read_text()
     files = find_policy_files(run)
     assert files.layout == "rl-zoo3" and files.model.name == "PassiveBound-v0.zip"
-    want = load_controller("ppo-v1").fingerprint()
+    want = load_controller(PPO_V1).fingerprint()
     for given in (run, params, run / "PassiveBound-v0.zip"):
         assert load_controller(given).fingerprint() == want
 

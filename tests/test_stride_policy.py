@@ -15,11 +15,10 @@ from agents.stride import (
     STRIDE_ENV_ID,
     DirectionStarts,
     StrideControl,
-    StridePolicyController,
     YardstickReward,
     ZeroActionNet,
-    load_stride_policy,
 )
+from agents.stride_policy import StridePolicyController, load_stride_policy
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "ppo-stride.yaml"
 TINY = ["n_envs=2", "n_steps=64", "batch_size=64", "n_epochs=1"]
@@ -32,7 +31,7 @@ def _zero_residual_policy(tmp_path) -> Path:
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.run_files import write_config
-    from agents.stride import write_base
+    from agents.stride_policy import write_base
     from agents.train import make_vec, resolve_section
 
     hp = resolve_section(CONFIG, STRIDE_ENV_ID, TINY, None)

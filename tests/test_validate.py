@@ -217,7 +217,7 @@ def test_shipped_choice_configs_name_their_sources_relative_to_the_package():
             if (folder / f).is_file():
                 text = (folder / f).read_text()
                 assert "/work/" not in text and '"/' not in text, (name, f)
-    assert source_name(SHIPPED_DIR / "distilled" / "s0") == "distilled/s0"
+    assert source_name(SHIPPED_DIR / "finetuned" / "s0") == "finetuned/s0"
     assert source_name("runs/x/policy") == "runs/x/policy"
     cfg = json.loads((shipped_policies()["default"] / "config.json").read_text())
     assert cfg["student"] == "distilled/s0" and cfg["expert"]["name"] == "distilled/s0"

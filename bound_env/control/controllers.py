@@ -31,82 +31,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..stride_map import max_intervals
-from ..stride_task import TorqueBasis
-from ..task import OBS_NAMES
-
-# indices in the default (x_g excluded) PassiveBound-v0 observation
-OBS_TIME = OBS_NAMES[1:].index("time_since_apex")
-OBS_TH2DOT = OBS_NAMES[1:].index("theta2dot")
-OBS_Z = tuple(
-    OBS_NAMES[1:].index(n) for n in ("y_g", "theta1", "theta2", "xdot_g", "theta1dot", "theta2dot")
+# The loop side of the protocol lives beside the stride map (`bound_env.stride_protocol`), so
+# that `bound_env.analysis` needs nothing from here; re-exported for the controllers' users.
+from ..stride_protocol import (  # noqa: F401
+    OBS_TH2DOT,
+    OBS_TIME,
+    OBS_Z,
+    StridePlans,
+    grid_times,
+    interval_actions_of,
+    interval_averages,
+    notify_apex,
+    observed_times,
 )
-
-
-def observed_times(dt: float) -> np.ndarray:
-    """The time since the apex a stride controller reads on control interval k of a stride
-    (the observation's, rounded to float32), k < `max_intervals` (dt)."""
-    return np.float32(dt * np.arange(max_intervals(dt))).astype(float)
-
-
-def grid_times(dt: float) -> np.ndarray:
-    """The start k dt of control interval k of a stride (the MPC snaps the observed time
-    to it), k < `max_intervals` (dt)."""
-    return dt * np.arange(max_intervals(dt))
-
-
-def interval_averages(basis: TorqueBasis, taus, t0, dt: float) -> np.ndarray:
-    """basis.average(taus[i], t0[i, j], t0[i, j] + dt) for each row of ``taus`` (n, n_sub)
-    and each time of row i of ``t0`` (broadcast to (n, m)), bit for bit as the scalar path
-    (elementwise products, and at most two non-zero terms per interval for sub-windows wider
-    than dt, so the order of the sums cannot matter)."""
-    taus = np.atleast_2d(np.asarray(taus, dtype=float))
-    t0 = np.atleast_2d(np.asarray(t0, dtype=float))
-    t1 = t0 + dt
-    lo = np.clip(basis.edges[:-1], t0[..., None], t1[..., None])
-    hi = np.clip(np.append(basis.edges[1:-1], np.inf), t0[..., None], t1[..., None])
-    return (taus[:, None, :] * (hi - lo)).sum(axis=-1) / (t1 - t0)
-
-
-def interval_actions_of(basis: TorqueBasis, max_torque: float, U, times, dt: float) -> np.ndarray:
-    """(n, len(times)): clip(basis.average(tau_i, t, t + dt) / max_torque, -1, 1) for the
-    profile tau_i = basis.torques(U[i], max_torque) of each row of U and each t of ``times``,
-    bit for bit as a stride controller's ``__call__`` computes it (`interval_averages`)."""
-    taus = np.array([basis.torques(u, max_torque) for u in np.atleast_2d(U)])
-    avg = interval_averages(basis, taus, np.asarray(times, dtype=float)[None, :], dt)
-    return np.clip(avg / max_torque, -1.0, 1.0)
-
-
-class StridePlans:
-    """The stride plans of n robots under one stride controller, for loops that step many
-    robots through the step env at once (long episodes, `bound_env.stride_map.to_next_apex`):
-    each robot's profile, chosen at its last apex (``apex``), and the time since that apex it
-    was announced at. The controller provides ``apex_torques(z)`` (the profile it plans at z,
-    as ``on_apex`` stores it), ``snaps_time`` (whether it reads its profile at the observed
-    time or snaps it to the apex's interval grid), ``basis``, ``max_torque`` and ``dt``."""
-
-    def __init__(self, controller, n: int):
-        self.ctrl = controller
-        self.taus = np.zeros((n, controller.basis.phi.shape[0]))
-        self.t0 = np.zeros(n)
-
-    def apex(self, i: int, z, time_since_apex: float = 0.0) -> None:
-        self.taus[i] = self.ctrl.apex_torques(np.asarray(z, dtype=float))
-        self.t0[i] = time_since_apex
-
-
-def notify_apex(controller, obs, info) -> None:
-    """The loop side of the ``on_apex`` protocol, for any rollout of PassiveBound-v0: call it
-    after ``reset`` and after every ``step`` with that call's observation and info. It calls
-    ``controller.on_apex`` when the info marks an apex (``start_z`` after a reset, ``apex_z``
-    after a step); controllers without ``on_apex`` are left alone."""
-    on_apex = getattr(controller, "on_apex", None)
-    if on_apex is None:
-        return
-    if "apex_z" in info:
-        on_apex(np.asarray(info["apex_z"], dtype=float), float(obs[OBS_TIME]))
-    elif "start_z" in info:
-        on_apex(np.asarray(info["start_z"], dtype=float), 0.0)
+from ..stride_task import TorqueBasis
 
 
 @dataclass

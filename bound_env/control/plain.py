@@ -36,8 +36,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..stride_protocol import notify_apex
 from ..task import DEFAULT_DT, OBS_NAMES
-from .controllers import notify_apex
 
 FULL_OBS_DIM = len(OBS_NAMES) - 1  # the default observation (x_g excluded)
 _MAKE = 'gym.make("PassiveBound-v1") (or the env factory of agents.rollout.load_policy)'
