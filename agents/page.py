@@ -137,9 +137,9 @@ NumPy and Numba, the same Numba cache state), and across machines to its statist
 precision: the controllers' own round-off differs from one CPU to another, `mpc` seeds its
 random candidates with the bytes of z, and rough terrain is chaotic, so a start near a basin
 edge can go either way. Measured: on another 2-core machine, from an empty cache, an earlier
-version of this page's code gave for `mpc` r50 0.294, σ50 0.757° and the MFPT's σ 0.791°
-(that version's page on this machine: 0.289, 0.697° and 0.802°), and for `default` r50
-0.2636 and 0.777° (that page: 0.264 and 0.774°).
+version of this page's code moved `mpc`'s r50 by +0.005, its σ50 by +0.06° and the MFPT's σ
+by −0.011° from that version's page on this machine, and `default`'s r50 by −0.0004 and the
+MFPT's σ by +0.003°.
 
 """
 
