@@ -251,7 +251,8 @@ def register(sub) -> None:
         "way (seeds), e.g. learned=runs/s0,runs/s1,runs/s2 (mean and 95%% "
         "t interval over them), or a classical controller: lqr, deadbeat, "
         "damping or a spec .yaml (a bare name is its own label); repeatable "
-        "(default: the shipped policies and lqr, deadbeat, damping)",
+        "(default: passive, lqr, deadbeat, mpc, the shipped policies and the literal "
+        "cycle's columns)",
     )
     p.add_argument(
         "--keep-defaults",

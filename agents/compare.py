@@ -351,3 +351,11 @@ def paired_comparisons(groups, n_boot: int = 2000) -> list[dict]:
                 entry.update(compare_paired(list(sizes), a, b, n_boot=n_boot))
             out.append(entry)
     return out
+
+
+if __name__ == "__main__":  # python -m agents.compare ARGS is bound-env compare ARGS
+    import sys
+
+    from bound_env.cli import main
+
+    sys.exit(main(["compare", *sys.argv[1:]]))

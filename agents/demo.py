@@ -38,7 +38,7 @@ from bound_env.params import Z_SI_UNITS
 
 from .distill import VALIDATION_SEED
 
-DEMO_POLICY = "default"  # the shipped learned controller (agents/policies/default)
+DEMO_POLICY = "default"  # the shipped learned controller (a name for finetuned/s0)
 DEMO_BASELINE = "lqr"  # the classical controller that falls from the start
 DEMO_SEED = VALIDATION_SEED  # 777: validation directions (the test set's seed is 12345)
 DEMO_DIRECTIONS = 16  # xi = random_directions(16, 777)[6] (a row does not depend on n)
