@@ -75,6 +75,11 @@ def archived_message(name: str) -> str | None:
     if group not in ARCHIVED:
         return None
     where = ARCHIVE_DIR / str(name)
+    if not ARCHIVE_DIR.is_dir():  # an installed wheel: the archive stays in the repository
+        return (
+            f"policy {name!r} was archived ({ARCHIVED[group]}): it is in the repository's "
+            f"agents/policies/archive/{name}, not in the installed package"
+        )
     return (
         f"policy {name!r} was archived ({ARCHIVED[group]}): it is {where} now; give that "
         "path to load it"

@@ -103,3 +103,13 @@ def test_help_and_docs_list_the_same_names():
             assert f"`{name}{end}" not in block.group(1)
         for end in ("'", "/"):
             assert f"'{name}{end}" not in help_text
+
+
+def test_an_archived_name_in_an_installed_package(monkeypatch, tmp_path):
+    """A wheel has no archive: the message points at the repository."""
+    import agents.policy_table as table
+
+    monkeypatch.setattr(table, "ARCHIVE_DIR", tmp_path / "none")
+    msg = table.archived_message("stride-residual/s0")
+    assert "repository's agents/policies/archive/stride-residual/s0" in msg and "\n" not in msg
+    assert table.archived_message("finetuned/s0") is None
