@@ -433,9 +433,10 @@ def test_selected_shipped_policies_state_their_validation_directions():
     import yaml
 
     from agents.policy import SHIPPED_DIR
+    from agents.policy_table import ARCHIVE_DIR
 
-    checked = 0
-    for folder in sorted(SHIPPED_DIR.iterdir()):
+    checked = 0  # the selected checkpoint ppo-v1 is archived now: its folder is checked there
+    for folder in sorted([*SHIPPED_DIR.iterdir(), *ARCHIVE_DIR.iterdir()]):
         exp = folder / "exported.json"
         if not exp.is_file() or "timesteps" not in json.loads(exp.read_text()):
             continue  # a final model: nothing was selected
