@@ -25,7 +25,7 @@ DOCS = ROOT / "docs"
 # a passage about another measurement than the test-set page
 OTHER = re.compile(
     r"validation|seed 777|quick budget|budget quick|--budget quick|History|archived|"
-    r"[Tt]he literal reading",
+    r"[Tt]he literal reading|results page of \d{4}-\d\d-\d\d",  # a dated, older page
 )
 DECISION = re.compile(r"decid|decision|median|p50|p99|percentile", re.I)
 TIME = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s?(ms|µs)\b")
