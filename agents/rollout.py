@@ -66,7 +66,7 @@ def _policy_wrappers(path) -> list:
     return out
 
 
-def load_policy(path, gait=None, force: bool = False):
+def load_policy(path, gait=None, force: bool = False, env_id: str | None = None):
     """``(env_factory, act)`` for a policy name (`agents.policy.policy_names`) or folder.
 
     ``env_factory(**kwargs)`` makes the environment the policy was trained for (its env kwargs
@@ -77,14 +77,15 @@ def load_policy(path, gait=None, force: bool = False):
     info returned with it, a `bound_env.control.PlainPolicy` (module docstring; ``act(obs)``
     for feedback policies); ``act.controller`` is the controller. ``gait`` evaluates on another
     gait (refused for a trained policy unless ``force``); built-in controllers (``passive``,
-    ...) run on ``gait`` or the default one.
+    ...) run on ``gait`` or the default one. ``env_id``: the env a plain SB3 ``model.zip``
+    without ``config.yaml`` was trained on (`agents.policy.load_controller`).
     """
     import gymnasium as gym
 
     import bound_env
 
     gym.register_envs(bound_env)
-    ctrl = load_controller(path, gait=gait, force=force)
+    ctrl = load_controller(path, gait=gait, force=force, env_id=env_id)
     resolved = resolve_policy(path)
     wrappers = [] if isinstance(resolved, str) else _policy_wrappers(resolved)
     env_kwargs = dict(ctrl.env_kwargs)
