@@ -4,14 +4,16 @@ A trained policy needs more than its ``model.zip``: the environment kwargs it wa
 with (``max_torque``, ``dt``, the gait), the observation wrappers of its config
 (`agents.wrappers.ObservationFilter`) and its ``VecNormalize`` statistics. `load_policy` reads
 them all (with the checks of `agents.policy.load_controller`) and returns an environment
-factory and an action function that belong together::
+factory and an action function that belong together:
 
-    from agents.rollout import load_policy
+```python
+from agents.rollout import load_policy
 
-    make_env, act = load_policy("default")        # a shipped name, or a policy/run folder
-    env = make_env()                               # or gym.make("PassiveBound-v1")
-    obs, info = env.reset(seed=0)
-    obs, reward, terminated, truncated, info = env.step(act(obs, info))
+make_env, act = load_policy("default")        # a shipped name, or a policy/run folder
+env = make_env()                               # or gym.make("PassiveBound-v1")
+obs, info = env.reset(seed=0)
+obs, reward, terminated, truncated, info = env.step(act(obs, info))
+```
 
 ``act(obs, info)`` is a `bound_env.control.PlainPolicy`: it announces each apex to a stride
 controller itself (the info carries the exact apex state), so this loop gives ``bound-env
