@@ -29,7 +29,7 @@ BUDGET_HELP = (
 COMPARE_BUDGET_HELP = (
     "margins budget of every column (bound_env.analysis.margins.BUDGETS): test (a smoke test; "
     "time not measured), quick (32 random directions; the default page took about 20 min in "
-    "the one timing reported, issue 26, machine load not stated), standard (time not "
+    "the one timing reported, machine load not stated), standard (time not "
     "measured) or full (256 directions, the finest curves: 12.2 min of wall time for the "
     "default page from an empty cache on 2 idle cores, docs/MARGINS.md); with a warm cache "
     "only the page is rewritten"
