@@ -497,6 +497,13 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
     if (src / "best.json").is_file():
         info.update(json.loads((src / "best.json").read_text()))
     (dest / "exported.json").write_text(json.dumps(info, indent=2) + "\n")
+    if (dest / "eval.csv").is_file():  # the curve of what was exported: no best marker on a final
+        from .run_files import plot_eval
+
+        try:
+            plot_eval(dest / "eval.csv", dest / "eval.png", kept="best" if src == best else "final")
+        except Exception as e:  # noqa: BLE001 - a plot must never stop an export
+            print(f"eval plot failed: {e}", file=sys.stderr)
     write_fingerprint(dest)
     return dest
 
