@@ -229,6 +229,7 @@ def test_plain_sb3_model_is_measured_with_an_env_id(tmp_path, cli):
     from agents.policy import load_controller
 
     gym.register_envs(bound_env)
+    (tmp_path / "plain").mkdir()
     PPO("MlpPolicy", gym.make("PassiveBound-v1"), seed=0).save(tmp_path / "plain" / "model.zip")
     model = tmp_path / "plain" / "model.zip"
     with pytest.raises(ValueError, match="name it with --env-id"):
