@@ -29,7 +29,7 @@ BUDGET_HELP = (
 COMPARE_BUDGET_HELP = (
     "margins budget of every column (bound_env.analysis.margins.BUDGETS): test (a smoke test; "
     "time not measured), quick (32 random directions; the default page took about 20 min in "
-    "the one timing reported, issue 26, machine load not stated), standard (time not "
+    "the one timing reported, machine load not stated), standard (time not "
     "measured) or full (256 directions, the finest curves: 12.2 min of wall time for the "
     "default page from an empty cache on 2 idle cores, docs/MARGINS.md); with a warm cache "
     "only the page is rewritten"
@@ -65,8 +65,9 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--env-id",
-        default=DEFAULT_ENV_ID,
-        help="section of the config and Gymnasium id (default: %(default)s)",
+        default=None,
+        help="section of the config and Gymnasium id (default: the config's only section, "
+        f"else {DEFAULT_ENV_ID})",
     )
     p.add_argument(
         "--name",
@@ -194,6 +195,13 @@ def register(sub) -> None:
         "--force",
         action="store_true",
         help="evaluate a policy on a gait or without files it was not trained for",
+    )
+    p.add_argument(
+        "--env-id",
+        metavar="ID",
+        help="the env a plain SB3 model.zip without config.yaml was trained on (e.g. "
+        "PassiveBound-v1: its registered kwargs, max_torque 80 N m); a policy with a config "
+        "takes its own",
     )
     p.add_argument(
         "--workers",
@@ -350,6 +358,10 @@ def cmd_train(args) -> int:
 
     t0 = time.perf_counter()
     n = int(args.n_timesteps) if args.n_timesteps is not None else None
+    if args.env_id is None:
+        from .config import default_env_id
+
+        args.env_id = default_env_id(args.config)
     if args.seeds is not None:
         return _train_seeds(args, n, t0)
     if args.export:  # refused before training, not after it
@@ -493,6 +505,13 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
     if (src / "best.json").is_file():
         info.update(json.loads((src / "best.json").read_text()))
     (dest / "exported.json").write_text(json.dumps(info, indent=2) + "\n")
+    if (dest / "eval.csv").is_file():  # the curve of what was exported: no best marker on a final
+        from .run_files import plot_eval
+
+        try:
+            plot_eval(dest / "eval.csv", dest / "eval.png", kept="best" if src == best else "final")
+        except Exception as e:  # noqa: BLE001 - a plot must never stop an export
+            print(f"eval plot failed: {e}", file=sys.stderr)
     write_fingerprint(dest)
     return dest
 
@@ -509,7 +528,7 @@ def cmd_margins(args) -> int:
     out = _checked(args.out or Path("out") / "margins" / name, "--out")  # made by the run
     # a bar on a terminal, else a line every 30 s or 10 % of the tasks (bound_env.parallel)
     progress = not args.no_progress
-    ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
+    ctrl = load_controller(args.policy, gait=args.gait, force=args.force, env_id=args.env_id)
     gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"
     r = compute_margins(
         ctrl,

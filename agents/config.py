@@ -78,6 +78,14 @@ def read_config_file(path: str | Path) -> dict:
     return data
 
 
+def default_env_id(path: str | Path) -> str:
+    """The env id ``train`` uses when none is given: the file's only section (``ppo-stride``:
+    ``PassiveBoundStride-v1``), else `DEFAULT_ENV_ID` (``ppo``)."""
+    data = read_config_file(path)
+    sections = [k for k, v in data.items() if isinstance(v, dict)]
+    return sections[0] if len(sections) == 1 else DEFAULT_ENV_ID
+
+
 def load_hyperparams(path: str | Path, env_id: str) -> dict:
     """The section of ``env_id`` (a deep copy), with a clear error naming the known ids."""
     data = read_config_file(path)

@@ -60,17 +60,47 @@ _INFERENCE_ONLY = {
 }  # replaces training-only pickled objects
 
 
-def load_controller(path: str | Path, gait: str | Path | None = None, force: bool = False):
+def check_env_id(env_id: str) -> str:
+    """``env_id`` when a plain SB3 model can be evaluated on it (a registered control-interval
+    env: ``PassiveBound-v0``/``-v1``, ``PassiveBoundLiteral-v0``/``-v1``), else ValueError."""
+    from bound_env import ENV_KWARGS
+
+    if env_id not in ENV_KWARGS:
+        raise ValueError(
+            f"--env-id {env_id!r}: a plain model.zip is evaluated on one of "
+            f"{', '.join(ENV_KWARGS)} (a stride or rescue policy needs its run's config.yaml)"
+        )
+    return env_id
+
+
+def load_controller(
+    path: str | Path,
+    gait: str | Path | None = None,
+    force: bool = False,
+    env_id: str | None = None,
+):
     """A controller from a name (`policy_names`) or a saved policy (see the module docstring).
 
     ``gait`` is passed to built-in controllers that need one; a trained policy takes its own
-    from its config and refuses another one unless ``force`` (`check_gait`). Raises
+    from its config and refuses another one unless ``force`` (`check_gait`). ``env_id`` names
+    the env a plain SB3 ``model.zip`` without ``config.yaml`` was trained on (its registered
+    kwargs are the policy's env kwargs, `check_env_id`); for a policy with a config it must be
+    the config's own id. Raises
     FileNotFoundError for a missing path and ValueError for a file that is not a PPO MLP
     policy for PassiveBound's observation space, or would be evaluated wrongly
     (`check_policy_files`).
     """
+    if env_id is not None:
+        check_env_id(env_id)
+        if Path(str(path)).suffix in (".yaml", ".yml") or isinstance(resolve_policy(path), str):
+            raise ValueError(f"--env-id is for a trained policy's model.zip, not {str(path)!r}")
     ctrl = load_apex_controller(path, gait, force)  # names, specs, choice and stride policies
     if ctrl is not None:
+        if env_id is not None:
+            raise ValueError(
+                f"--env-id {env_id}: policy {path} is a distilled student or a stride-level "
+                "policy, which carries its own env id (drop --env-id)"
+            )
         return ctrl
     path = resolve_policy(path)  # a step-level PPO policy's folder or zip
     files = find_policy_files(path)
@@ -82,15 +112,21 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
         model = PPO.load(str(model_path), device="cpu", custom_objects=_INFERENCE_ONLY)
     except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
         raise ValueError(f"cannot load {model_path} as an SB3 PPO model: {e}") from None
-    section, env_id, seed = read_policy_section(files)
-    env_kwargs = check_env_kwargs(section_env_kwargs(section, env_id), str(files.config))
+    section, trained_on, seed = read_policy_section(files)
+    if env_id is not None and files.config is None:
+        trained_on = env_id  # a plain SB3 model: the env id the user names
+    elif env_id is not None and env_id != trained_on:
+        raise ValueError(
+            f"--env-id {env_id}: policy {path} was trained on {trained_on} ({files.config})"
+        )
+    env_kwargs = check_env_kwargs(section_env_kwargs(section, trained_on), str(files.config))
     wrappers = section.get("env_wrapper") or []
     residual = controller_wrapper(wrappers)
     if residual is None:
         obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
     else:
         obs_index = None
-    for w in check_policy_files(files, section, force):
+    for w in check_policy_files(files, section, force, env_given=env_id is not None):
         print(f"warning: {w}", file=sys.stderr)
     layers, activation = extract_actor(model, model_path)
     check_layers(layers, str(model_path))

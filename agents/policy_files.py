@@ -218,11 +218,14 @@ def write_fingerprint(folder: str | Path, **extra) -> Path:
     return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
 
 
-def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -> list[str]:
+def check_policy_files(
+    files: PolicyFiles, section: dict, force: bool = False, env_given: bool = False
+) -> list[str]:
     """ValueError for a policy whose evaluation would be silently wrong; returns warnings.
 
     - no config: the env kwargs it was trained with (``max_torque``, ``dt``, wrappers) are
-      unknown (``force`` evaluates it with the env's defaults);
+      unknown (``force`` evaluates it with the env's defaults; ``env_given``: the caller names
+      the env id it was trained on, a plain SB3 model's ``--env-id``);
     - trained with ``normalize`` but no ``vecnormalize.pkl`` beside the model;
     - a ``fingerprint.json`` (written at export and at the end of training) that does not match
       the model or the statistics: they belong to different policies;
@@ -232,13 +235,16 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
       is, with a warning.
     """
     warnings = []
-    if files.config is None:
+    if files.config is None and not env_given:
         msg = (
             f"policy {files.model}: no config.yaml beside it, so the environment it was "
             "trained on (max_torque, dt, observation filter) is unknown"
         )
         if not force:
-            raise ValueError(msg + "; pass --force to evaluate it with the env's defaults")
+            raise ValueError(
+                msg + "; name it with --env-id (e.g. PassiveBound-v1), or pass --force to "
+                "evaluate it with the env's defaults"
+            )
         warnings.append(msg)
     if section.get("normalize") and files.vecnormalize is None:
         where = files.config.parent if files.config is not None else files.model.parent

@@ -4,14 +4,16 @@ A trained policy needs more than its ``model.zip``: the environment kwargs it wa
 with (``max_torque``, ``dt``, the gait), the observation wrappers of its config
 (`agents.wrappers.ObservationFilter`) and its ``VecNormalize`` statistics. `load_policy` reads
 them all (with the checks of `agents.policy.load_controller`) and returns an environment
-factory and an action function that belong together::
+factory and an action function that belong together:
 
-    from agents.rollout import load_policy
+```python
+from agents.rollout import load_policy
 
-    make_env, act = load_policy("default")        # a shipped name, or a policy/run folder
-    env = make_env()                               # or gym.make("PassiveBound-v1")
-    obs, info = env.reset(seed=0)
-    obs, reward, terminated, truncated, info = env.step(act(obs, info))
+make_env, act = load_policy("default")        # a shipped name, or a policy/run folder
+env = make_env()                               # or gym.make("PassiveBound-v1")
+obs, info = env.reset(seed=0)
+obs, reward, terminated, truncated, info = env.step(act(obs, info))
+```
 
 ``act(obs, info)`` is a `bound_env.control.PlainPolicy`: it announces each apex to a stride
 controller itself (the info carries the exact apex state), so this loop gives ``bound-env
@@ -66,7 +68,7 @@ def _policy_wrappers(path) -> list:
     return out
 
 
-def load_policy(path, gait=None, force: bool = False):
+def load_policy(path, gait=None, force: bool = False, env_id: str | None = None):
     """``(env_factory, act)`` for a policy name (`agents.policy.policy_names`) or folder.
 
     ``env_factory(**kwargs)`` makes the environment the policy was trained for (its env kwargs
@@ -77,14 +79,15 @@ def load_policy(path, gait=None, force: bool = False):
     info returned with it, a `bound_env.control.PlainPolicy` (module docstring; ``act(obs)``
     for feedback policies); ``act.controller`` is the controller. ``gait`` evaluates on another
     gait (refused for a trained policy unless ``force``); built-in controllers (``passive``,
-    ...) run on ``gait`` or the default one.
+    ...) run on ``gait`` or the default one. ``env_id``: the env a plain SB3 ``model.zip``
+    without ``config.yaml`` was trained on (`agents.policy.load_controller`).
     """
     import gymnasium as gym
 
     import bound_env
 
     gym.register_envs(bound_env)
-    ctrl = load_controller(path, gait=gait, force=force)
+    ctrl = load_controller(path, gait=gait, force=force, env_id=env_id)
     resolved = resolve_policy(path)
     wrappers = [] if isinstance(resolved, str) else _policy_wrappers(resolved)
     env_kwargs = dict(ctrl.env_kwargs)

@@ -47,24 +47,35 @@ def read_csv(path: Path) -> dict[str, np.ndarray]:
     }
 
 
-def plot_eval(csv_path: Path, png_path: Path, title: str | None = None) -> None:
+def plot_eval(csv_path: Path, png_path: Path, title: str | None = None, kept: str = "best") -> None:
     """Evaluation curve: mean return (± std) and fall rate against timesteps, and below it
-    the basin validation score (``basin_validation.csv`` beside the CSV), if any."""
+    the basin validation score (``basin_validation.csv`` beside the CSV), if any. ``kept``:
+    ``"best"`` (a run, which keeps its best-validation checkpoint in ``best/``) marks that
+    checkpoint; ``"final"`` (an exported final model) marks the last point instead. The
+    title names the start noise only when the run had one; legends sit outside the data."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if kept not in ("best", "final"):
+        raise ValueError(f"kept must be 'best' or 'final', got {kept!r}")
     d = read_csv(csv_path)
     val_path = Path(csv_path).parent / "basin_validation.csv"
     val = np.loadtxt(val_path, delimiter=",", skiprows=1, ndmin=2) if val_path.exists() else None
     rows = 2 if val is not None and len(val) else 1
     fig, axes = plt.subplots(
-        rows, 1, figsize=(6.4, 3.6 * rows), dpi=100, sharex=True, squeeze=False
+        rows,
+        1,
+        figsize=(9.5, 3.8 * rows),
+        dpi=100,
+        sharex=True,
+        squeeze=False,
+        layout="constrained",
     )
     ax = axes[0, 0]
     t = d["timesteps"]
-    ax.plot(t, d["mean_reward"], color="C0", label="mean return")
+    ax.plot(t, d["mean_reward"], color="C0", label="mean return (± std)")
     ax.fill_between(
         t,
         d["mean_reward"] - d["std_reward"],
@@ -78,16 +89,30 @@ def plot_eval(csv_path: Path, png_path: Path, title: str | None = None) -> None:
     ax2.set_ylim(-0.05, 1.05)
     ax2.set_ylabel("fall rate", color="C3")
     noise = d["noise_scale"][-1] if len(t) else math.nan
-    ax.set_title(title or f"PPO evaluation (start noise {noise:g} x apex_scales)")
+    with_noise = f" (start noise {noise:g} × apex_scales)" if math.isfinite(noise) else ""
+    ax.set_title(title or f"PPO evaluation{with_noise}")
+    if len(t) and not np.any(d["mean_reward"]) and not np.any(d["std_reward"]):
+        ax.text(
+            0.01,
+            0.04,
+            "the evaluation env's own reward is 0 for this task (its reward is its wrapper's)",
+            transform=ax.transAxes,
+            fontsize=8,
+            color="0.3",
+        )
+    handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
+    ax2.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(1.1, 1.0))
     if rows == 2:
         axv = axes[1, 0]
-        axv.plot(val[:, 0], val[:, 1], "o-", color="C2", ms=3)
-        best = int(np.argmax(val[:, 1]))
-        axv.plot(val[best, 0], val[best, 1], "*", color="C1", ms=12, label="kept (best)")
+        axv.plot(val[:, 0], val[:, 1], "o-", color="C2", ms=3, label="validation score")
+        if kept == "best":
+            k, mark = int(np.argmax(val[:, 1])), "best validation (kept in best/)"
+        else:
+            k, mark = len(val) - 1, "final model (exported; no selection)"
+        axv.plot(val[k, 0], val[k, 1], "*", color="C1", ms=12, label=mark)
         axv.set_ylabel("basin validation\n(min rel. basin, xdot & y_g)")
-        axv.legend(fontsize=8)
+        axv.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.1, 1.0))
     axes[-1, 0].set_xlabel("timesteps")
-    fig.tight_layout()
     fig.savefig(png_path)
     plt.close(fig)
 

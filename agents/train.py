@@ -51,9 +51,9 @@ from bound_env.cache import atomic_write
 from .checkpoints import last_checkpoint, save_policy
 from .config import (
     DEFAULT_CONFIG,
-    DEFAULT_ENV_ID,
     TrainSpec,
     apply_sets,
+    default_env_id,
     load_hyperparams,
     preprocess,
 )
@@ -206,7 +206,7 @@ def resolve_section(
 
 def train(
     config: str | Path = DEFAULT_CONFIG,
-    env_id: str = DEFAULT_ENV_ID,
+    env_id: str | None = None,
     name: str | None = None,
     seed: int = 0,
     n_timesteps: int | None = None,
@@ -223,6 +223,8 @@ def train(
 ) -> Path:
     """Train PPO as the config section of ``env_id`` says; returns the run directory.
 
+    ``env_id`` None: the config's only section, else ``PassiveBound-v0`` (`default_env_id`).
+
     ``init_from``: a stride controller whose torques the actor clones before PPO
     (`agents.warmstart`; a fresh run only, a resume continues from its checkpoint)."""
     import torch as th
@@ -232,6 +234,8 @@ def train(
 
     from bound_env.cli_args import check_name
 
+    if env_id is None:
+        env_id = default_env_id(config)
     name = check_name(name or f"{env_id}_s{seed}", "--name")  # a folder of runs_dir, no path
     run_dir = Path(runs_dir) / name
     prev_info: dict = {}

@@ -22,13 +22,13 @@ Importing the package registers these Gymnasium environments:
   continuous profile actions; `bound_env.wrappers.LibraryActions` gives the profile
   library's discrete actions.
 
-::
+```python
+import gymnasium as gym
+import bound_env
 
-    import gymnasium as gym
-    import bound_env
-
-    gym.register_envs(bound_env)
-    env = gym.make("PassiveBound-v1")  # the published task (v0: the same at 40 N m)
+gym.register_envs(bound_env)
+env = gym.make("PassiveBound-v1")  # the published task (v0: the same at 40 N m)
+```
 
 Gymnasium itself is imported lazily by those modules; the simulator (`bound_env.params`,
 `bound_env.stride`, `bound_env.fast`) never needs it.

@@ -4,6 +4,7 @@ Small pure functions, compiled with Numba so that both integrator back-ends (and
 environment) evaluate exactly the same equations.
 
 Conventions (see the sketch in docs/model.md):
+
 - Slope-aligned frame: x along the slope, downhill = forward; y normal to it, ground y = 0.
   Gravity is (g sin alpha, -g cos alpha) per unit mass (eq. 2).
 - q = [x_g, y_g, theta1, theta2]: centre of mass of the whole robot, pitch of the back body

@@ -64,7 +64,122 @@ def test_mkdocs_build_strict(tmp_path):
     assert "Version History" in html and "Observation Space" in html  # the class docstring
     html = (tmp_path / "site" / "envs" / "passive-bound-rescue-v0" / "index.html").read_text()
     assert "Version History" in html and "Starting State" in html and "TO FILL" not in html
+    problems = rendered_problems(tmp_path / "site")
+    assert not problems, "\n".join(problems[:20])
     print(f"mkdocs build: {time.perf_counter() - t0:.1f} s")
+
+
+def _outside_code(html: str) -> str:
+    return re.sub(r"<(pre|code|script|style)\b.*?</\1>", "", html, flags=re.S)
+
+
+def _toc_entries(html: str) -> int:
+    m = re.search(r'<nav class="md-nav md-nav--secondary"(.*?)</nav>', html, re.S)
+    return len(re.findall(r'class="md-nav__link"', m.group(1))) if m else 0
+
+
+def rendered_problems(site: Path) -> list[str]:
+    """The known failure shapes of the built HTML, one line each: an italic run opened by the
+    star of z* (``z<em>``, or a run closed by a literal star), a reStructuredText ``::`` at
+    the end of a paragraph, a ``\\|`` (an escaped table pipe shown as typed, in text or
+    code), a Markdown list run into its paragraph (a line starting with ``- `` inside a
+    ``<p>``), and a long page (over 600 words) with fewer than 3 table-of-contents entries."""
+    out = []
+    for f in sorted(site.rglob("index.html")):
+        if "search" in f.parts:
+            continue
+        page, html = str(f.parent.relative_to(site)), f.read_text()
+        text = _outside_code(html)
+        for m in re.finditer(r"(?<=[zZ])<em>|\*</em>", text):
+            out.append(f"{page}: italics opened by z*: {text[max(0, m.start() - 50) : m.end()]!r}")
+        for m in re.finditer(r"::\s*</p>", text):
+            out.append(f"{page}: '::' leak: {text[max(0, m.start() - 60) : m.end()]!r}")
+        body = re.search(r"<article.*?</article>", html, re.S)
+        article = body.group(0) if body else html
+        if "\\|" in re.sub(r"<script\b.*?</script>", "", article, flags=re.S):
+            out.append(f"{page}: a \\| shows")
+        for m in re.finditer(r"<p>((?:(?!</p>).)*?)</p>", text, re.S):
+            if re.search(r"\n\s*(- |\d+\. )\S", m.group(1)):
+                out.append(f"{page}: a list run into a paragraph: {m.group(1)[:80]!r}")
+        words = len(re.sub(r"<[^>]+>", " ", article).split())
+        if words > 600 and _toc_entries(html) < 3:
+            out.append(f"{page}: {words} words but {_toc_entries(html)} contents entries")
+    return out
+
+
+def test_rendered_problems_finds_the_known_shapes(tmp_path):
+    page = tmp_path / "p" / "index.html"
+    page.parent.mkdir()
+    page.write_text(
+        "<article><p>x = (z - z<em>) / s, z</em> the cycle</p><p>a loop::</p>"
+        "<p>text\n- item</p><code>NAME\\|PATH</code></article>"
+    )
+    kinds = [p.split(": ")[1] for p in rendered_problems(tmp_path)]
+    assert any(k.startswith("italics") for k in kinds) and "'::' leak" in kinds
+    assert "a \\| shows" in kinds and any(k.startswith("a list run") for k in kinds)
+    page.write_text("<article><p>z* and <em>word</em> and <code>a::</code></p></article>")
+    assert rendered_problems(tmp_path) == []
+
+
+def budget_table() -> str:
+    """The yardsticks page's table of budgets, from `BUDGETS` (what the code runs)."""
+    from bound_env.analysis.margins import BUDGETS
+
+    names = ("test", "quick", "standard", "full")
+    b = {n: BUDGETS[n] for n in names}
+
+    def seq(t):
+        return f"{len(t)} ({min(t):g}-{max(t):g})"
+
+    rows = [
+        ("random directions (curve)", lambda x: str(x.curve_dirs)),
+        ("curve sizes r", lambda x: seq(x.curve_sizes)),
+        ("strides to return (basin, curve, push)", lambda x: str(x.basin_strides)),
+        ("basin bisection steps", lambda x: str(x.basin_iters)),
+        (
+            "push kick sizes (ẋ, θ̇1) × samples",
+            lambda x: f"{len(x.push_xdot)}, {len(x.push_th1dot)} × {x.push_samples}",
+        ),
+        ("window bisection steps × strides", lambda x: f"{x.window_iters} × {x.window_strides}"),
+        (
+            "ceiling: strides, steps, random profiles, optimizer iterations",
+            lambda x: (
+                f"{x.ceiling_strides}, {x.ceiling_iters}, {x.ceiling_random}, {x.ceiling_opt}"
+            ),
+        ),
+        (
+            "rough terrain: σ levels, runs × strides",
+            lambda x: f"{len(x.terrain_sigmas)}, {x.terrain_runs} × {x.terrain_strides}",
+        ),
+        (
+            "MFPT: σ levels, robots × horizon [strides]",
+            lambda x: f"{len(x.mfpt_sigmas)}, {x.mfpt_robots} × {x.mfpt_strides}",
+        ),
+    ]
+    lines = ["| setting | " + " | ".join(f"`{n}`" for n in names) + " |"]
+    lines.append("| --- |" + " --- |" * len(names))
+    lines += [f"| {label} | " + " | ".join(f(b[n]) for n in names) + " |" for label, f in rows]
+    return "\n".join(lines)
+
+
+def test_yardsticks_page_states_the_budgets_the_code_runs():
+    """Each yardstick once, with its parameters: the budget table is `BUDGETS`, and the page
+    carries no change log (that is CHANGELOG.md)."""
+    page = (DOCS / "yardsticks.md").read_text()
+    assert budget_table() in page
+    for history in ("Margins v2", "Margins v3", "before the change", "298ea85", "2000 strides"):
+        assert history not in page, history
+    assert "## [Unreleased]" in (ROOT / "CHANGELOG.md").read_text()
+
+
+def test_no_issue_numbers_in_product_text():
+    from bound_env.cli import build_parser
+
+    texts = {p.name: p.read_text() for p in [ROOT / "README.md", *DOCS.rglob("*.md")]}
+    sub = build_parser()._subparsers._group_actions[0]
+    texts.update({f"{k} --help": v.format_help() for k, v in sub.choices.items()})
+    for name, text in texts.items():
+        assert not re.search(r"\b[Ii]ssues? #?\d+", text), name
 
 
 def _subcommands() -> set[str]:

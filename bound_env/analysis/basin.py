@@ -649,9 +649,33 @@ def write_basin(out_dir: Path, summary: dict, values, res: dict, passive: dict |
     plot_basin(out_dir / "basin.png", summary, arrays)
 
 
+def return_scale(strides, max_strides: int) -> int:
+    """The top of the strides-to-return colour scale: the 99th percentile of the starts that
+    returned, rounded up to a multiple of 5 (at least 5, at most ``max_strides``), so the
+    colours spread over the range the returns use; ``max_strides`` when none returned."""
+    s = np.asarray(strides, dtype=float)
+    s = s[np.isfinite(s)]
+    if s.size == 0:
+        return int(max_strides)
+    top = int(5 * np.ceil(np.percentile(s, 99) / 5))
+    return int(min(max(top, 5), max_strides))
+
+
+def _legend_below(ax) -> None:
+    """A map's legend under its axes, outside the data."""
+    ax.legend(
+        fontsize=7,
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.13),
+        ncol=2,
+        frameon=False,
+    )
+
+
 def plot_basin(path: Path, summary: dict, a: dict) -> Path:
-    """Left: strides to return (colour), fell (light grey), undecided (dark grey), with the
-    passive basin's boundary (red) on a controller's map. Right: why and where starts fell."""
+    """Left: strides to return (colour, scaled to the range the returns use: `return_scale`),
+    fell (light grey), undecided (dark grey), with the passive basin's boundary (red) on a
+    controller's map. Right: why and where starts fell. Legends under the maps."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -663,11 +687,12 @@ def plot_basin(path: Path, summary: dict, a: dict) -> Path:
     lab = [f"{n} [{u}]" for n, u in zip(summary["axes"], summary["units"], strict=True)]
     zt = z_to_paper(a["z_target"])
     ix, iy = (Z_NAMES.index(n) for n in summary["axes"])
-    fig, axs = plt.subplots(1, 2, figsize=(11.0, 4.4), dpi=100)
+    fig, axs = plt.subplots(1, 2, figsize=(12.0, 5.4), dpi=100, layout="constrained")
     ax = axs[0]
     bg = np.where(a["outcome"] == FELL, 0.85, np.where(a["outcome"] == UNDECIDED, 0.45, np.nan))
     ax.imshow(bg, origin="lower", extent=ext, aspect="auto", cmap="gray", vmin=0, vmax=1)
     ret = np.where(a["outcome"] == RETURNED, a["strides"], np.nan).astype(float)
+    top = return_scale(ret, summary["max_strides"])
     im = ax.imshow(
         ret,
         origin="lower",
@@ -675,9 +700,10 @@ def plot_basin(path: Path, summary: dict, a: dict) -> Path:
         aspect="auto",
         cmap="viridis",
         vmin=1,
-        vmax=summary["max_strides"],
+        vmax=top,
     )
-    fig.colorbar(im, ax=ax, label="strides to return")
+    over = bool(np.nanmax(ret, initial=0) > top) if np.isfinite(ret).any() else False
+    fig.colorbar(im, ax=ax, label="strides to return", extend="max" if over else "neither")
     if "passive_outcome" in a:
         ax.contour(
             x,
@@ -688,8 +714,8 @@ def plot_basin(path: Path, summary: dict, a: dict) -> Path:
             linewidths=1.2,
         )
         ax.plot([], [], "r-", label="passive basin boundary")
-    ax.plot(zt[ix], zt[iy], "wx", ms=8, mew=2, label="cycle")
-    ax.legend(fontsize=7, loc="upper right")
+    ax.plot(zt[ix], zt[iy], "X", ms=9, mfc="white", mec="black", mew=1, label="cycle")
+    _legend_below(ax)
     f = summary["fraction"]
     ax.set_title(
         f"{summary['policy']}: returned {100 * f['returned']:.1f} %, fell "
@@ -719,7 +745,7 @@ def plot_basin(path: Path, summary: dict, a: dict) -> Path:
             phases = a["phase"][(a["reason"] == r) & (a["outcome"] == FELL)]
             ph = ", ".join(f"{PHASES[p]}" for p in sorted(set(int(v) for v in phases)) if p >= 0)
             ax.plot([], [], "s", color=cmap(k), label=f"{REASONS[r]} (in {ph or '?'})")
-        ax.legend(fontsize=7, loc="upper right")
+        _legend_below(ax)
     ax.set_title("fell: reason (stance condition)", fontsize=9)
     ax.set_xlabel(lab[0])
     ax.set_ylabel(lab[1])
@@ -729,7 +755,6 @@ def plot_basin(path: Path, summary: dict, a: dict) -> Path:
         f"cycle in {summary['max_strides']} strides)",
         fontsize=9,
     )
-    fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     plt.close(fig)

@@ -1,10 +1,12 @@
 """A controller as a function of what the env gives it: ``act(obs, info)`` for the plain loop.
 
-Every Gymnasium user writes the same loop::
+Every Gymnasium user writes the same loop:
 
-    obs, info = env.reset(seed=0)
-    while not (terminated or truncated):
-        obs, reward, terminated, truncated, info = env.step(act(obs, info))
+```python
+obs, info = env.reset(seed=0)
+while not (terminated or truncated):
+    obs, reward, terminated, truncated, info = env.step(act(obs, info))
+```
 
 A stride controller (LQR, deadbeat, MPC, the distilled and stride-level policies) plans its
 torque profile at every apex from the exact apex state, which only the env's ``info`` carries

@@ -1,13 +1,15 @@
 """Controller spec files: small YAML files under ``configs/controllers/``.
 
-A spec names the controller and its design settings, e.g. ``configs/controllers/lqr.yaml``::
+A spec names the controller and its design settings, e.g. ``configs/controllers/lqr.yaml``:
 
-    controller: lqr      # lqr | deadbeat | damping
-    basis: windows       # torque basis of the stride (bound_env.stride_task.BASES)
-    K: 6                 # number of basis functions
-    Q: 1.0               # weight(s) on the normalized apex error (z - z*)/s: a number or 6
-    R: 1.0               # weight(s) on the coefficients u: a number or K
-    max_torque: 80.0     # saturation [N m]
+```yaml
+controller: lqr      # lqr | deadbeat | damping
+basis: windows       # torque basis of the stride (bound_env.stride_task.BASES)
+K: 6                 # number of basis functions
+Q: 1.0               # weight(s) on the normalized apex error (z - z*)/s: a number or 6
+R: 1.0               # weight(s) on the coefficients u: a number or K
+max_torque: 80.0     # saturation [N m]
+```
 
 Every key (`SPEC_KEYS`) has a default; a key the controller does not use, or an unknown one,
 is an error naming the file and the key.

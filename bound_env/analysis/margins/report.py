@@ -123,10 +123,16 @@ def write_outputs(result: dict, out_dir: Path) -> None:
     plot_margins([result], out_dir)
 
 
-# Colours for columns without a style of their own (`column_styles`): matplotlib's tab10
-# and then tab20's lighter halves, so that up to 20 columns never share one.
+# Colours for columns without a style of their own (`column_styles`): matplotlib's tab10,
+# then strong colours of ColorBrewer's Dark2 that tab10 lacks (so that a column added beside
+# tab10's is still told apart), then tab20's lighter halves: up to 25 columns never share one.
 _PALETTE = (
     *(f"tab:{c}" for c in "blue orange green red purple brown pink gray olive cyan".split()),
+    "#1b9e77",
+    "#7570b3",
+    "#e6ab02",
+    "#e7298a",
+    "#66a61e",
     "#aec7e8",
     "#ffbb78",
     "#98df8a",
@@ -164,11 +170,37 @@ def column_styles(labels, styles: dict | None = None) -> dict:
     return out
 
 
+# The columns drawn bold on the comparison plots when the caller names none: the passive
+# gait, the classical lqr and mpc, and the shipped learned controllers (their columns'
+# usual labels); every other column is drawn thinner and lighter behind them.
+HEADLINE_COLUMNS = ("passive", "lqr", "mpc", "default", "fine-tuned", "step-ppo")
+FIG_WIDTH = 10.0  # inches at FIG_DPI: 1000 px wide
+FIG_DPI = 100
+
+
+def _legend(ax, n: int) -> None:
+    """The legend outside the data, right of the axes (one column up to 14 entries)."""
+    ax.legend(
+        fontsize=8,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        borderaxespad=0.0,
+        frameon=False,
+        ncol=1 if n <= 14 else 2,
+    )
+
+
 def plot_margins(
-    results: list[dict], out_dir: Path, prefix: str = "", styles: dict | None = None
+    results: list[dict],
+    out_dir: Path,
+    prefix: str = "",
+    styles: dict | None = None,
+    emphasis=None,
 ) -> list[Path]:
     """basin, curve and push plots of one or more results: one colour and line style per
-    result's label, the same in every plot (`column_styles`; ``styles`` fixes some)."""
+    result's label, the same in every plot (`column_styles`; ``styles`` fixes some). The
+    labels of ``emphasis`` (default `HEADLINE_COLUMNS`) are drawn bold, the others thinner
+    and lighter; legends sit outside the data, right of the axes; figures are 1000 px wide."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -178,8 +210,13 @@ def plot_margins(
     paths = []
     labels = [r.get("label") or r["policy"] for r in results]
     sty = column_styles(labels, styles)
+    bold = set(HEADLINE_COLUMNS if emphasis is None else emphasis)
+    if len(results) > 1:  # one result alone is always the one to see
+        for lab in labels:
+            sty[lab]["bold"] = lab in bold
+    n = len(results)
 
-    fig, ax = plt.subplots(figsize=(7.0, 3.6), dpi=100)
+    fig, ax = plt.subplots(figsize=(FIG_WIDTH, 4.2), dpi=FIG_DPI, layout="constrained")
     names = [f"{lab}{s}" for lab in Z_LABELS for s in ("+", "-")]
     x = np.arange(len(names))
     wbar = 0.8 / len(results)
@@ -194,71 +231,78 @@ def plot_margins(
             color=st["color"],
             hatch=_HATCH.get(st["ls"]),
             edgecolor="white" if _HATCH.get(st["ls"]) else None,
+            alpha=0.45 if st.get("bold") is False else 1.0,
         )
     if any(r["basin"][c][s]["rel"] > 0 for r in results for c in Z_LABELS for s in "+-"):
         ax.set_yscale("log")  # an empty basin (all zero) has nothing to put on a log axis
     ax.set_xticks(x, names, rotation=45, ha="right")
+    for k in range(1, len(names)):  # a thin rule between the components' groups of bars
+        ax.axvline(k - 0.5, color="0.85", lw=0.6, zorder=0)
+    ax.set_xlim(-0.5, len(names) - 0.5)
     ax.set_ylabel("largest relative perturbation")
     ax.set_title("Basin along each apex component (units of |z*_i|; uncapped)")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    _legend(ax, n)
     paths.append(out_dir / f"{prefix}basin.png")
     fig.savefig(paths[-1])
     plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
+    fig, ax = plt.subplots(figsize=(FIG_WIDTH, 4.6), dpi=FIG_DPI, layout="constrained")
     for r, lab in zip(results, labels, strict=True):
         c = r["basin_curve"]
         line = ax.plot(c["sizes"], c["success"], marker="o", label=lab, ms=3, **_line(sty[lab]))[0]
         if "ci_low" in c:
             ax.fill_between(
-                c["sizes"], c["ci_low"], c["ci_high"], color=line.get_color(), alpha=0.15
+                c["sizes"], c["ci_low"], c["ci_high"], color=line.get_color(), alpha=_band(sty[lab])
             )
     ax.set_xscale("log")
     ax.set_xlabel("relative perturbation size r (random direction)")
     ax.set_ylabel("P(return)")
     ax.set_ylim(-0.05, 1.05)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    _legend(ax, n)
     paths.append(out_dir / f"{prefix}curve.png")
     fig.savefig(paths[-1])
     plt.close(fig)
 
-    fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.4), dpi=100)
+    fig, axes = plt.subplots(
+        1, 2, figsize=(FIG_WIDTH + 1.0, 4.2), dpi=FIG_DPI, layout="constrained"
+    )
     for ax, kind, unit in ((axes[0], "xdot", "m/s"), (axes[1], "th1dot", "rad/s")):
         for r, lab in zip(results, labels, strict=True):
             ax.plot(
                 r["push"][kind]["sizes"],
                 r["push"][kind]["success"],
                 marker="o",
+                ms=3,
                 label=lab,
                 **_line(sty[lab]),
             )
         ax.set_xlabel(f"kick in {kind} [{unit}]")
         ax.set_ylabel("success rate")
         ax.set_ylim(-0.05, 1.05)
-    axes[0].legend(fontsize=8)
-    fig.tight_layout()
+    _legend(axes[1], n)
     paths.append(out_dir / f"{prefix}push.png")
     fig.savefig(paths[-1])
     plt.close(fig)
 
     if all("terrain" in r for r in results):
-        fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
+        fig, ax = plt.subplots(figsize=(FIG_WIDTH, 4.6), dpi=FIG_DPI, layout="constrained")
         for r, lab in zip(results, labels, strict=True):
             t = r["terrain"]
             line = ax.plot(
                 t["sigmas_deg"], t["survival"], marker="o", label=lab, ms=3, **_line(sty[lab])
             )[0]
             ax.fill_between(
-                t["sigmas_deg"], t["ci_low"], t["ci_high"], color=line.get_color(), alpha=0.15
+                t["sigmas_deg"],
+                t["ci_low"],
+                t["ci_high"],
+                color=line.get_color(),
+                alpha=_band(sty[lab]),
             )
         ax.set_xscale("log")
         ax.set_xlabel("slope noise sigma per apex [deg]")
         ax.set_ylabel(f"P(survive {results[0]['terrain']['strides']} strides)")
         ax.set_ylim(-0.05, 1.05)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
+        _legend(ax, n)
         paths.append(out_dir / f"{prefix}terrain.png")
         fig.savefig(paths[-1])
         plt.close(fig)
@@ -266,7 +310,7 @@ def plot_margins(
     if any(r.get("mfpt") for r in results):
         from matplotlib.ticker import NullFormatter
 
-        fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
+        fig, ax = plt.subplots(figsize=(FIG_WIDTH, 4.6), dpi=FIG_DPI, layout="constrained")
         for r, lab in zip(results, labels, strict=True):
             m = r.get("mfpt") or []
             if not m:
@@ -290,8 +334,7 @@ def plot_margins(
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel("slope noise sigma per apex [deg]")
         ax.set_ylabel("MFPT [strides] (^: lower bound)")
-        ax.legend(fontsize=8)
-        fig.tight_layout()
+        _legend(ax, n)
         paths.append(out_dir / f"{prefix}mfpt.png")
         fig.savefig(paths[-1])
         plt.close(fig)
@@ -299,7 +342,15 @@ def plot_margins(
 
 
 def _line(st: dict) -> dict:
-    return {"color": st["color"], "linestyle": st["ls"]}
+    """A column's line: bold (headline, or no emphasis given) or thin and lighter."""
+    if st.get("bold") is False:
+        return {"color": st["color"], "linestyle": st["ls"], "lw": 1.0, "alpha": 0.6}
+    return {"color": st["color"], "linestyle": st["ls"], "lw": 2.2, "zorder": 3}
+
+
+def _band(st: dict) -> float:
+    """The opacity of a column's interval band: the headline's visible, the others' faint."""
+    return 0.05 if st.get("bold") is False else 0.15
 
 
 def summary_text(r: dict) -> str:

@@ -5,6 +5,9 @@
   0 and 1);
 - `t_interval`: mean and 95 % Student-t interval of a few values (the seeds of one
   controller): mean +- t_{0.975, n-1} s / sqrt(n);
+- `bounded_t_interval`: the same for a quantity that cannot go below a bound (effort,
+  sizes, times: >= 0): the Student-t interval when it respects the bound, else the t
+  interval of log(x - bound) mapped back (a log-scale interval, never below the bound);
 - `threshold_on_grid`: the largest grid value up to which a rate stays >= 0.5 (p50);
 - `crossing_on_grid`: where a rate first falls below 0.5, interpolated linearly in log x
   between the two grid points around the crossing (r50, sigma50); applied to the rate's
@@ -54,6 +57,33 @@ def t_interval(values, level: float = 0.95) -> dict:
     sd = math.sqrt(sum((x - mean) ** 2 for x in xs) / (n - 1))
     half = float(stats.t.ppf(0.5 + level / 2, n - 1)) * sd / math.sqrt(n)
     return {"mean": mean, "low": mean - half, "high": mean + half, "n": n, "method": "t"}
+
+
+def bounded_t_interval(values, lower: float = 0.0, level: float = 0.95) -> dict:
+    """`t_interval` of a quantity that cannot go below ``lower`` (effort, a basin size, a
+    time: 0): the same dict, the same ``mean`` (the arithmetic mean of the values). When the
+    Student-t interval stays at or above ``lower`` it is returned as it is (``method`` "t").
+    Otherwise the interval is computed on the log scale: the t interval of log(x - lower),
+    mapped back (``method`` "t, log scale"), widened if needed to contain the mean (the
+    geometric mean the log scale centres on lies below it); values at ``lower`` itself have
+    no logarithm, and then the interval is [lower, the t interval's high] (``method``
+    "t, cut at the bound")."""
+    ti = t_interval(values, level)
+    if ti["n"] < 2 or not ti["low"] < lower:
+        return ti
+    xs = [float(v) for v in values if v is not None and not math.isnan(float(v))]
+    if any(x < lower for x in xs):
+        raise ValueError(f"values below the bound {lower:g}: {min(xs):g}")
+    if any(x == lower for x in xs):
+        return {**ti, "low": float(lower), "method": "t, cut at the bound"}
+    lg = t_interval([math.log(x - lower) for x in xs], level)
+    low, high = lower + math.exp(lg["low"]), lower + math.exp(lg["high"])
+    return {
+        **ti,
+        "low": min(low, ti["mean"]),
+        "high": max(high, ti["mean"]),
+        "method": "t, log scale",
+    }
 
 
 def threshold_on_grid(sizes, rates, level: float = 0.5) -> float:
