@@ -41,14 +41,16 @@ def value(fn, r):
     return math.nan if v is None else float(v)
 
 
-def agg(values, digits) -> str:
-    """One value as it is; several (seeds) as mean [95 % t interval]."""
+def agg(values, digits, lower: float | None = None) -> str:
+    """One value as it is; several (seeds) as mean [95 % t interval]; a quantity that cannot go
+    below ``lower`` (effort, a size, a ratio: 0) gets an interval that respects the bound
+    (`bounded_t_interval`)."""
     vals = [v for v in values if not math.isnan(v)]
     if not vals:
         return "—"
     if len(values) == 1:
         return fmt(vals[0], digits)
-    ti = t_interval(vals)
+    ti = t_interval(vals) if lower is None else bounded_t_interval(vals, lower)
     return f"{fmt(ti['mean'], digits)} [{fmt(ti['low'], digits)}, {fmt(ti['high'], digits)}]"
 
 

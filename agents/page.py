@@ -349,7 +349,7 @@ def training_section(curves) -> str:
     ]
     return f"""## Training curves
 
-{chr(10).join(train_lines) if train_lines else "(no trained policy)"}
+{(chr(10) * 2).join(train_lines) if train_lines else "(no trained policy)"}
 
 The literal reading of Table II (`PassiveBoundLiteral-v0`, section of `configs/ppo.yaml`):
 its published apex state falls within the first stride, so its task starts on the literal

@@ -16,6 +16,7 @@ from bound_env.analysis.margins import Z_LABELS
 
 from .formatting import agg, fmt, value
 from .provenance import trained
+from .table_split import split_table
 
 # (name, value of one result, digits, ratio against passive?)
 MEASURES = [
@@ -86,11 +87,27 @@ MEASURES = [
 ]
 
 
+# measures that cannot be negative: their seed intervals respect 0 (`agg`'s ``lower``)
+NON_NEGATIVE = {
+    "basin_min",
+    "basin_min_cycle",
+    "basin_share_min",
+    "r50",
+    "terrain_sigma50_deg",
+    "mfpt_sigma_100_deg",
+    "emax",
+    "fp_residual",
+    "push_xdot",
+    "push_th1dot",
+    "effort",
+}
+
+
 def cell(g, base, name, fn, digits, ratio) -> str:
     """One cell of the full table: column ``g``'s measure ``name`` (and its ratio to ``base``)."""
     runs = g["runs"]
     vals = [value(fn, r) for r in runs]
-    text = agg(vals, digits)
+    text = agg(vals, digits, 0.0 if name in NON_NEGATIVE else None)
     if name == "basin_min":
         dirs = sorted({r["basin_min_direction"] or "—" for r in runs})
         text += f" ({', '.join(dirs)})"
@@ -112,7 +129,7 @@ def cell(g, base, name, fn, digits, ratio) -> str:
         b = value(fn, base["runs"][0])
         ratios = [v / b if b and not math.isnan(v) else math.nan for v in vals]
         if not all(math.isnan(x) for x in ratios):
-            text += f", **{agg(ratios, 3)}×**"
+            text += f", **{agg(ratios, 3, 0.0)}×**"
     return text
 
 
@@ -120,7 +137,7 @@ def basin_cell(runs, label, sym, key, field="rel", digits=3) -> str:
     """One direction's ``key``/``field`` over the runs of a column; ≥ at the cap."""
     vals = [r[key][label][sym][field] if r[key].get(label, {}).get(sym) else math.nan for r in runs]
     vals = [math.nan if v is None else float(v) for v in vals]
-    text = agg(vals, digits)
+    text = agg(vals, digits, 0.0)
     capped = sum(
         bool(r[key][label][sym].get("capped")) for r in runs if r[key].get(label, {}).get(sym)
     )
@@ -135,26 +152,19 @@ def _separator(groups) -> str:
 
 def columns_table(groups) -> str:
     """The full table: one row per `MEASURES` entry, one column per group (ratios against the
-    first group, the passive column)."""
+    first group, the passive column), as narrow tables with the headline columns first
+    (`agents.table_split.split_table`)."""
     base = groups[0]
-    head = (
-        "| measure | "
-        + " | ".join(
-            f"{g['label']} ({len(g['runs'])} seed{'s' if len(g['runs']) > 1 else ''})"
-            if trained(g)
-            else g["label"]
-            for g in groups
-        )
-        + " |"
-    )
-    rows = ["| gait | " + " | ".join(f"`{g['gait']}`" for g in groups) + " |"]
+    labels = [
+        f"{g['label']} ({len(g['runs'])} seed{'s' if len(g['runs']) > 1 else ''})"
+        if trained(g)
+        else g["label"]
+        for g in groups
+    ]
+    rows = [("gait", [f"`{g['gait']}`" for g in groups])]
     for name, title, fn, digits, ratio in MEASURES:
-        rows.append(
-            f"| {title} | "
-            + " | ".join(cell(g, base, name, fn, digits, ratio) for g in groups)
-            + " |"
-        )
-    return "\n".join([head, _separator(groups), *rows])
+        rows.append((title, [cell(g, base, name, fn, digits, ratio) for g in groups]))
+    return split_table(labels, rows)
 
 
 def seed_details(groups) -> list[str]:

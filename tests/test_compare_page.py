@@ -4,8 +4,9 @@ The page is rewritten from a fixture (tests/data/render_only: a test-budget ``ma
 of passive and of lqr, as `compute_margins` wrote them, and a ``paired.json`` with decision
 times) and must equal, byte for byte, what the code before the split of agents/compare.py made
 from the same files (``MARGINS.md``, ``headline.json`` and ``paired.expected.json`` beside
-them; one later, deliberate change of the page's text applied to ``MARGINS.md``: the
-reproducibility paragraph quotes differences, not an older page's numbers). A malformed
+them; two later, deliberate changes of the page applied to ``MARGINS.md``: the
+reproducibility paragraph quotes differences, not an older page's numbers, and the full table
+is split with the headline columns first, `agents.table_split`). A malformed
 ``margins.json``, ``paired.json`` or ``headline.json`` is one line naming the file and the key,
 exit 2, never a traceback.
 """
