@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from bound_env.analysis.margins.stats import t_interval
+from bound_env.analysis.margins.stats import bounded_t_interval, t_interval
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -248,5 +248,6 @@ def test_plain_sb3_model_is_measured_with_an_env_id(tmp_path, cli):
     assert load_controller(tmp_path / "plain").env_kwargs["max_torque"] == 80.0
     with pytest.raises(ValueError, match="was trained on PassiveBound-v1"):
         load_controller(tmp_path / "plain", env_id="PassiveBound-v0")
-    code, _, err = cli("margins", "--policy", "agents/policies/archive/stride-residual/s0", "--env-id", "PassiveBound-v1")
+    archived = "agents/policies/archive/stride-residual/s0"
+    code, _, err = cli("margins", "--policy", archived, "--env-id", "PassiveBound-v1")
     assert code != 0 and "--env-id PassiveBound-v1: policy" in err and len(err.splitlines()) == 1
