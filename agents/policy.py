@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from bound_env import STRIDE_ENV_IDS
+from bound_env.control.offset_free import SUFFIX as OF_SUFFIX
 from bound_env.resources import controllers_dir
 
 from .controllers import MLPController, ZeroController, check_gait, same_gait  # noqa: F401 - re-exported
@@ -150,8 +151,14 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     policy for PassiveBound's observation space, or would be evaluated wrongly
     (`check_policy_files`).
     """
-    if Path(str(path)).suffix in (".yaml", ".yml"):  # a classical controller's spec file
-        return _classical(str(path), gait)
+    text = str(path)
+    if text.endswith(OF_SUFFIX) and len(text) > len(OF_SUFFIX):  # NAME+of: held offset-free
+        from bound_env.control.offset_free import OffsetFree
+
+        base = load_controller(text[: -len(OF_SUFFIX)], gait=gait, force=force)
+        return OffsetFree(base, name=text)
+    if Path(text).suffix in (".yaml", ".yml"):  # a classical controller's spec file
+        return _classical(text, gait)
     path = resolve_policy(path)
     if isinstance(path, str):
         return CONTROLLERS[path][0](gait=gait)

@@ -7,6 +7,9 @@ PassiveBound-v0 env use):
 - ``on_apex(z, time_since_apex)`` (optional): called with the apex state z (SI, float64) at
   every apex: after a reset onto an apex with 0.0, and after each step whose info has
   ``"apex_z"``, with the time elapsed since that apex at the end of the step [s];
+- ``stateful`` and ``reset()`` (optional): a controller with memory across strides (e.g.
+  `bound_env.control.offset_free.OffsetFree`) forgets its episode in ``reset()``, which the
+  loops call at each start (`reset_controller`); it has no stateless ``interval_actions``;
 - ``fingerprint() -> str``, ``name``, ``env_kwargs`` (the env keyword arguments the controller
   was designed for: gait, max_torque, dt);
 - ``interval_actions(Z) -> A`` (a stride controller): for n apex states at once, the actions
@@ -93,6 +96,14 @@ class StridePlans:
     def apex(self, i: int, z, time_since_apex: float = 0.0) -> None:
         self.taus[i] = self.ctrl.apex_torques(np.asarray(z, dtype=float))
         self.t0[i] = time_since_apex
+
+
+def reset_controller(controller) -> None:
+    """Forget a stateful controller's episode (``reset()``, e.g. `OffsetFree`'s estimate): the
+    loops call it at the start of each episode; memoryless controllers are left alone."""
+    reset = getattr(controller, "reset", None)
+    if getattr(controller, "stateful", False) and callable(reset):
+        reset()
 
 
 def notify_apex(controller, obs, info) -> None:
