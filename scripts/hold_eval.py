@@ -94,16 +94,21 @@ def main(argv=None) -> int:
     ap.add_argument("--strides", type=int, default=100)
     ap.add_argument("--gait", default="default")
     ap.add_argument("--out", type=Path, default=None)
-    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
-                    help="OffsetFree settings for '+of' policies (gain, deadband, max_shift)")  # fmt: skip
+    ap.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="OffsetFree settings of the '+of' policies (estimator, gain, deadband, max_shift)",
+    )
     args = ap.parse_args(argv)
-    if not 0.0 <= min(args.delta) and max(args.delta) < 1.0:
+    if not (0.0 <= min(args.delta) and max(args.delta) < 1.0):
         print("error: --delta must lie in [0, 1)", file=sys.stderr)
         return 2
     overrides = {}
     for item in args.set:
         k, _, v = item.partition("=")
-        overrides[k] = float(v)
+        overrides[k] = v if k == "estimator" else float(v)
     tag = ",".join(f"{k}={v:g}" for k, v in sorted(overrides.items()))
     seen = set()
     if args.out is not None and args.out.exists():
@@ -118,9 +123,12 @@ def main(argv=None) -> int:
                 continue
             if ctrl is None:
                 ctrl = load(name, args.gait)
-                for k, v in overrides.items():
-                    if getattr(ctrl, "stateful", False):
-                        setattr(ctrl, k, v)
+                if overrides and getattr(ctrl, "stateful", False):
+                    from bound_env.control import OffsetFree
+
+                    ctrl = OffsetFree(
+                        ctrl.inner, name=ctrl.name, **{**ctrl.settings(), **overrides}
+                    )
             _, aux = sample_plants(args.gait, delta, args.robots, args.seed)
             t0 = time.time()
             res = hold(ctrl, aux, args.strides, args.gait)
@@ -131,9 +139,17 @@ def main(argv=None) -> int:
                 flush=True,
             )
             if args.out is not None:
-                row = {"policy": name, "delta": delta, "seed": args.seed, "set": tag,
-                       "n": args.robots, "strides": args.strides, "held": n_held,
-                       "median_tail_effort": eff, **res}  # fmt: skip
+                row = {
+                    "policy": name,
+                    "delta": delta,
+                    "seed": args.seed,
+                    "set": tag,
+                    "n": args.robots,
+                    "strides": args.strides,
+                    "held": n_held,
+                    "median_tail_effort": eff,
+                    **res,
+                }
                 with args.out.open("a") as f:
                     f.write(json.dumps(row) + "\n")
     return 0

@@ -135,7 +135,9 @@ class OffsetFree:
         estimator: str = OF_DEFAULTS["estimator"],
     ):
         if estimator not in ESTIMATORS:
-            raise ValueError(f"offset_free: estimator must be one of {ESTIMATORS}, got {estimator!r}")
+            raise ValueError(
+                f"offset_free: estimator must be one of {ESTIMATORS}, got {estimator!r}"
+            )
         self.estimator = estimator
         if not callable(getattr(inner, "interval_actions", None)) or not callable(
             getattr(inner, "on_apex", None)

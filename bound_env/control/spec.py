@@ -193,20 +193,20 @@ def load_spec(spec: str | Path) -> ControllerSpec:
 
 
 def check_offset_free(value, path) -> dict:
-    """The ``offset_free`` block: ``true`` (the defaults) or a mapping of some of
+    """The ``offset_free`` block: ``true`` (the defaults), ``false`` (none) or a mapping of some of
     ``estimator`` (torque | innovation), ``gain`` (0 < L <= 1), ``deadband`` and ``max_shift``
     (`bound_env.control.offset_free`)."""
-    from .offset_free import OF_DEFAULTS, OF_LIMITS
+    from .offset_free import ESTIMATORS, OF_DEFAULTS, OF_LIMITS
 
     if value is True:
         return dict(OF_DEFAULTS)
+    if value is False:
+        return None
     if not isinstance(value, dict):
         raise ValueError(
             f"{path}: offset_free must be true or a mapping of {', '.join(OF_DEFAULTS)}, "
             f"got {value!r}"
         )
-    from .offset_free import ESTIMATORS
-
     out = dict(OF_DEFAULTS)
     for key, v in value.items():
         if key not in OF_DEFAULTS:
@@ -218,12 +218,11 @@ def check_offset_free(value, path) -> dict:
                 raise ValueError(
                     f"{path}: offset_free.estimator must be one of {ESTIMATORS}, got {v!r}"
                 )
+            out[key] = v
             continue
         lo, hi = OF_LIMITS[key]
-        out[key] = schema.real(
-            float(v) if isinstance(v, str) else v, f"{path}: offset_free.{key}", lo, hi,
-            lo_open=key == "gain",
-        )  # fmt: skip
+        value_ = _positive(path, f"offset_free.{key}", v) if isinstance(v, str) else v
+        out[key] = schema.real(value_, f"{path}: offset_free.{key}", lo, hi, lo_open=key == "gain")
     return out
 
 
