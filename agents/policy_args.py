@@ -16,7 +16,8 @@ POLICY_HELP = (
     "'ppo-v1-final/s0' .. 's2', 'stride-residual/s0' .. 's2'), a "
     "classical controller (" + _CONTROLLER_NAMES + ": "
     "bound_env.control, or a controller spec .yaml), or a path: a run/policy folder, a "
-    "model .zip, an rl-zoo3 run folder"
+    "model .zip, an rl-zoo3 run folder; any stride controller's name + '+of' (e.g. "
+    "'default+of', 'mpc+of') holds the robot's own cycle (bound_env.control.offset_free)"
 )
 
 

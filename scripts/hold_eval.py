@@ -79,6 +79,46 @@ def summary(res: dict) -> tuple[int, float]:
     return int(held.sum()), float(np.median(eff)) if eff.size else float("nan")
 
 
+def table(path: Path, seeds: list[int]) -> str:
+    """A Markdown table of the rows of ``path`` on ``seeds`` (pooled): held / n with its
+    Wilson 95 % interval and the median tail |tau| of the held robots, and for each 'NAME+of'
+    the paired count against NAME on the same plants (held only by +of / only by NAME,
+    exact McNemar p)."""
+    from bound_env.analysis.margins.stats import wilson_interval
+    from bound_env.analysis.paired import mcnemar_exact
+
+    rows = [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
+    rows = [r for r in rows if r["seed"] in seeds and not r.get("set")]
+    pols = list(dict.fromkeys(r["policy"] for r in rows))
+    deltas = sorted({r["delta"] for r in rows})
+    pooled: dict = {}
+    for r in rows:
+        key = (r["policy"], r["delta"])
+        h, e = pooled.setdefault(key, ({}, {}))
+        h[r["seed"]], e[r["seed"]] = r["held"], r["tail_effort"]
+    head = "| policy | " + " | ".join(f"±{d:.0%}" for d in deltas) + " |"
+    out = [head, "| --- |" + " --- |" * len(deltas)]
+    for p in pols:
+        cells = []
+        for d in deltas:
+            if (p, d) not in pooled or set(pooled[(p, d)][0]) != set(seeds):
+                cells.append("")
+                continue
+            held = np.concatenate([pooled[(p, d)][0][s] for s in seeds]).astype(bool)
+            eff = np.concatenate([pooled[(p, d)][1][s] for s in seeds])
+            lo, hi = wilson_interval(int(held.sum()), held.size)
+            med = f", {np.median(eff[held]):.2g} N·m" if held.any() else ""
+            cell = f"{held.sum()}/{held.size} [{lo:.2f}, {hi:.2f}]{med}"
+            base = p[: -len("+of")] if p.endswith("+of") else None
+            if base is not None and (base, d) in pooled and set(pooled[(base, d)][0]) == set(seeds):
+                b = np.concatenate([pooled[(base, d)][0][s] for s in seeds]).astype(bool)
+                m = mcnemar_exact(held, b)
+                cell += f"; +{int((held & ~b).sum())}/−{int((b & ~held).sum())} p {m['p']:.2g}"
+            cells.append(cell)
+        out.append(f"| {p} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
 def load(name: str, gait: str):
     from agents.policy import load_controller
 
@@ -101,7 +141,20 @@ def main(argv=None) -> int:
         metavar="KEY=VALUE",
         help="OffsetFree settings of the '+of' policies (estimator, gain, deadband, max_shift)",
     )
+    ap.add_argument(
+        "--table",
+        type=int,
+        nargs="+",
+        metavar="SEED",
+        help="print the Markdown table of --out on these seeds (pooled) and exit",
+    )
     args = ap.parse_args(argv)
+    if args.table:
+        if args.out is None or not args.out.is_file():
+            print("error: --table reads the rows of --out FILE", file=sys.stderr)
+            return 2
+        print(table(args.out, args.table))
+        return 0
     if not (0.0 <= min(args.delta) and max(args.delta) < 1.0):
         print("error: --delta must lie in [0, 1)", file=sys.stderr)
         return 2

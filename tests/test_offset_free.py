@@ -153,6 +153,10 @@ def test_loading_by_name_and_spec(lqr):
         assert is_controller(name)
         assert isinstance(load_policy(name), OffsetFree)
     assert load_controller("lqr-of").fingerprint() != load_controller("lqr").fingerprint()
+    learned = load_policy("default+of")  # the learned controller, wrapped
+    assert isinstance(learned, OffsetFree) and learned.name == "default+of"
+    state = learned.start(2)
+    assert np.all(learned.plan_actions(state, np.tile(Z_STAR, (2, 1))) == 0.0)
     d = load_policy("deadbeat+of")
     assert isinstance(d, OffsetFree) and d.inner.kind == "deadbeat"
     assert not is_controller("nonsense+of")

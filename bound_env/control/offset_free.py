@@ -14,22 +14,32 @@ with a constant disturbance observer):
       z_{k+1} - z* ~ A (z_k - z*) + B a_k + d,
 
   with d a constant offset, zero on the nominal plant (`interval_model`);
-- at each apex, the offset estimate is updated from the last stride (gain ``gain``, 0 < L <= 1)::
-
-      e = (z_{k+1} - z*) - A (z_k - z*) - B a_k - d^,   d^ <- d^ + L e,
-
-  skipped when max |e_i / s_i| <= ``deadband`` (s: the apex scales), so that the integrator's
-  round-off on the nominal cycle (1e-10) leaves d^ exactly 0;
 - the target is the cycle on which the plant needs no steady torque,
-  z_ss = z* + (I - A)^-1 d^ (its normalized shift limited to ``max_shift``), and the inner
-  controller is fed z - z_ss + z*: it acts on the error from z_ss as it acts on the error
-  from z*.
+  z_ss = z* + (I - A)^-1 d^ (its normalized shift max |z_ss - z*|_i / s_i limited to
+  ``max_shift``; s: the apex scales), and the inner controller is fed z - z_ss + z*: it acts
+  on the error from z_ss as it acts on the error from z*;
+- at each apex the estimate d^ is updated from the last stride, by one of two estimators:
 
-At a fixed point z_f of the closed loop the estimate has converged, d^ = (I - A)(z_f - z*) -
-B a_f, so z_f - z_ss = (I - A)^-1 B a_f; for the LQR a_f = -W G (z_f - z_ss), hence
-(I + W G (I - A)^-1 B) a_f = 0 and a_f = 0: the loop settles only on a cycle that needs no
-torque, stable or not for the passive robot (the LQR stabilizes it). On the nominal plant from
-z*, d^ stays 0 and the wrapped controller is the inner one, bit for bit.
+  ``innovation`` (a disturbance observer): e = (z_{k+1} - z*) - A (z_k - z*) - B a_k - d^,
+  d^ <- d^ + L e. At a fixed point z_f, d^ = (I - A)(z_f - z*) - B a_f, so
+  z_f - z_ss = (I - A)^-1 B a_f, and for the LQR a_f = -K (z_f - z_ss), hence
+  (I + K (I - A)^-1 B) a_f = 0: a_f = 0.
+
+  ``torque`` (the default, chosen on validation plants): the steady torque is integrated
+  away, d^ <- d^ - L (I - A) H^+ a_k, i.e. the target moves by -L H^+ a_k, where
+  H = (I + K (I - A)^-1 B)^-1 K is the model's steady torque a = -H (z_p - z_ss) with which
+  the inner loop (its gain K = -da/dz at z*) holds a target z_ss off the plant's passive
+  cycle z_p. The target stops only where the torque is zero. It reads only the torques the
+  inner controller chose, not the model's one-stride prediction, whose error on a
+  mismatched plant the innovation estimator takes for an offset and chases.
+
+  Updates with max |e_i / s_i| <= ``deadband`` are not made, so that the integrator's
+  round-off on the nominal cycle (1e-10) leaves d^ exactly 0: on the nominal plant from z*
+  the wrapped controller is the inner one, bit for bit, and its torque at z* exactly zero.
+
+Either way the loop can settle only on a cycle that needs no torque, stable or not for the
+passive robot (the inner controller stabilizes it), as long as the target stays within
+``max_shift``; beyond, it holds the limited target with a steady torque.
 
 State. The wrapper remembers, per robot, d^ and the last stride's apex state and actions. The
 step protocol (``on_apex`` / ``__call__``, `PlainPolicy`, `ClosedLoop` in its env loop) keeps
