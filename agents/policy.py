@@ -118,6 +118,12 @@ def policy_names() -> list[str]:
     return list(CONTROLLERS) + [n for n in shipped_policies() if n not in CONTROLLERS]
 
 
+def unwrapped_name(spec: str | Path) -> str | Path:
+    """The policy ``NAME+of`` wraps (`bound_env.control.offset_free`), else ``spec``."""
+    text = str(spec)
+    return text[: -len(OF_SUFFIX)] if text.endswith(OF_SUFFIX) and text != OF_SUFFIX else spec
+
+
 def resolve_policy(spec: str | Path) -> str | Path:
     """A built-in controller's name (returned as is), a shipped policy's folder, or a path."""
     text = str(spec)
@@ -152,11 +158,10 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     (`check_policy_files`).
     """
     text = str(path)
-    if text.endswith(OF_SUFFIX) and len(text) > len(OF_SUFFIX):  # NAME+of: held offset-free
+    if unwrapped_name(text) != text:  # NAME+of: NAME held on the robot's own cycle
         from bound_env.control.offset_free import OffsetFree
 
-        base = load_controller(text[: -len(OF_SUFFIX)], gait=gait, force=force)
-        return OffsetFree(base, name=text)
+        return OffsetFree(load_controller(unwrapped_name(text), gait, force), name=text)
     if Path(text).suffix in (".yaml", ".yml"):  # a classical controller's spec file
         return _classical(text, gait)
     path = resolve_policy(path)

@@ -157,6 +157,13 @@ def test_loading_by_name_and_spec(lqr):
     assert isinstance(learned, OffsetFree) and learned.name == "default+of"
     state = learned.start(2)
     assert np.all(learned.plan_actions(state, np.tile(Z_STAR, (2, 1))) == 0.0)
+    from agents.rollout import load_policy as rollout_policy
+
+    make, act = rollout_policy("default+of")  # the plain loop, through the base's env
+    env = make()
+    obs, info = env.reset(options={"apex_state": Z_STAR})
+    assert act(obs, info)[0] == 0.0 and isinstance(act.controller, OffsetFree)
+    env.close()
     d = load_policy("deadbeat+of")
     assert isinstance(d, OffsetFree) and d.inner.kind == "deadbeat"
     assert not is_controller("nonsense+of")
