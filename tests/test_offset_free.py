@@ -164,6 +164,8 @@ def test_loading_by_name_and_spec(lqr):
     obs, info = env.reset(options={"apex_state": Z_STAR})
     assert act(obs, info)[0] == 0.0 and isinstance(act.controller, OffsetFree)
     env.close()
+    mpc = load_policy("mpc+of")
+    assert mpc.inner.decision_kinds == [] and mpc.inner.decision_seconds == []
     d = load_policy("deadbeat+of")
     assert isinstance(d, OffsetFree) and d.inner.kind == "deadbeat"
     assert not is_controller("nonsense+of")

@@ -181,7 +181,12 @@ class OffsetFree:
         m = self.model
         h = 1e-4 * m.scales
         Z = np.concatenate([m.z_ref + np.diag(h), m.z_ref - np.diag(h)])
+        logs = [getattr(self.inner, k, None) for k in ("decision_seconds", "decision_kinds")]
+        sizes = [len(x) if isinstance(x, list) else 0 for x in logs]
         acts = np.atleast_2d(self.inner.interval_actions(Z))
+        for x, n0 in zip(logs, sizes, strict=True):  # the probes are not decisions (the MPC's log)
+            if isinstance(x, list):
+                del x[n0:]
         a = np.zeros((12, m.n))
         k = min(m.n, acts.shape[1])
         a[:, :k] = acts[:, :k]
