@@ -20,6 +20,7 @@ from functools import partial
 from pathlib import Path
 
 from bound_env import STRIDE_ENV_IDS
+from bound_env.control.offset_free import SUFFIX as OF_SUFFIX
 from bound_env.resources import controllers_dir
 
 from .controllers import ZeroController
@@ -78,6 +79,12 @@ def shipped_policies() -> dict[str, Path]:
 def policy_names() -> list[str]:
     """Every name ``--policy`` accepts besides a path."""
     return list(CONTROLLERS) + [n for n in shipped_policies() if n not in CONTROLLERS]
+
+
+def unwrapped_name(spec: str | Path) -> str | Path:
+    """The policy ``NAME+of`` wraps (`bound_env.control.offset_free`), else ``spec``."""
+    text = str(spec)
+    return text[: -len(OF_SUFFIX)] if text.endswith(OF_SUFFIX) and text != OF_SUFFIX else spec
 
 
 def resolve_policy(spec: str | Path) -> str | Path:

@@ -33,6 +33,7 @@ from .names import (  # noqa: F401 - the names API, importable from here as befo
     register_controller,
     resolve_policy,
     shipped_policies,
+    unwrapped_name,
 )
 from .policy_files import (  # noqa: F401 - the policy-file API, importable from here as before
     DYNAMICS_KWARGS,
@@ -90,6 +91,11 @@ def load_controller(
     policy for PassiveBound's observation space, or would be evaluated wrongly
     (`check_policy_files`).
     """
+    text = str(path)
+    if unwrapped_name(text) != text:  # NAME+of: NAME held on the robot's own cycle
+        from bound_env.control.offset_free import OffsetFree
+
+        return OffsetFree(load_controller(unwrapped_name(text), gait, force, env_id), name=text)
     if env_id is not None:
         check_env_id(env_id)
         if Path(str(path)).suffix in (".yaml", ".yml") or isinstance(resolve_policy(path), str):

@@ -16,7 +16,9 @@ POLICY_HELP = (
     "'passive', a shipped policy (" + names_text("'") + "; 'default' is the learned "
     "controller chosen on validation), a classical controller (" + _CONTROLLER_NAMES + ": "
     "bound_env.control, or a controller spec .yaml), or a path: a run/policy folder, a "
-    "model .zip, an rl-zoo3 run folder (archived policies: agents/policies/archive/NAME)"
+    "model .zip, an rl-zoo3 run folder (archived policies: agents/policies/archive/NAME); "
+    "any stride controller's name + '+of' (e.g. 'default+of', 'mpc+of') holds the robot's own "
+    "cycle (bound_env.control.offset_free)"
 )
 
 

@@ -42,7 +42,7 @@ import numpy as np
 from bound_env.control.plain import FULL_OBS_DIM, PlainPolicy
 
 from .controllers import MLPController, check_gait
-from .policy import load_controller, resolve_policy
+from .policy import load_controller, resolve_policy, unwrapped_name
 from .policy_files import find_policy_files, read_policy_section
 
 MAX_VIDEO_FRAMES = 2000  # frames a rollout's video holds in memory (~0.7 MB each at 640x360)
@@ -88,7 +88,7 @@ def load_policy(path, gait=None, force: bool = False, env_id: str | None = None)
 
     gym.register_envs(bound_env)
     ctrl = load_controller(path, gait=gait, force=force, env_id=env_id)
-    resolved = resolve_policy(path)
+    resolved = resolve_policy(unwrapped_name(path))  # NAME+of: NAME's env and wrappers
     wrappers = [] if isinstance(resolved, str) else _policy_wrappers(resolved)
     env_kwargs = dict(ctrl.env_kwargs)
     if gait is not None:

@@ -88,6 +88,14 @@ class StridePlans:
         self.t0[i] = time_since_apex
 
 
+def reset_controller(controller) -> None:
+    """Forget a stateful controller's episode (``reset()``, e.g. `OffsetFree`'s estimate): the
+    loops call it at the start of each episode; memoryless controllers are left alone."""
+    reset = getattr(controller, "reset", None)
+    if getattr(controller, "stateful", False) and callable(reset):
+        reset()
+
+
 def notify_apex(controller, obs, info) -> None:
     """The loop side of the ``on_apex`` protocol, for any rollout of PassiveBound-v0: call it
     after ``reset`` and after every ``step`` with that call's observation and info. It calls

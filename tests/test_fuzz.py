@@ -586,6 +586,9 @@ def test_a_ppo_folder_with_a_choice_npz_dropped_in_is_refused(tmp_path):
         ("safe: .nan", "safe"),
         ("max_torque: 1.0e+9", "max_torque"),
         ("cem_samples: true", "cem_samples"),
+        ("offset_free: {gain: .nan}", "offset_free.gain"),
+        ("offset_free: {max_shift: '-1'}", "offset_free.max_shift"),
+        ("offset_free: {estimator: 3}", "offset_free.estimator"),
     ],
 )
 def test_bad_controller_specs_are_refused_by_key(tmp_path, text, word):

@@ -17,12 +17,15 @@ for each action (`bound_env.control.controllers` describes the protocol), or wra
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from .controllers import DampingFeedback, StrideFeedback, notify_apex
 from .design import Linearization, deadbeat_gain, linearize, lqr_gain, spectral_radius
+from .offset_free import SUFFIX as OF_SUFFIX
+from .offset_free import OffsetFree, interval_model
 from .plain import PlainPolicy
 from .spec import CONTROLLERS_DIR, ControllerSpec, load_spec, read_gain, weights
 
@@ -31,6 +34,7 @@ __all__ = [
     "ControllerSpec",
     "DampingFeedback",
     "Linearization",
+    "OffsetFree",
     "PlainPolicy",
     "StrideFeedback",
     "controller_names",
@@ -39,6 +43,7 @@ __all__ = [
     "linearize",
     "load_controller",
     "load_spec",
+    "interval_model",
     "lqr_gain",
     "notify_apex",
     "spectral_radius",
@@ -51,8 +56,11 @@ def controller_names() -> list[str]:
 
 
 def is_controller(policy) -> bool:
-    """Whether ``policy`` (a string) names a controller spec: a shipped name or a .yaml."""
+    """Whether ``policy`` (a string) names a controller spec: a shipped name or a .yaml
+    (either with the suffix ``+of``: held offset-free)."""
     s = str(policy)
+    if s.endswith(OF_SUFFIX):
+        s = s[: -len(OF_SUFFIX)]
     return s in controller_names() or Path(s).suffix in (".yaml", ".yml")
 
 
@@ -61,7 +69,12 @@ def load_controller(spec, gait: str | None = None):
     (default: the spec's). LQR and deadbeat linearize the stride map there (~0.1 s)."""
     from ..stride_task import StrideTask
 
+    if isinstance(spec, (str, Path)) and str(spec).endswith(OF_SUFFIX) and str(spec) != OF_SUFFIX:
+        return OffsetFree(load_controller(str(spec)[: -len(OF_SUFFIX)], gait), name=str(spec))
     s = spec if isinstance(spec, ControllerSpec) else load_spec(spec)
+    if s.offset_free is not None:
+        inner = load_controller(replace(s, offset_free=None), gait)
+        return OffsetFree(inner, name=s.name, **s.offset_free)
     gait = str(gait) if gait is not None else s.gait
     if s.controller == "damping":
         return DampingFeedback(s.name, s.c, s.max_torque, s.dt, gait)

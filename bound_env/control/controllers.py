@@ -7,6 +7,9 @@ PassiveBound-v0 env use):
 - ``on_apex(z, time_since_apex)`` (optional): called with the apex state z (SI, float64) at
   every apex: after a reset onto an apex with 0.0, and after each step whose info has
   ``"apex_z"``, with the time elapsed since that apex at the end of the step [s];
+- ``stateful`` and ``reset()`` (optional): a controller with memory across strides (e.g.
+  `bound_env.control.offset_free.OffsetFree`) forgets its episode in ``reset()``, which the
+  loops call at each start (`reset_controller`); it has no stateless ``interval_actions``;
 - ``fingerprint() -> str``, ``name``, ``env_kwargs`` (the env keyword arguments the controller
   was designed for: gait, max_torque, dt);
 - ``interval_actions(Z) -> A`` (a stride controller): for n apex states at once, the actions
@@ -43,6 +46,7 @@ from ..stride_protocol import (  # noqa: F401
     interval_averages,
     notify_apex,
     observed_times,
+    reset_controller,
 )
 from ..stride_task import TorqueBasis
 

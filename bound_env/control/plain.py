@@ -38,7 +38,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..stride_protocol import notify_apex
+from ..stride_protocol import notify_apex, reset_controller
 from ..task import DEFAULT_DT, OBS_NAMES
 
 FULL_OBS_DIM = len(OBS_NAMES) - 1  # the default observation (x_g excluded)
@@ -68,7 +68,9 @@ class PlainPolicy:
         self.restart()
 
     def restart(self) -> None:
-        """Forget the episode (the next call must bring a reset's info)."""
+        """Forget the episode (the next call must bring a reset's info), and a stateful
+        controller's memory of it."""
+        reset_controller(self._ctrl)
         self._started = False
         self._info = None  # the last info seen (a repeat call announces nothing)
         self._time = None

@@ -61,11 +61,13 @@ MPC_LIMITS = {
 }
 MAX_TORQUE_LIMIT = 1e4  # [N m]: a saturation above this is certainly a mistake
 SPEC_KEYS = {
-    "lqr": COMMON_KEYS + ("basis", "K", "Q", "R", "jacobian", "gain"),
-    "deadbeat": COMMON_KEYS + ("basis", "K", "jacobian", "gain"),
+    "lqr": COMMON_KEYS + ("basis", "K", "Q", "R", "jacobian", "gain", "offset_free"),
+    "deadbeat": COMMON_KEYS + ("basis", "K", "jacobian", "gain", "offset_free"),
     "damping": COMMON_KEYS + ("c",),
     # the MPC's terminal controller is an LQR (its keys), plus the search (bound_env.control.mpc)
-    "mpc": COMMON_KEYS + ("basis", "K", "Q", "R", "jacobian", "gain") + tuple(MPC_DEFAULTS),
+    "mpc": COMMON_KEYS
+    + ("basis", "K", "Q", "R", "jacobian", "gain", "offset_free")
+    + tuple(MPC_DEFAULTS),
 }
 DEFAULT_MAX_TORQUE = 80.0  # [N m]: the saturation of the learned policies
 DEFAULT_DT = 0.01  # control interval of the step env [s]
@@ -88,6 +90,9 @@ class ControllerSpec:
     gain: object = None  # an explicit gain (K x 6, SI): a nested list or a file
     c: float = 0.0  # damping [N m s/rad]
     extra: dict = field(default_factory=dict)
+    # None, or the settings of `bound_env.control.offset_free.OffsetFree` (checked): the
+    # controller held on the plant's own cycle
+    offset_free: object = None
 
     @property
     def name(self) -> str:
@@ -182,8 +187,44 @@ def load_spec(spec: str | Path) -> ControllerSpec:
         raise ValueError(f"{path}: K must be an integer, got {data['K']!r}")
     if kind == "mpc":
         out.extra = check_mpc_settings({k: data.get(k, v) for k, v in MPC_DEFAULTS.items()}, path)
+    if out.offset_free is not None:
+        out.offset_free = check_offset_free(out.offset_free, path)
     if out.jacobian not in ("fd", "variational"):
         raise ValueError(f"{path}: jacobian must be 'fd' or 'variational', got {out.jacobian!r}")
+    return out
+
+
+def check_offset_free(value, path) -> dict:
+    """The ``offset_free`` block: ``true`` (the defaults), ``false`` (none) or a mapping of some of
+    ``estimator`` (torque | innovation), ``gain`` (0 < L <= 1), ``deadband`` and ``max_shift``
+    (`bound_env.control.offset_free`)."""
+    from .offset_free import ESTIMATORS, OF_DEFAULTS, OF_LIMITS
+
+    if value is True:
+        return dict(OF_DEFAULTS)
+    if value is False:
+        return None
+    if not isinstance(value, dict):
+        raise ValueError(
+            f"{path}: offset_free must be true or a mapping of {', '.join(OF_DEFAULTS)}, "
+            f"got {value!r}"
+        )
+    out = dict(OF_DEFAULTS)
+    for key, v in value.items():
+        if key not in OF_DEFAULTS:
+            raise ValueError(
+                f"{path}: unknown key {key!r} in offset_free (allowed: {', '.join(OF_DEFAULTS)})"
+            )
+        if key == "estimator":
+            if v not in ESTIMATORS:
+                raise ValueError(
+                    f"{path}: offset_free.estimator must be one of {ESTIMATORS}, got {v!r}"
+                )
+            out[key] = v
+            continue
+        lo, hi = OF_LIMITS[key]
+        value_ = _positive(path, f"offset_free.{key}", v) if isinstance(v, str) else v
+        out[key] = schema.real(value_, f"{path}: offset_free.{key}", lo, hi, lo_open=key == "gain")
     return out
 
 

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...control.controllers import StridePlans
 from ...events import PHASES
 from ...params import Z_IN_Y
 from ...stride_map import (
@@ -20,6 +19,7 @@ from ...stride_map import (
     max_intervals,
     to_next_apex,
 )
+from ...stride_protocol import StridePlans, reset_controller
 from ...task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_STRIDES
 from .budget import DEFAULT_SEED, Budget
 
@@ -153,6 +153,7 @@ class ClosedLoop:
         ``max_strides`` (or, with ``survive_only``, did not fall in ``max_strides``)."""
         z = np.asarray(z0, dtype=float)
         self.last_phase = None
+        reset_controller(self.controller)  # a run is an episode (a stateful controller)
         for n in range(1, max_strides + 1):
             out = self.stride(z, kick if n == 1 else None)
             if out.z1 is None:
@@ -267,6 +268,7 @@ class ClosedLoop:
         obs, info = env.reset(seed=seed, options={"apex_state": z0})
         if info["failure"] is not None:
             return False, 0, info["failure"]
+        reset_controller(ctrl)
         if self.on_apex is not None:
             self.on_apex(z0, 0.0)
         while True:
@@ -350,6 +352,7 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
     copies = None if batched or plans is not None else [copy.deepcopy(ctrl) for _ in range(n)]
     if copies is not None and on_apex is not None:
         for c in copies:
+            reset_controller(c)
             c.on_apex(z0.copy(), 0.0)
     strides = np.zeros(n, dtype=np.int64)
     fell = np.zeros(n, dtype=np.int64)
