@@ -3,6 +3,8 @@ decision_shares)."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from agents.decisions import (
@@ -25,26 +27,56 @@ def test_timing_states_are_the_same_for_everyone_and_past_the_safe_radius():
     assert np.all(np.max(np.abs(a - z_star) / np.asarray(APEX_SCALES), axis=1) > FAIR_SAFE)
 
 
+class Sleeper:
+    """A gated planner whose decision at z takes z[0] milliseconds (and counts its calls)."""
+
+    def __init__(self):
+        self.decision_kinds, self.calls = [], 0
+
+    def coefficients(self, z):
+        self.calls += 1
+        time.sleep(1e-3 * z[0])
+        return np.zeros(8)
+
+
 def test_only_gated_planners_are_timed():
     default = load_controller("default")
     assert planner_of(load_controller("lqr")) is None  # no gate, no search: not timed
     assert planner_of(default) is default
     Z = timing_states(default.z_ref, 12345)[:5]
-    t = time_decisions(default, Z)
-    assert t["n"] == 5 and 0 < t["p50"] <= t["p99"] <= t["max"]
     assert time_decisions(load_controller("passive"), Z) is None
+
+
+def test_decision_times_are_the_decisions_own():
+    """One timed decision per state (after one untimed warm-up call), each as long as the
+    planner's own work: a planner that sleeps 0, 1, 2, 3 and 8 ms."""
+    s = Sleeper()
+    Z = np.zeros((5, 6))
+    Z[:, 0] = [2.0, 0.0, 8.0, 1.0, 3.0]
+    t = time_decisions(s, Z)
+    assert s.calls == 6 and t["n"] == 5
+    assert 2e-3 <= t["p50"] < 2e-3 + 1.5e-3  # the median state's 2 ms
+    assert 8e-3 <= t["max"] < 8e-3 + 4e-3 and t["p99"] > 5e-3
+    assert 2.8e-3 <= t["mean"] < 2.8e-3 + 1.5e-3
 
 
 def test_decision_shares_count_what_the_controller_recorded():
     default = load_controller("default")
     rec = Decisions(default)
     default.coefficients(default.z_ref)  # the gate
-    z = default.z_ref + 0.3 * np.abs(default.z_ref) * np.array([0, 0, 0, 1, 0, 0])
-    default.coefficients(z)
+    Z = timing_states(default.z_ref, 12345)[:12]  # all past the safe radius
+    for z in Z:
+        default.coefficients(z)
     out = rec.into({})
-    assert sum(out["decision_kinds"].values()) == 2 and out["decision_kinds"]["gate"] == 1
-    s = decision_shares([out, {"decision_kinds": {"gate": 0, "lqr": 2, "override": 0}}])
-    assert s["n"] == 4 and abs(s["gate"] + s["lqr"] + s["override"] - 1) < 1e-12
+    # each past the gate: row 0 (the LQR's plan) or an override, as the network picks
+    picked = np.argmax(default.logits(Z), axis=1)
+    want = {"gate": 1, "lqr": int(np.sum(picked == 0)), "override": int(np.sum(picked > 0))}
+    assert out["decision_kinds"] == want
+    s = decision_shares([{"decision_kinds": {"gate": 1, "lqr": 0, "override": 1}}, {}, out])
+    n = 2 + len(Z) + 1
+    assert s["n"] == n and s["counts"]["gate"] == 2
+    assert s["gate"] == 2 / n and s["lqr"] == want["lqr"] / n
+    assert s["override"] == (1 + want["override"]) / n
     assert decision_shares([{}]) is None
     assert Decisions(load_controller("lqr")).into({}) == {}  # no gate: nothing recorded
 
