@@ -21,6 +21,11 @@ So a stride here is bit-identical to the stride of a PassiveBound-v0 episode sta
 ``reset(options={"apex_state": z})`` and stepped with the same actions (tested), and zero
 action is the passive Poincare map P of eq. 18 up to the integrator tolerance.
 
+For planning only, ``StrideMap(segments=True)`` integrates each run of equal interval actions
+as one segment and stops at the apex (`stride_segments`): the same piecewise-constant torque,
+so the same stride to the integrator tolerance, but not bit for bit (the step env restarts
+its integration at every interval); the MPC plans on it.
+
 What it owns (one definition each): `EVAL_RTOL`, the integrator tolerance of every evaluation;
 `RETURN_TOL`, "returned to the cycle"; `max_intervals`, the step limit of one stride; and the
 failure names of the outcomes (`bound_env.task.FAILURE_NAMES`, from `bound_env.events`).

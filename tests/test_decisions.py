@@ -55,9 +55,10 @@ def test_decision_times_are_the_decisions_own():
     Z[:, 0] = [2.0, 0.0, 8.0, 1.0, 3.0]
     t = time_decisions(s, Z)
     assert s.calls == 6 and t["n"] == 5
-    assert 2e-3 <= t["p50"] < 2e-3 + 1.5e-3  # the median state's 2 ms
-    assert 8e-3 <= t["max"] < 8e-3 + 4e-3 and t["p99"] > 5e-3
-    assert 2.8e-3 <= t["mean"] < 2.8e-3 + 1.5e-3
+    # the median state's 2 ms (a sleep overshoots on a loaded machine, never undershoots)
+    assert 2e-3 <= t["p50"] < 7e-3
+    assert 8e-3 <= t["max"] < 40e-3 and t["p99"] > 6e-3
+    assert 2.8e-3 <= t["mean"] < 14e-3
 
 
 def test_decision_shares_count_what_the_controller_recorded():

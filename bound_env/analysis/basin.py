@@ -17,14 +17,13 @@ Two ways to run a batch of starts:
 - **passive**: `passive_batch`, one compiled function that loops over the starts and over
   their strides with the fast back-end's `bound_env.fast.advance` (the same call
   `bound_env.hybrid.simulate_stride` makes);
-- **a controller** with ``env_kwargs`` and ``batch(obs) -> actions`` (a trained policy,
-  `agents.controllers.MLPController`) or the per-observation protocol of
-  `bound_env.analysis.margins` (``__call__(obs)``, optional ``on_apex``; then one copy per
-  robot): `controller_batch`, the native vector env's kernel
-  (`bound_env.task.PassiveBoundTask.step`) with one controller call per control interval for
-  the whole batch (Python runs once per interval, and once per stride for a robot's restart).
-  Each stride restarts the control intervals at its apex (the robot is reset at the apex it
-  reached), so the closed-loop apex map is the one `bound_env.analysis.margins` measures.
+- **a controller**: `controller_batch`, the one batched closed loop of the project
+  (`bound_env.analysis.apex_loop`, which margins runs too): a stride controller's strides
+  through the one stride map, any other controller (``batch(obs)``, or one copy per robot
+  with its ``on_apex`` hook) through the native vector env's kernel, one controller call per
+  control interval for the whole batch. Each stride restarts the control intervals at its
+  apex (the robot is reset at the apex it reached), so the closed-loop apex map is the one
+  `bound_env.analysis.margins` measures.
 
 The grid is cut into chunks of ``chunk`` starts (row-major), one task each, through any
 executor (`bound_env.parallel`). A chunk's result depends only on its starts, so the map is

@@ -16,12 +16,22 @@ A candidate's score puts a **return** first (the normalized error falls to ``saf
 sooner is better), then **survival** of the whole horizon (a smaller final error is better),
 then the **progress** of a fall (strides and the fraction of a stride survived).
 
-The model is the plant itself: the one stride map (`bound_env.stride_map`), the step env's
-own kernel, which holds the profile's average over each control interval [k dt, (k + 1) dt]
-from the apex, as a stride-level controller outputs it (`bound_env.control.controllers`), at
-the planning tolerance ``rtol``. So a plan holds in `margins`. Random candidates come from a
-generator seeded by the bytes of z: the controller is a deterministic function of the apex
-state. Every decision is timed (`decision_seconds`).
+The model is the plant itself: the one stride map (`bound_env.stride_map.StrideMap.run`), the
+step env's own kernel, which holds the profile's average over each control interval
+[k dt, (k + 1) dt] from the apex, as a stride-level controller outputs it
+(`bound_env.control.controllers`), at the planning tolerance ``rtol``, with each run of equal
+interval actions integrated as one segment (``segments``: the same strides to the integrator
+tolerance, about half the cost); the LQR strides after a candidate are the LQR's own law
+(``lqr.plan``). All live candidates advance together, one batch of strides per stride. So a
+plan holds in `margins`.
+
+The search is pruned where that cannot change the decision: the LQR's row of the library is
+the plan already evaluated; candidates stop once enough others have returned sooner than they
+still can (`rollouts`), the elites are taken in a stable order, and the cross-entropy rounds
+are skipped when a candidate already returns after one stride (nothing scores higher).
+
+Random candidates come from a generator seeded by the bytes of z: the controller is a
+deterministic function of the apex state. Every decision is timed (`decision_seconds`).
 """
 
 from __future__ import annotations
