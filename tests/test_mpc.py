@@ -228,4 +228,7 @@ def test_margins_reports_the_mpcs_decision_times(tmp_path):
     # every closed loop of the curve (2 sizes x 2 directions) decides at least once; that
     # each decision is timed exactly once is test_every_closed_loop_decision_is_timed's
     assert d["n"] >= 4 and d["p50"] > 0
+    # the real-time yardstick: every apex decision of every measure, the curve's among them
+    every = out["decision_times"]
+    assert every["n"] > d["n"] and every["p50"] <= every["p99"]
     assert out["effort"] < 1e-6  # zero torque on the cycle

