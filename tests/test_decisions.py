@@ -11,6 +11,7 @@ from agents.decisions import (
     FAIR_SAFE,
     decisions_text,
     planner_of,
+    real_time_text,
     shares_rows,
     time_decisions,
     timing_states,
@@ -95,3 +96,24 @@ def test_the_page_section_lists_shares_and_times():
     text = decisions_text(times, groups)
     assert "| x | curve | 50.0 % | 25.0 % | 25.0 % | 4 |" in text and "| x | 0.1 | 0.2 |" in text
     assert decisions_text(None, []) == ""
+
+
+def test_the_real_time_section_of_the_page():
+    fast = {"p50": 1e-5, "p99": 3e-5, "n": 7}
+    slow = {"p50": 5e-3, "p99": 4e-2, "n": 9}
+    groups = [
+        {"label": "a", "runs": [{"decision_times": fast, "basin_curve": {"r50": 0.2}}]},
+        {
+            "label": "b (2 seeds)",
+            "runs": [
+                {"decision_times": fast, "basin_curve": {"r50": 0.24}},
+                {"decision_times": fast, "basin_curve": {"r50": 0.22}},
+            ],
+        },
+        {"label": "c", "runs": [{"decision_times": slow, "basin_curve": {"r50": 0.3}}]},
+        {"label": "passive", "runs": [{"basin_curve": {"r50": 0.01}}]},
+    ]
+    text = real_time_text(groups)
+    assert "| c | 5 | 40 | 9 |" in text and "| passive | no apex decisions | | |" in text
+    assert "**b (2 seeds)** (r50 0.230," in text  # c is better but over 1 ms; b beats a
+    assert real_time_text([groups[-1]]) == ""
