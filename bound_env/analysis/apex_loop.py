@@ -59,7 +59,10 @@ CLOCK = DecisionClock()
 def timed_interval_actions(controller, Z) -> np.ndarray:
     """``controller.interval_actions(Z)``, its apex decisions timed into `CLOCK`: the
     controller's own ``decision_seconds`` where it times each one, else the call's time
-    shared equally by the robots."""
+    shared equally by the robots; none for a controller with ``decides_at_apex`` false (the
+    passive gait's zero torque)."""
+    if not getattr(controller, "decides_at_apex", True):
+        return controller.interval_actions(Z)
     own = getattr(controller, "decision_seconds", None)
     n0 = len(own) if own is not None else 0
     t0 = time.perf_counter()
