@@ -373,10 +373,11 @@ class StrideMap:
         the caller resets the robots it runs)."""
         b = self._batches.get("all")
         if b is None or b.n < n:
+            self._batches.clear()
             b = self._batches["all"] = self.task.new_batch(max(n, 8))
-        if b.n == n:
-            return b
-        return replace(b, **{f.name: getattr(b, f.name)[:n] for f in fields(b)})
+        if n not in self._batches:
+            self._batches[n] = replace(b, **{f.name: getattr(b, f.name)[:n] for f in fields(b)})
+        return self._batches[n]
 
     def run(self, Z, A, *, aux=None, kicks=None, slopes=None) -> Strides:
         """One stride from each apex state Z[i] (SI) with the interval actions A[i] (or one
@@ -447,6 +448,32 @@ class StrideMap:
             tau_last=np.abs(b.s[:, S.TAU]),
             impulse_before=out[:, 4].copy(),
         )
+
+    def apexes(self, Z, A) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The lean core of `run` for a planner's inner loop (no kicks, slopes or parameter
+        overrides, no checks: Z (n, 6) and A (n, K) finite float arrays): (status, apex time
+        or time of the failure, next apex state z1 (NaN where it failed)) per robot, the
+        same strides as `run`'s."""
+        n = Z.shape[0]
+        b = self._batch(n)
+        reset_rows(b.y, b.aux, b.flags, b.s, b.obs, self._aux0, Z, self.task.cfg)
+        out = np.zeros((n, 6))
+        A = np.ascontiguousarray(A)
+        if self.segments:
+            strides_segments(
+                b.y, b.aux, b.flags, b.s, b.apex, self.task.cfg, A, self.n_max, self.segments,
+                out,
+            )  # fmt: skip
+        else:
+            ks, zero = np.full(n, NO_KICK, dtype=np.int64), np.zeros(n, dtype=np.int64)
+            strides(
+                b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.task.cfg, A, ks, zero,
+                np.zeros(n), self.n_max, out,
+            )  # fmt: skip
+        status = out[:, 0].astype(np.int64)
+        z1 = b.apex[:, 0][:, _Z_IDX]
+        z1[status != APEX] = np.nan
+        return status, out[:, 1], z1
 
     def open_loop(self, z, actions, seg: int, max_strides: int) -> tuple:
         """`open_loop` from the apex state z: (code, strides, t_step, t_apex, t, status,

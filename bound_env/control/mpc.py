@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..events import APEX
 from ..stride_map import StrideMap, interval_weights
 from .controllers import (
     OBS_TIME,
@@ -65,7 +66,8 @@ def rollouts(
     """Every candidate's first stride (interval actions ``A0[c]``) from the apex z0, then the
     LQR's own law (``lqr.plan``: u = clip(-G (z - z*), -1, 1), interval actions
     ``profile_actions(u)``) for up to ``horizon`` strides: all live candidates advanced
-    together, one batch of strides of the planning map ``model`` (`StrideMap.run`) per stride.
+    together, one batch of strides of the planning map ``model`` per stride (`StrideMap.apexes`,
+    the core of `StrideMap.run`).
 
     Returns (outcome, strides, error, progress, z_first) per candidate: `RETURNED` when the
     normalized error max|(z - z*) / s| reached ``safe`` (``strides`` after z0), else `SURVIVED`
@@ -86,11 +88,11 @@ def rollouts(
     A = A0
     z_ref = lqr.z_ref
     for k in range(horizon + 1):
-        r = model.run(Z, A)
-        fell = ~r.ok
-        progress[live[fell]] = k + np.minimum(r.period[fell] / period, 1.0)
-        ok = np.flatnonzero(r.ok)
-        rows, Z = live[ok], r.z1[ok]
+        status, t, z1 = model.apexes(Z, A)
+        ok = status == APEX
+        fell = ~ok
+        progress[live[fell]] = k + np.minimum(t[fell] / period, 1.0)
+        rows, Z = live[ok], z1[ok]
         if k == 0:
             z_first[rows] = Z
         strides[rows] = k + 1
