@@ -102,14 +102,15 @@ def test_kicks_and_slopes_are_the_envs(lqr):
     np.testing.assert_array_equal(out.z1, tilted.z1[0])
 
 
-PLAN_ATOL = 1e-5  # the MPC's planning path (rtol 1e-8, segments) against the plant [SI]
+PLAN_ATOL = 100.0  # x the planning rtol: the MPC's planning path (segments) against the plant
 
 
 def test_every_user_of_a_stride_lands_on_the_same_apex(lqr):
     """The acceptance of "one stride map": the stride env, distillation's and fine-tuning's
     plant and margins' closed loop, for the same (z, u), on bang-bang rows from r = 0.1
     starts, agree to 1e-9; the MPC's own planning path (`MPCController.rollouts`, the call of
-    every decision: its planning map at the planning tolerance, segments) to `PLAN_ATOL`."""
+    every decision: its planning map at the planning tolerance, segments) to `PLAN_ATOL` x
+    that tolerance."""
     from agents.distill import plant_of, stride_of
     from agents.finetune import rescue_env
     from agents.policy import load_controller as load_policy
@@ -147,7 +148,7 @@ def test_every_user_of_a_stride_lands_on_the_same_apex(lqr):
                 if ref is None:
                     assert z1 is None, name
                 else:
-                    atol = PLAN_ATOL if name == "mpc" else 1e-9
+                    atol = PLAN_ATOL * mpc.rtol if name == "mpc" else 1e-9
                     np.testing.assert_allclose(z1, ref, rtol=0, atol=atol, err_msg=name)
     assert fell > 0 and all(n >= 8 for n in compared.values()), compared
 
@@ -163,13 +164,13 @@ def test_segments_agree_with_the_per_interval_stride(lqr):
     segment, stopping at the apex) gives the same outcomes as the step env's per-interval
     stride and the same apex to the integrator tolerance, and it does merge intervals (it is
     not the per-interval path: the results differ above round-off). At the planning tolerance
-    1e-8 a marginal stride's outcome may differ (a brief leg overcompression stepped over):
+    (1e-8, 1e-6) a marginal stride's outcome may differ (a brief leg overcompression stepped over):
     at most 1 in 100 here, and none at the evaluation tolerance."""
     W = interval_weights(lqr.basis.edges, lqr.basis.phi, lqr.dt)
     rows = np.concatenate([bang_bang_rows(K), np.random.default_rng(0).uniform(-1, 1, (8, K))])
     Z = np.concatenate([starts(lqr.z_ref, 3), starts(lqr.z_ref, 3, r=0.4)])
     ZZ, A = np.repeat(Z, len(rows), axis=0), np.tile(rows, (len(Z), 1)) @ W.T
-    for rtol, atol in ((EVAL_RTOL, 1e-7), (1e-8, PLAN_ATOL)):
+    for rtol, atol in ((EVAL_RTOL, 1e-7), (1e-8, PLAN_ATOL * 1e-8), (1e-6, PLAN_ATOL * 1e-6)):
         per = StrideMap("default", None, lqr.dt, 80.0, rtol).run(ZZ, A)
         seg = StrideMap("default", None, lqr.dt, 80.0, rtol, segments=True).run(ZZ, A)
         assert per.ok.sum() > len(ZZ) // 2 and (~per.ok).sum() > 0  # both outcomes occur
