@@ -258,7 +258,7 @@ def compare(
     pairs = paired_comparisons(groups)
     head = headline_numbers(groups, budget, seed)
     path = docs / "MARGINS.md"
-    from .decisions import decisions_text, fair_decision_times
+    from .decisions import decisions_text, fair_decision_times, real_time_text
     from .policy import load_controller
 
     old = path.with_name("paired.json")
@@ -268,6 +268,7 @@ def compare(
         times = fair_decision_times(groups, load_controller, seed)  # the workers are done
     page = render_markdown(groups, plots, curves, budget, note, pairs, basin_maps(docs), head)
     page += decisions_text(times, groups)
+    page += real_time_text(groups)  # each column's own decisions (empty before they were timed)
     body = {"budget": budget, "seed": seed, "pairs": pairs, "decision_times": times}
     atomic_write(path.with_name("paired.json"), json.dumps(body, indent=2) + "\n")
     atomic_write(path.with_name(HEADLINE_FILE), json.dumps(head, indent=2) + "\n")

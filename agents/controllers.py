@@ -21,6 +21,7 @@ class ZeroController:
 
     name: str = "passive"
     env_kwargs: dict = field(default_factory=dict)
+    decides_at_apex = False  # zero torque whatever the apex: no decision to time
 
     def __call__(self, obs: np.ndarray) -> float:
         return 0.0

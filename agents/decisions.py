@@ -135,3 +135,29 @@ def decisions_text(times: dict, groups) -> str:
             lines.append(f"| {label} | {' | '.join(ms)} |")
         lines.append("")
     return "\n".join(lines) + "\n" if len(lines) > 3 else ""
+
+
+def real_time_text(groups) -> str:
+    """The page's real-time yardstick: each column's decision p50 and p99 over every apex
+    decision of its own margins measures (its first seed's ``decision_times``), and the row
+    "best controller within 1 ms per decision (p99)" by the columns' mean r50 over seeds
+    (`bound_env.analysis.margins.decision_times.real_time_table`). Empty when no column has
+    decision times (pages measured before they were recorded)."""
+    from bound_env.analysis.margins.decision_times import real_time_table
+
+    columns = {}
+    for g in groups:
+        runs = g["runs"]
+        r50s = [r["basin_curve"]["r50"] for r in runs if r.get("basin_curve")]
+        columns[g["label"]] = {
+            "decision_times": runs[0].get("decision_times"),
+            "r50": float(np.mean(r50s)) if r50s else None,
+        }
+    if not any(c["decision_times"] for c in columns.values()):
+        return ""
+    return (
+        "\n## Real time: every apex decision of each controller's own measures\n\n"
+        "Wall time of every apex decision a controller made during its own margins measures "
+        "(first seed; a controller without apex decisions has none):\n\n"
+        + real_time_table(columns)
+    )

@@ -21,6 +21,11 @@ So a stride here is bit-identical to the stride of a PassiveBound-v0 episode sta
 ``reset(options={"apex_state": z})`` and stepped with the same actions (tested), and zero
 action is the passive Poincare map P of eq. 18 up to the integrator tolerance.
 
+For planning only, ``StrideMap(segments=True)`` integrates each run of equal interval actions
+as one segment and stops at the apex (`stride_segments`): the same piecewise-constant torque,
+so the same stride to the integrator tolerance, but not bit for bit (the step env restarts
+its integration at every interval); the MPC plans on it.
+
 What it owns (one definition each): `EVAL_RTOL`, the integrator tolerance of every evaluation;
 `RETURN_TOL`, "returned to the cycle"; `max_intervals`, the step limit of one stride; and the
 failure names of the outcomes (`bound_env.task.FAILURE_NAMES`, from `bound_env.events`).
@@ -29,15 +34,20 @@ failure names of the outcomes (`bound_env.task.FAILURE_NAMES`, from `bound_env.e
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from .dynamics import jit
-from .events import APEX, F_NO_APEX, FAIL_FIRST
-from .params import Z_IN_Y
+from .dynamics import jit, make_aux
+from .events import APEX, CONTINUE, F_NO_APEX, F_NON_FINITE, FAIL_FIRST, TIME_UP, phase_index
+from .fast import Options, advance, event_log, recorder
+from .params import P_TAU, Z_IN_Y
 from .task import (
+    C_ATOL,
+    C_DT,
     C_MAX_TORQUE,
+    C_NO_APEX,
+    C_RTOL,
     DEFAULT_DT,
     DEFAULT_MAX_TORQUE,
     FAILURE_NAMES,
@@ -45,6 +55,7 @@ from .task import (
     PassiveBoundTask,
     S,
     advance_interval,
+    reset_at_apex,
     step_env,
     strict_jit,
 )
@@ -53,6 +64,14 @@ from .terrain import change_slope, set_slope
 EVAL_RTOL = 1e-10  # integrator tolerance of every evaluation (relative and absolute)
 RETURN_TOL = 1e-4  # "returned to the cycle": max |z - z_target| below this (SI)
 NO_KICK = -1  # kick_step of a stride without a push
+# segments (planning only): consecutive interval actions that differ by at most this (normalized
+# torque; 1e-12 x max_torque N m, far below any integrator tolerance) are one segment
+SEGMENT_TOL = 1e-12
+# intervals per segment at most with segments=True: no cap. (A cap keeps the integrator's
+# steps shorter; at the planning tolerance 1e-8 longer steps very rarely step over a brief
+# guard violation that the per-interval stride sees, or the reverse: 1 stride in ~1 000 of the
+# tests' and validation's differs in outcome either way, see tests/test_stride_map.py)
+MAX_SEGMENT = 1 << 30
 _Z_IDX = np.array(Z_IN_Y, dtype=np.int64)
 
 
@@ -110,6 +129,74 @@ def stride(y, aux, flags, s, apex, obs, cfg, actions, kick_step, kick_index, kic
             return int(s[S.STATUS]), s[S.T], impulse, k + 1, before, t_prev
         t_prev = s[S.T]
     return F_NO_APEX, s[S.T], impulse, n_max, impulse, t_prev
+
+
+@jit
+def stride_segments(y, aux, flags, s, apex, cfg, actions, n_max, max_seg):
+    """`stride` for planning: every run of equal consecutive interval actions (to
+    `SEGMENT_TOL`) is integrated as one segment, and the integration stops at the apex. The
+    torque is the same piecewise-constant function of time, but the integrator no longer
+    restarts at every interval boundary inside a run, so the result agrees with `stride` to
+    the integrator tolerance, not bit for bit (tested). No kicks, smooth ground only.
+
+    Returns what `stride` returns (the apex state in ``apex[0]``)."""
+    if s[S.STATUS] >= FAIL_FIRST:  # an impossible start
+        return int(s[S.STATUS]), 0.0, 0.0, 0, 0.0, 0.0
+    n_a = actions.shape[0]
+    dt = cfg[C_DT]
+    opts = Options(cfg[C_RTOL], cfg[C_ATOL], True)
+    log = event_log(32, apex)
+    rec = recorder(0, 0.0)
+    y_start = np.empty(8)
+    t, h, impulse, t_prev = 0.0, 0.0, 0.0, 0.0
+    k = 0
+    while k < n_max:
+        a = actions[min(k, n_a - 1)]
+        m = 1
+        if k >= n_a - 1:  # the last action holds to the step limit
+            m = n_max - k
+        else:
+            while k + m < n_a and m < max_seg and abs(actions[k + m] - a) <= SEGMENT_TOL:
+                m += 1
+            if k + m >= n_a:
+                m = n_max - k
+        m = min(m, max_seg)
+        tau = cfg[C_MAX_TORQUE] * min(max(a, -1.0), 1.0)
+        aux[P_TAU] = tau
+        y_start[:] = y
+        status, t1, h = advance(y, aux, flags, t, (k + m) * dt, h, opts, log, rec)
+        finite = True
+        for j in range(8):
+            if not math.isfinite(y[j]):
+                finite = False
+        if not finite:
+            y[:] = y_start
+            if status < FAIL_FIRST:
+                status = F_NON_FINITE
+        t_prev = max(t, dt * math.floor(t1 / dt - 1e-9))  # start of the interval reached
+        before = impulse + abs(tau) * (t_prev - t)
+        s[S.T], s[S.TAU], s[S.PHASE] = t1, tau, phase_index(aux)
+        if status == APEX:
+            apex[0, :] = y
+            steps = int(math.ceil(t1 / dt - 1e-9))
+            return APEX, t1, impulse + abs(tau) * (t1 - t), steps, before, t_prev
+        impulse += abs(tau) * (t1 - t)
+        if status == TIME_UP or status == CONTINUE:
+            status = F_NO_APEX if t1 >= cfg[C_NO_APEX] else CONTINUE
+        if status >= FAIL_FIRST:
+            s[S.STATUS] = status
+            return status, t1, impulse, int(math.ceil(t1 / dt - 1e-9)), before, t_prev
+        t = t1
+        k += m
+    s[S.STATUS] = F_NO_APEX
+    return F_NO_APEX, t, impulse, n_max, impulse, t_prev
+
+
+@jit
+def reset_rows(Y, AUX, FLAGS, SS, OBS, aux0, Z, cfg):
+    """`bound_env.task.reset_at_apex` of robot i at Z[i] for every row i (one compiled call)."""
+    for i in range(Y.shape[0]):
+        reset_at_apex(Y[i], AUX[i], FLAGS[i], SS[i], OBS[i], aux0, Z[i], cfg)
 
 
 @jit
@@ -202,6 +289,17 @@ def strides(
         out[i, 4], out[i, 5] = before, t_prev
 
 
+@jit
+def strides_segments(Y, AUX, FLAGS, SS, APEXES, cfg, A, n_max, max_seg, out):
+    """`stride_segments` for every robot i of a batch; ``out[i]`` = its six returns."""
+    for i in range(Y.shape[0]):
+        st, t, imp, k, before, t_prev = stride_segments(
+            Y[i], AUX[i], FLAGS[i], SS[i], APEXES[i], cfg, A[i], n_max, max_seg
+        )
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = st, t, imp, k
+        out[i, 4], out[i, 5] = before, t_prev
+
+
 @dataclass
 class Strides:
     """The outcome of n strides (row i: robot i)."""
@@ -231,7 +329,10 @@ class StrideMap:
     """z1 = P(z, a): strides of the step env of one task setting, batched (module docstring).
 
     ``gait``, ``gait_overrides``, ``dt``, ``max_torque`` and ``rtol`` are PassiveBound-v0's
-    settings of the same name (``rtol`` defaults to `EVAL_RTOL`)."""
+    settings of the same name (``rtol`` defaults to `EVAL_RTOL`). ``segments``: a planning
+    map, each run of equal interval actions integrated as one segment, stopping at the apex
+    (`stride_segments`: the same strides to the integrator tolerance, not bit for bit; no
+    kicks, no slopes)."""
 
     def __init__(
         self,
@@ -240,6 +341,7 @@ class StrideMap:
         dt: float = DEFAULT_DT,
         max_torque: float = DEFAULT_MAX_TORQUE,
         rtol: float = EVAL_RTOL,
+        segments: bool | int = False,
     ):
         self.task = PassiveBoundTask(
             gait=gait,
@@ -253,6 +355,9 @@ class StrideMap:
         self.max_torque = self.task.max_torque
         self.rtol = float(rtol)
         self.n_max = max_intervals(self.dt)
+        # intervals per segment at most (0: off; True: `MAX_SEGMENT`)
+        self.segments = MAX_SEGMENT if segments is True else int(segments)
+        self._aux0 = make_aux(self.task.params.to_array())
         self._batches: dict = {}
 
     @property
@@ -264,10 +369,14 @@ class StrideMap:
         return self.task.z_ref
 
     def _batch(self, n: int):
+        """The first n robots of one batch kept for every size (grown to the largest n asked;
+        the caller resets the robots it runs)."""
+        b = self._batches.get("all")
+        if b is None or b.n < n:
+            self._batches.clear()
+            b = self._batches["all"] = self.task.new_batch(max(n, 8))
         if n not in self._batches:
-            if len(self._batches) > 8:
-                self._batches.clear()
-            self._batches[n] = self.task.new_batch(n)
+            self._batches[n] = replace(b, **{f.name: getattr(b, f.name)[:n] for f in fields(b)})
         return self._batches[n]
 
     def run(self, Z, A, *, aux=None, kicks=None, slopes=None) -> Strides:
@@ -290,9 +399,11 @@ class StrideMap:
         for kick in kicks if kicks is not None else ():
             if kick is not None and not 4 <= int(kick[1]) <= 7:
                 raise ValueError(f"a kick changes a velocity (state index 4..7), got {kick[1]}")
+        if self.segments and (kicks is not None or slopes is not None):
+            raise ValueError("a StrideMap with segments=True (planning) takes no kicks or slopes")
         b = self._batch(n)
-        for i in range(n):
-            self.task.reset_robot(b, i, Z[i])
+        reset_rows(b.y, b.aux, b.flags, b.s, b.obs, self._aux0, Z, self.task.cfg)
+        for i in range(n) if aux is not None or slopes is not None else ():
             if aux is not None:
                 b.aux[i] = aux[i]
             if slopes is not None and slopes[i] is not None:
@@ -308,10 +419,16 @@ class StrideMap:
             if kick is not None:
                 ks[i], ki[i], kd[i] = int(kick[0]), int(kick[1]), float(kick[2])
         out = np.zeros((n, 6))
-        strides(
-            b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.task.cfg,
-            np.ascontiguousarray(A), ks, ki, kd, self.n_max, out,
-        )  # fmt: skip
+        if self.segments:
+            strides_segments(
+                b.y, b.aux, b.flags, b.s, b.apex, self.task.cfg, np.ascontiguousarray(A),
+                self.n_max, self.segments, out,
+            )  # fmt: skip
+        else:
+            strides(
+                b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.task.cfg,
+                np.ascontiguousarray(A), ks, ki, kd, self.n_max, out,
+            )  # fmt: skip
         status = out[:, 0].astype(np.int64)
         ok = status == APEX
         y_end = np.where(ok[:, None], b.apex[:, 0], b.y)
@@ -331,6 +448,32 @@ class StrideMap:
             tau_last=np.abs(b.s[:, S.TAU]),
             impulse_before=out[:, 4].copy(),
         )
+
+    def apexes(self, Z, A) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The lean core of `run` for a planner's inner loop (no kicks, slopes or parameter
+        overrides, no checks: Z (n, 6) and A (n, K) finite float arrays): (status, apex time
+        or time of the failure, next apex state z1 (NaN where it failed)) per robot, the
+        same strides as `run`'s."""
+        n = Z.shape[0]
+        b = self._batch(n)
+        reset_rows(b.y, b.aux, b.flags, b.s, b.obs, self._aux0, Z, self.task.cfg)
+        out = np.zeros((n, 6))
+        A = np.ascontiguousarray(A)
+        if self.segments:
+            strides_segments(
+                b.y, b.aux, b.flags, b.s, b.apex, self.task.cfg, A, self.n_max, self.segments,
+                out,
+            )  # fmt: skip
+        else:
+            ks, zero = np.full(n, NO_KICK, dtype=np.int64), np.zeros(n, dtype=np.int64)
+            strides(
+                b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.task.cfg, A, ks, zero,
+                np.zeros(n), self.n_max, out,
+            )  # fmt: skip
+        status = out[:, 0].astype(np.int64)
+        z1 = b.apex[:, 0][:, _Z_IDX]
+        z1[status != APEX] = np.nan
+        return status, out[:, 1], z1
 
     def open_loop(self, z, actions, seg: int, max_strides: int) -> tuple:
         """`open_loop` from the apex state z: (code, strides, t_step, t_apex, t, status,

@@ -31,7 +31,7 @@ DECISION = re.compile(r"decid|decision|median|p50|p99|percentile", re.I)
 TIME = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s?(ms|µs)\b")
 R50 = re.compile(r"\br50\s*(?:=|of|≈|is|at|:)?\s*([+−-]?\d+\.\d+)")
 RATIO = re.compile(r"(\d+(?:\.\d+)?)\s?×\s*faster")
-NOT_DECISIONS = {(390.0, "ms")}  # a stride's duration, beside the decision times
+NOT_DECISIONS = {(390.0, "ms"), (1.0, "ms")}  # a stride's duration; the real-time threshold
 
 
 def _tolerance(text: str) -> float:

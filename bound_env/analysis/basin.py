@@ -17,14 +17,13 @@ Two ways to run a batch of starts:
 - **passive**: `passive_batch`, one compiled function that loops over the starts and over
   their strides with the fast back-end's `bound_env.fast.advance` (the same call
   `bound_env.hybrid.simulate_stride` makes);
-- **a controller** with ``env_kwargs`` and ``batch(obs) -> actions`` (a trained policy,
-  `agents.controllers.MLPController`) or the per-observation protocol of
-  `bound_env.analysis.margins` (``__call__(obs)``, optional ``on_apex``; then one copy per
-  robot): `controller_batch`, the native vector env's kernel
-  (`bound_env.task.PassiveBoundTask.step`) with one controller call per control interval for
-  the whole batch (Python runs once per interval, and once per stride for a robot's restart).
-  Each stride restarts the control intervals at its apex (the robot is reset at the apex it
-  reached), so the closed-loop apex map is the one `bound_env.analysis.margins` measures.
+- **a controller**: `controller_batch`, the one batched closed loop of the project
+  (`bound_env.analysis.apex_loop`, which margins runs too): a stride controller's strides
+  through the one stride map, any other controller (``batch(obs)``, or one copy per robot
+  with its ``on_apex`` hook) through the native vector env's kernel, one controller call per
+  control interval for the whole batch. Each stride restarts the control intervals at its
+  apex (the robot is reset at the apex it reached), so the closed-loop apex map is the one
+  `bound_env.analysis.margins` measures.
 
 The grid is cut into chunks of ``chunk`` starts (row-major), one task each, through any
 executor (`bound_env.parallel`). A chunk's result depends only on its starts, so the map is
@@ -52,7 +51,8 @@ from ..events import phase_index as _phase_index
 from ..fast import EVENT_CAPACITY, Options, advance, event_log, recorder
 from ..params import Z_IN_Y, Z_NAMES, Z_PAPER_UNITS, load_gait, z_to_paper, z_to_si
 from ..stride import DEFAULT_T_MAX
-from ..stride_map import EVAL_RTOL, RETURN_TOL, max_intervals
+from ..stride_map import EVAL_RTOL, RETURN_TOL
+from .apex_loop import FELL, RETURNED, UNDECIDED, apex_loop, empty_outputs  # noqa: F401
 from .basin_defaults import (  # noqa: F401 - the command line reads them without numba
     DEFAULT_CHUNK,
     DEFAULT_GRID,
@@ -61,7 +61,6 @@ from .basin_defaults import (  # noqa: F401 - the command line reads them withou
     MAX_STRIDES,
 )
 
-RETURNED, FELL, UNDECIDED = 0, 1, 2
 OUTCOMES = ("returned", "fell", "undecided")
 REASONS = ("",) + FAILURES  # reason code 0: none; k >= 1: FAILURES[k - 1]
 # Default half-widths of the slice around the cycle, paper units [m, deg, deg, m/s, deg/s, deg/s]
@@ -158,65 +157,22 @@ def controller_batch(
     rtol=EVAL_RTOL,
 ) -> dict:
     """Iterate the closed-loop apex map of ``controller`` from each row of ``Z`` (SI); the
-    same outputs as `passive_batch`, as a dict of arrays."""
-    from ..task import S_NAPEX, S_PHASE, S_STATUS
-
+    same outputs as `passive_batch`, as a dict of arrays: the one batched closed loop
+    (`bound_env.analysis.apex_loop`), a stride controller's strides through the one stride
+    map, any other controller through the task's batch kernel."""
     if callable(getattr(controller, "interval_actions", None)):
-        return _stride_controller_batch(controller, Z, z_ref, gait, max_strides, tol, rtol)
+        sm = _map_for(controller, gait, rtol)
+
+        def strides(Zs, kicks):
+            return sm.run(Zs, controller.interval_actions(Zs))
+
+        return apex_loop(Z, z_ref, max_strides, tol=tol, strides=strides)
     task = _task_for(controller, gait, rtol)
-    Z = np.asarray(Z, dtype=float)
-    n = Z.shape[0]
-    b = task.new_batch(n)
-    for i in range(n):
-        task.reset_robot(b, i, Z[i])
-    out = _empty_outputs(n, max_strides)
-    out["z_last"][:] = Z
-    act = _actions(controller, Z)
-    live = np.ones(n, dtype=np.bool_)
-    stride = np.zeros(n, dtype=np.int64)  # strides completed
-    steps = np.zeros(n, dtype=np.int64)  # control intervals in the current stride
-    max_steps = max_intervals(task.dt)
-    zi = np.array(Z_IN_Y)
-    while live.any():
-        b.actions[:] = act(b.obs, live)
-        b.active[:] = live
-        task.step(b)
-        steps[live] += 1
-        s = b.s
-        napex = s[:, S_NAPEX].astype(np.int64)
-        done_stride = live & (napex > 0)
-        failed = live & ~done_stride & ((s[:, S_STATUS] >= FAIL_FIRST) | (steps >= max_steps))
-        for i in np.flatnonzero(failed):
-            code = int(s[i, S_STATUS]) if s[i, S_STATUS] >= FAIL_FIRST else F_NO_APEX
-            _fell(out, i, code, stride[i] + 1, int(s[i, S_PHASE]))
-        live &= ~failed
-        for i in np.flatnonzero(done_stride):
-            z1 = b.apex[i, min(napex[i], b.apex.shape[1]) - 1][zi]
-            stride[i] += 1
-            if not np.all(np.isfinite(z1)):
-                _fell(out, i, FAILURES.index("non_finite") + FAIL_FIRST, stride[i], -1)
-                live[i] = False
-                continue
-            err = float(np.max(np.abs(z1 - z_ref)))
-            out["error"][i] = err
-            out["z_last"][i] = z1
-            if err < tol:
-                out["outcome"][i], out["strides"][i] = RETURNED, stride[i]
-                live[i] = False
-            elif stride[i] >= max_strides:
-                live[i] = False
-            else:
-                task.reset_robot(b, i, z1)
-                act.restart(i, z1)
-                steps[i] = 0
-    return out
+    return apex_loop(Z, z_ref, max_strides, tol=tol, task=task, controller=controller)
 
 
-def _stride_controller_batch(controller, Z, z_ref, gait, max_strides, tol, rtol) -> dict:
-    """`controller_batch` of a stride controller: whole strides of all live starts at once
-    through the one stride map (`bound_env.stride_map`), with the actions the controller
-    outputs interval by interval (``interval_actions``): the same outcomes as the step env's
-    loop, without a Python call per interval."""
+def _map_for(controller, gait: str, rtol: float):
+    """The one stride map of ``controller``'s task settings (kept per process)."""
     from ..stride_map import StrideMap
     from ..task import DEFAULT_DT, DEFAULT_MAX_TORQUE
 
@@ -229,78 +185,7 @@ def _stride_controller_batch(controller, Z, z_ref, gait, max_strides, tol, rtol)
             gait, kwargs.get("gait_overrides") or None, kwargs.get("dt", DEFAULT_DT),
             kwargs.get("max_torque", DEFAULT_MAX_TORQUE), rtol,
         )  # fmt: skip
-    sm = _TASKS[key]
-    Z = np.array(Z, dtype=float)
-    n = Z.shape[0]
-    out = _empty_outputs(n, max_strides)
-    out["z_last"][:] = Z
-    live = np.arange(n)
-    non_finite = FAILURES.index("non_finite") + FAIL_FIRST
-    for stride in range(1, max_strides + 1):
-        r = sm.run(Z[live], controller.interval_actions(Z[live]))
-        fell = ~r.ok
-        bad = r.ok & ~np.all(np.isfinite(r.z1), axis=1)
-        for j in np.flatnonzero(fell):
-            _fell(out, live[j], int(r.status[j]), stride, int(r.phase[j]))
-        for j in np.flatnonzero(bad):
-            _fell(out, live[j], non_finite, stride, -1)
-        good = r.ok & ~bad
-        rows, z1 = live[good], r.z1[good]
-        err = np.max(np.abs(z1 - z_ref), axis=1) if len(rows) else np.zeros(0)
-        out["error"][rows] = err
-        out["z_last"][rows] = z1
-        back = err < tol
-        out["outcome"][rows[back]] = RETURNED
-        out["strides"][rows[back]] = stride
-        Z[rows] = z1
-        live = rows[~back]
-        if not len(live):
-            break
-    return out
-
-
-class _actions:
-    """One call per control interval for the whole batch: ``controller.batch(obs)`` if it has
-    one; else one copy of the controller per robot, called row by row, with ``on_apex(z, 0.0)``
-    at each stride's start apex when it has that hook (stride-level controllers)."""
-
-    def __init__(self, controller, Z):
-        self.controller = controller
-        self.batched = callable(getattr(controller, "batch", None))
-        if not self.batched:
-            import copy
-
-            self.copies = [copy.deepcopy(controller) for _ in range(len(Z))]
-            for i, z in enumerate(Z):
-                self.restart(i, z)
-
-    def restart(self, i: int, z) -> None:
-        if not self.batched and hasattr(self.copies[i], "on_apex"):
-            self.copies[i].on_apex(np.asarray(z, dtype=float), 0.0)
-
-    def __call__(self, obs, live) -> np.ndarray:
-        if self.batched:
-            return self.controller.batch(obs)
-        a = np.zeros(len(obs))
-        for i in np.flatnonzero(live):
-            a[i] = self.copies[i](obs[i])
-        return a
-
-
-def _fell(out, i, code, stride, phase):
-    out["outcome"][i], out["reason"][i] = FELL, code - FAIL_FIRST + 1
-    out["strides"][i], out["phase"][i] = stride, phase
-
-
-def _empty_outputs(n: int, max_strides: int) -> dict:
-    return {
-        "outcome": np.full(n, UNDECIDED, dtype=np.int8),
-        "reason": np.zeros(n, np.int8),
-        "strides": np.full(n, max_strides, dtype=np.int32),
-        "phase": np.full(n, -1, dtype=np.int8),
-        "error": np.full(n, np.inf),
-        "z_last": np.zeros((n, 6)),
-    }
+    return _TASKS[key]
 
 
 def controller_cycle(
@@ -393,7 +278,7 @@ def run_chunk(spec: BasinSpec, i: int) -> dict:
     t0 = time.perf_counter()
     if spec.controller is None:
         gait = load_gait(spec.gait)
-        out = _empty_outputs(len(Z), spec.max_strides)
+        out = empty_outputs(len(Z), spec.max_strides)
         passive_batch(
             Z,
             make_aux(gait.params.to_array()),
@@ -419,6 +304,7 @@ def run_chunk(spec: BasinSpec, i: int) -> dict:
             spec.tol,
             spec.rtol,
         )
+    out.pop("apexes")
     out["seconds"] = time.perf_counter() - t0
     return out
 

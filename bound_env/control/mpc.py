@@ -16,12 +16,22 @@ A candidate's score puts a **return** first (the normalized error falls to ``saf
 sooner is better), then **survival** of the whole horizon (a smaller final error is better),
 then the **progress** of a fall (strides and the fraction of a stride survived).
 
-The model is the plant itself: the one stride map (`bound_env.stride_map`), the step env's
-own kernel, which holds the profile's average over each control interval [k dt, (k + 1) dt]
-from the apex, as a stride-level controller outputs it (`bound_env.control.controllers`), at
-the planning tolerance ``rtol``. So a plan holds in `margins`. Random candidates come from a
-generator seeded by the bytes of z: the controller is a deterministic function of the apex
-state. Every decision is timed (`decision_seconds`).
+The model is the plant itself: the one stride map (`bound_env.stride_map.StrideMap.run`), the
+step env's own kernel, which holds the profile's average over each control interval
+[k dt, (k + 1) dt] from the apex, as a stride-level controller outputs it
+(`bound_env.control.controllers`), at the planning tolerance ``rtol``, with each run of equal
+interval actions integrated as one segment (``segments``: the same strides to the integrator
+tolerance, about half the cost); the LQR strides after a candidate are the LQR's own law
+(``lqr.plan``). All live candidates advance together, one batch of strides per stride. So a
+plan holds in `margins`.
+
+The search is pruned where that cannot change the decision: the LQR's row of the library is
+the plan already evaluated; candidates stop once enough others have returned sooner than they
+still can (`rollouts`), the elites are taken in a stable order, and the cross-entropy rounds
+are skipped when a candidate already returns after one stride (nothing scores higher).
+
+Random candidates come from a generator seeded by the bytes of z: the controller is a
+deterministic function of the apex state. Every decision is timed (`decision_seconds`).
 """
 
 from __future__ import annotations
@@ -32,11 +42,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..dynamics import jit, make_aux
-from ..events import APEX, N_FLAGS
-from ..params import Z_IN_Y
-from ..stride_map import NO_KICK, StrideMap, interval_weights, stride
-from ..task import N_S, reset_at_apex
+from ..events import APEX
+from ..stride_map import StrideMap, interval_weights
+from ..stride_protocol import DECISION_KINDS  # noqa: F401 - who decides (the protocol's)
 from .controllers import (
     OBS_TIME,
     OBS_Z,
@@ -45,80 +53,83 @@ from .controllers import (
     interval_actions_of,
 )
 
-_Z_IDX = np.array(Z_IN_Y, dtype=np.int64)
-RETURNED, SURVIVED, FELL = 2, 1, 0  # a candidate's outcome, best first
+RETURNED, SURVIVED, FELL, PRUNED = 2, 1, 0, -1  # a candidate's outcome, best first
+BEST_SCORE_STRIDES = 1  # a return after one stride: no candidate can score higher
 # Who made a decision (``decision_kinds``): "gate" (within ``safe``: the LQR alone), "lqr"
 # (past it, the LQR's own plan kept: it returns on the planning model, or a learned chooser
 # picked it) and "override" (a searched or chosen profile instead of the LQR's plan).
-DECISION_KINDS = ("gate", "lqr", "override")
 
 
-@jit
 def rollouts(
-    z0, cand, aux0, cfg, n_obs, n_apex, W, G, z_ref, scales, horizon, safe, period, n_max
+    model, z0, A0, lqr, profile_actions, scales, horizon, safe, period, prune=0, floor=-np.inf
 ):
-    """Every candidate's first stride (interval actions ``cand[c]``) from the apex z0, then
-    the LQR u = clip(-G (z - z*), -1, 1) (interval actions W u) for up to ``horizon``
-    strides, each a stride of the one stride map (`bound_env.stride_map.stride`) with the
-    task constants ``cfg``.
+    """Every candidate's first stride (interval actions ``A0[c]``) from the apex z0, then the
+    LQR's own law (``lqr.plan``: u = clip(-G (z - z*), -1, 1), interval actions
+    ``profile_actions(u)``) for up to ``horizon`` strides: all live candidates advanced
+    together, one batch of strides of the planning map ``model`` per stride (`StrideMap.apexes`,
+    the core of `StrideMap.run`).
 
-    Returns (outcome, strides, error, progress) per candidate: `RETURNED` when the normalized
-    error max|(z - z*) / s| reached ``safe`` (``strides`` strides after z0), else `SURVIVED`
+    Returns (outcome, strides, error, progress, z_first) per candidate: `RETURNED` when the
+    normalized error max|(z - z*) / s| reached ``safe`` (``strides`` after z0), else `SURVIVED`
     (``error``: the final normalized error) or `FELL` (``progress``: strides completed plus
-    the fraction of a nominal ``period`` survived in the last one)."""
-    n_c = cand.shape[0]
-    y = np.zeros(8)
-    aux = aux0.copy()
-    flags = np.zeros(N_FLAGS, dtype=np.bool_)
-    s = np.zeros(N_S)
-    apex = np.zeros((n_apex, 8))
-    obs = np.zeros(n_obs, dtype=np.float32)
-    z = np.empty(6)
-    outcome = np.zeros(n_c, dtype=np.int64)
+    the fraction of a nominal ``period`` survived in the last one); ``z_first``: the apex
+    state after the candidate's own stride (NaN where it fell). ``prune`` > 0: once that
+    many candidates have returned, the others can no longer be among the ``prune`` best
+    (`scores`: a later return scores lower), so they stop there as `PRUNED`; so do those whose
+    best possible score (a return at the next stride) is at most ``floor``."""
+    n_c = A0.shape[0]
+    outcome = np.full(n_c, FELL, dtype=np.int64)
     strides = np.zeros(n_c, dtype=np.int64)
     error = np.full(n_c, np.inf)
     progress = np.zeros(n_c)
-    for c in range(n_c):
-        z[:] = z0
-        a = cand[c].copy()
-        for k in range(horizon + 1):
-            reset_at_apex(y, aux, flags, s, obs, aux0, z, cfg)
-            status, t = stride(y, aux, flags, s, apex, obs, cfg, a, NO_KICK, 0, 0.0, n_max)[:2]
-            if status != APEX:
-                outcome[c] = FELL
-                progress[c] = k + min(t / period, 1.0)
-                break
-            strides[c] = k + 1
-            e = 0.0
-            dz = np.empty(6)
-            for i in range(6):
-                z[i] = apex[0, _Z_IDX[i]]
-                dz[i] = z[i] - z_ref[i]
-                e = max(e, abs(dz[i]) / scales[i])
-            error[c] = e
-            if not np.isfinite(e):
-                outcome[c] = FELL
-                progress[c] = k + 1.0
-                break
-            if e <= safe:
-                outcome[c] = RETURNED
-                break
-            if k == horizon:
-                outcome[c] = SURVIVED
-                break
-            u = -(G @ dz)
-            for j in range(u.shape[0]):
-                u[j] = min(1.0, max(-1.0, u[j]))
-            a = W @ u
-    return outcome, strides, error, progress
+    z_first = np.full((n_c, 6), np.nan)
+    live = np.arange(n_c)
+    Z = np.tile(np.asarray(z0, dtype=float), (n_c, 1))
+    A = A0
+    z_ref = lqr.z_ref
+    for k in range(horizon + 1):
+        status, t, z1 = model.apexes(Z, A)
+        ok = status == APEX
+        fell = ~ok
+        progress[live[fell]] = k + np.minimum(t[fell] / period, 1.0)
+        rows, Z = live[ok], z1[ok]
+        if k == 0:
+            z_first[rows] = Z
+        strides[rows] = k + 1
+        e = np.max(np.abs(Z - z_ref) / scales, axis=1)
+        error[rows] = e
+        bad = ~np.isfinite(e)
+        progress[rows[bad]] = k + 1.0
+        back = ~bad & (e <= safe)
+        outcome[rows[back]] = RETURNED
+        go = ~bad & ~back
+        if k == horizon:
+            outcome[rows[go]] = SURVIVED
+            break
+        live, Z = rows[go], Z[go]
+        if (prune > 0 and np.count_nonzero(outcome == RETURNED) >= prune) or (
+            return_score(k + 2, horizon) <= floor
+        ):
+            outcome[live] = PRUNED
+            break
+        if not len(live):
+            break
+        A = profile_actions(lqr.plan(Z))
+    return outcome, strides, error, progress, z_first
 
 
 def scores(outcome, strides, error, progress, horizon: int) -> np.ndarray:
     """One number per candidate, larger is better: a return (sooner first) over a survival
-    (smaller final error first) over a fall (more progress first)."""
-    s = np.where(outcome == FELL, progress, 0.0)
+    (smaller final error first) over a fall (more progress first); a pruned candidate (it
+    scores below the pruning rank, `rollouts`) -inf."""
+    s = np.where(outcome == FELL, progress, -np.inf)
     s = np.where(outcome == SURVIVED, horizon + 2.0 + 1.0 / (1.0 + error), s)
-    return np.where(outcome == RETURNED, 2.0 * horizon + 10.0 - strides, s)
+    return np.where(outcome == RETURNED, return_score(strides, horizon), s)
+
+
+def return_score(strides, horizon: int):
+    """The score of a return after ``strides`` strides (`scores`)."""
+    return 2.0 * horizon + 10.0 - strides
 
 
 def library(K: int, u_lqr: np.ndarray, rng, n_random: int, n_noise: int, noise: float):
@@ -152,6 +163,8 @@ class MPCController:
     cem_samples: int = 24
     cem_elites: int = 6
     rtol: float = 1e-8  # planning tolerance (the evaluation runs at 1e-10)
+    # planning map: runs of equal interval actions integrated as one segment (`StrideMap`)
+    segments: bool = True
     seed: int = 0
     library_seed: int = -1  # >= 0: the library's random rows are fixed (drawn from this seed)
     decision_seconds: list = field(default_factory=list, repr=False)
@@ -164,9 +177,10 @@ class MPCController:
     def __post_init__(self):
         b = self.lqr.basis
         self._W = interval_weights(b.edges, b.phi, self.lqr.dt)
-        self._aux0 = make_aux(self.params.to_array())
         # the planning model: the one stride map at the planning tolerance
-        self.model = StrideMap(self.gait, None, self.dt, self.max_torque, self.rtol)
+        self.model = StrideMap(
+            self.gait, None, self.dt, self.max_torque, self.rtol, segments=self.segments
+        )
         from ..task import APEX_SCALES
 
         self.scales = np.asarray(APEX_SCALES, dtype=float)
@@ -187,26 +201,28 @@ class MPCController:
         `interval_actions` is the step env's view of a stride, bit for bit)."""
         return np.atleast_2d(U) @ self._W.T
 
-    def evaluate(self, z, U):
-        """`rollouts` of the coefficient rows U from the apex z: (scores, outcome, strides)."""
-        task = self.model.task
-        out = rollouts(
+    def evaluate(self, z, U, prune: int = 0, floor: float = -np.inf):
+        """`rollouts` of the coefficient rows U from the apex z: (scores, outcome, strides)
+        (``prune``, ``floor``: see `rollouts`)."""
+        out = self.rollouts(z, U, prune, floor)
+        return scores(*out[:4], self.horizon), out[0], out[1]
+
+    def rollouts(self, z, U, prune: int = 0, floor: float = -np.inf):
+        """`rollouts` of the coefficient rows U from the apex z on the planning model: the
+        path of every decision (`evaluate`)."""
+        return rollouts(
+            self.model,
             np.asarray(z, dtype=float),
             self.profile_actions(U),
-            self._aux0,
-            task.cfg,
-            task.obs_dim,
-            task.apex_capacity,
-            self._W,
-            self.lqr.gain,
-            self.z_ref,
+            self.lqr,
+            self.profile_actions,
             self.scales,
             self.horizon,
             self.safe,
             self.basis.period,
-            self.model.n_max,
+            prune,
+            floor,
         )
-        return scores(*out, self.horizon), out[0], out[1]
 
     def plan(self, z) -> np.ndarray:
         """The coefficients of the stride from apex z (the decision, untimed); for n apex
@@ -218,7 +234,7 @@ class MPCController:
         if np.max(np.abs(z - self.z_ref) / self.scales) <= self.safe:
             self._kind = "gate"
             return u_lqr
-        _, outcome, _ = self.evaluate(z, u_lqr[None])
+        s0, outcome, _ = self.evaluate(z, u_lqr[None])
         if outcome[0] == RETURNED:
             self._kind = "lqr"
             return u_lqr
@@ -230,16 +246,32 @@ class MPCController:
         K = self.basis.K
         lib_rng = rng if self.library_seed < 0 else np.random.default_rng(self.library_seed)
         U = library(K, u_lqr, lib_rng, self.n_random, self.n_noise, self.noise)
-        s, outcome, _ = self.evaluate(z, U)
-        best_u, best_s = U[int(np.argmax(s))], float(np.max(s))
-        for _ in range(self.cem_iters):
-            elite = U[np.argsort(-s)[: self.cem_elites]]
+        # row 0 is the LQR's plan, just evaluated; the rest pruned below the elites (or below
+        # the best without cross-entropy rounds): the same elites and best, exactly
+        top = self.cem_elites if self.cem_iters > 0 else 1
+        s = np.concatenate([s0, self.evaluate(z, U[1:], prune=top)[0]])
+        order = np.argsort(-s, kind="stable")
+        best_u, best_s = U[order[0]], float(s[order[0]])
+        for it in range(self.cem_iters):
+            if best_s >= self.best_score:  # returns after one stride: nothing scores higher
+                break
+            elite = U[order[: self.cem_elites]]
             mu, sd = elite.mean(axis=0), elite.std(axis=0) + 0.05
             U = np.clip(mu + sd * rng.standard_normal((self.cem_samples, K)), -1.0, 1.0)
-            s, _, _ = self.evaluate(z, U)
-            if float(np.max(s)) > best_s:
-                best_u, best_s = U[int(np.argmax(s))], float(np.max(s))
+            last = it == self.cem_iters - 1
+            # the last round only has to beat the best so far (strictly)
+            s, _, _ = self.evaluate(
+                z, U, prune=1 if last else self.cem_elites, floor=best_s if last else -np.inf
+            )
+            order = np.argsort(-s, kind="stable")
+            if float(s[order[0]]) > best_s:
+                best_u, best_s = U[order[0]], float(s[order[0]])
         return best_u
+
+    @property
+    def best_score(self) -> float:
+        """The score of a return after one stride (`scores`): no candidate scores higher."""
+        return return_score(BEST_SCORE_STRIDES, self.horizon)
 
     def coefficients(self, z) -> np.ndarray:
         t0 = time.perf_counter()
@@ -288,6 +320,8 @@ class MPCController:
         h.update(self.lqr.fingerprint().encode())
         h.update(repr(sorted(self.settings().items())).encode())
         h.update(np.ascontiguousarray(self.params.to_array(), dtype=float).tobytes())
+        if not self.segments:  # the per-interval planning map
+            h.update(b"per-interval")
         return h.hexdigest()[:16]
 
     def __getstate__(self):  # the plan and the timings are not part of the controller

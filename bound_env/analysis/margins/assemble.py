@@ -11,6 +11,7 @@ from .basin import BASIN_CAP, BASIN_HI, BASIN_LO
 from .budget import DEFAULT_SEED, MFPT_CHUNK, MFPT_LEVEL, Budget, sample_seeds
 from .closed_loop import EVAL_RTOL, PROFILE_SEG, RETURN_TOL
 from .curve import decision_shares, decision_summary
+from .decision_times import summary as decision_times
 from .report import Z_LABELS, Z_UNITS
 from .stats import (
     crossing_on_grid,
@@ -225,6 +226,8 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None, seed=DEFAUL
         "effort": cyc["effort"],
         "effort_frac": cyc["effort"] / cyc["max_torque"],
         "decision_seconds": decision_summary(curve),
+        # every apex decision of the controller's own measures (the real-time yardstick)
+        "decision_times": decision_times(res.values()),
         # who decided at the apexes of a gated controller (gate / the LQR's plan / override)
         "decision_shares": {
             "curve": decision_shares(curve),

@@ -21,6 +21,7 @@ from ...stride_map import (
 )
 from ...stride_protocol import StridePlans, reset_controller
 from ...task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_STRIDES
+from ..apex_loop import RETURNED, apex_loop, timed_interval_actions, timed_on_apex
 from .budget import DEFAULT_SEED, Budget
 
 ENV_ID = "PassiveBound-v0"
@@ -28,6 +29,7 @@ PROFILE_SEG = 5  # ceiling search: control intervals per piece of a torque profi
 PROFILE_SPAN = 1.3  # ceiling search: the profile covers 1.3 x the strides' nominal duration
 STRIDES = [0]  # strides advanced in this process (benchmarks/margins.py reads it)
 _Z_IDX = np.array(Z_IN_Y)  # z = y[_Z_IDX] at an apex
+FAILURES_BY_REASON = (None, *FAILURE_NAMES[FAIL_FIRST:])  # apex_loop's reason -> failure name
 
 
 @dataclass
@@ -96,7 +98,7 @@ class ClosedLoop:
         """One closed-loop stride from each apex state Z[i] of a stride controller, through
         the one stride map (``kicks[i]``: (interval, state index 4..7, delta) or None)."""
         Z = np.atleast_2d(np.asarray(Z, dtype=float))
-        r = self.stride_map.run(Z, self.controller.interval_actions(Z), kicks=kicks)
+        r = self.stride_map.run(Z, timed_interval_actions(self.controller, Z), kicks=kicks)
         STRIDES[0] += len(Z)
         return r
 
@@ -123,7 +125,7 @@ class ClosedLoop:
         if info["failure"] is not None:
             return StrideOut(None, info["failure"], phase="df")
         if self.on_apex is not None:
-            self.on_apex(z, 0.0)
+            timed_on_apex(self.on_apex, z, 0.0)
         t_prev, impulse = 0.0, 0.0
         for k in range(self.max_steps):
             if kick is not None and k == kick[0]:
@@ -170,94 +172,27 @@ class ClosedLoop:
         self, Z0, z_target, max_strides: int, kicks=None
     ) -> list[tuple[bool, int, str | None]]:
         """`run` from each row of Z0 (``kicks[i]``: robot i's first-stride kick or None), all
-        robots advanced together, one batch of strides through the one stride map per stride
-        count for a stride controller (the same outcomes as `run` row by row: every robot's
-        strides are its own)."""
+        robots advanced together by the one batched closed loop (`bound_env.analysis.
+        apex_loop`): a stride controller through the one stride map, any other through the
+        task's batch kernel (the same outcomes as `run` row by row: every robot's strides are
+        its own)."""
         Z = np.array(np.atleast_2d(Z0), dtype=float)
-        kicks = list(kicks) if kicks is not None else [None] * len(Z)
-        for k in kicks:
-            if k is not None and not 4 <= k[1] <= 7:
-                raise ValueError(f"a kick changes a velocity (state index 4..7), got {k[1]}")
-        if self.stride_map is None:
-            if callable(getattr(self.controller, "batch", None)) and self.on_apex is None:
-                return self._run_many_batched(Z, z_target, max_strides, kicks)
-            pairs = zip(Z, kicks, strict=True)
-            return [self.run(z, z_target, max_strides, kick=k) for z, k in pairs]
-        out: list = [None] * len(Z)
-        live = np.arange(len(Z))
-        for n in range(1, max_strides + 1):
-            r = self.strides(Z[live], [kicks[i] for i in live] if n == 1 else None)
-            keep = []
-            for j, i in enumerate(live):
-                if not r.ok[j]:
-                    out[i] = (False, n, r.failure(j))
-                elif not np.all(np.isfinite(r.z1[j])):
-                    out[i] = (False, n, "non_finite")
-                elif np.max(np.abs(r.z1[j] - z_target)) < RETURN_TOL:
-                    out[i] = (True, n, None)
-                else:
-                    Z[i] = r.z1[j]
-                    keep.append(i)
-            live = np.array(keep, dtype=np.int64)
-            if not len(live):
-                break
-        for i in live:
-            out[i] = (False, max_strides, None)
-        return out
-
-    def _run_many_batched(self, Z, z_target, max_strides: int, kicks) -> list:
-        """`run_many` of a step-level controller with ``batch(obs)``: all robots stepped
-        together through the env's task, one ``batch`` call per control interval, each robot
-        restarted at its apex as `stride` restarts the env (the actions are ``batch``'s, equal
-        to ``__call__`` row by row to rounding)."""
-        task, ctrl = self.env.task, self.controller
-        n = len(Z)
-        b = task.new_batch(n)
-        for i in range(n):
-            task.reset_robot(b, i, Z[i])
-        out: list = [None] * n
-        strides = np.zeros(n, dtype=np.int64)  # completed
-        steps = np.zeros(n, dtype=np.int64)  # intervals in the current stride
-        live = np.ones(n, dtype=np.bool_)
-        for i in np.flatnonzero(b.s[:, S_STATUS] >= FAIL_FIRST):  # impossible starts
-            out[i] = (False, 1, FAILURE_NAMES[int(b.s[i, S_STATUS])])
-            live[i] = False
-        kick_at = np.array([-1 if k is None else k[0] for k in kicks])
-        while live.any():
-            for i in np.flatnonzero(live & (strides == 0) & (steps == kick_at)):
-                b.y[i, kicks[i][1]] += kicks[i][2]
-            b.actions[:] = ctrl.batch(b.obs)
-            b.active[:] = live
-            task.step(b)
-            steps[live] += 1
-            s = b.s
-            apex = live & (s[:, S_NAPEX] > 0)
-            failed = live & ~apex & (s[:, S_STATUS] >= FAIL_FIRST)
-            timeout = live & ~apex & ~failed & (steps >= self.max_steps)
-            for i in np.flatnonzero(apex | failed | timeout):
-                if apex[i]:
-                    strides[i] += 1
-                    napex = min(int(s[i, S_NAPEX]), b.apex.shape[1])
-                    z = np.array(b.apex[i, napex - 1][_Z_IDX], dtype=float)
-                    STRIDES[0] += 1
-                    if not np.all(np.isfinite(z)):
-                        out[i] = (False, int(strides[i]), "non_finite")
-                    elif np.max(np.abs(z - z_target)) < RETURN_TOL:
-                        out[i] = (True, int(strides[i]), None)
-                    elif strides[i] >= max_strides:
-                        out[i] = (False, max_strides, None)
-                    else:
-                        task.reset_robot(b, i, z)
-                        steps[i] = 0
-                        continue
-                    live[i] = False
-                elif failed[i]:
-                    out[i] = (False, int(strides[i]) + 1, FAILURE_NAMES[int(s[i, S_STATUS])])
-                    live[i] = False
-                else:
-                    out[i] = (False, int(strides[i]) + 1, "no_apex")
-                    live[i] = False
-        return out
+        if self.stride_map is not None:
+            r = apex_loop(Z, z_target, max_strides, strides=self.strides, kicks=kicks)
+        else:
+            r = apex_loop(
+                Z, z_target, max_strides, task=self.env.task, controller=self.controller,
+                kicks=kicks,
+            )  # fmt: skip
+            STRIDES[0] += r["apexes"]
+        return [
+            (
+                bool(r["outcome"][i] == RETURNED),
+                int(r["strides"][i]),
+                FAILURES_BY_REASON[int(r["reason"][i])],
+            )
+            for i in range(len(Z))
+        ]
 
     def episode(self, z0, max_strides: int, seed: int | None = None) -> tuple:
         """One long episode from the apex state z0 (env seed ``seed``: with
@@ -270,7 +205,7 @@ class ClosedLoop:
             return False, 0, info["failure"]
         reset_controller(ctrl)
         if self.on_apex is not None:
-            self.on_apex(z0, 0.0)
+            timed_on_apex(self.on_apex, z0, 0.0)
         while True:
             obs, _, terminated, _, info = env.step(np.array([ctrl(obs)]))
             if terminated:
@@ -282,7 +217,8 @@ class ClosedLoop:
                     STRIDES[0] += info["stride"]
                     return True, info["stride"], None
                 if self.on_apex is not None:
-                    self.on_apex(np.array(info["apex_z"]), float(obs[self.i_since_apex]))
+                    z1, t_seen = np.array(info["apex_z"]), float(obs[self.i_since_apex])
+                    timed_on_apex(self.on_apex, z1, t_seen)
 
     def profile(self, z0, actions, max_strides: int, seg: int = PROFILE_SEG) -> tuple:
         """Open loop: the normalized torques ``actions[j]`` held over control intervals
@@ -348,12 +284,12 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
     if not batched and callable(getattr(ctrl, "apex_torques", None)):
         plans = StridePlans(ctrl, n)
         for i in range(n):
-            plans.apex(i, z0.copy(), 0.0)
+            timed_on_apex(lambda z, t, i=i: plans.apex(i, z, t), z0.copy(), 0.0)
     copies = None if batched or plans is not None else [copy.deepcopy(ctrl) for _ in range(n)]
     if copies is not None and on_apex is not None:
         for c in copies:
             reset_controller(c)
-            c.on_apex(z0.copy(), 0.0)
+            timed_on_apex(c.on_apex, z0.copy(), 0.0)
     strides = np.zeros(n, dtype=np.int64)
     fell = np.zeros(n, dtype=np.int64)
     failures: dict = {}
@@ -397,9 +333,9 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
                 z1 = np.array(b.apex[i, min(napex, b.apex.shape[1]) - 1][_Z_IDX], dtype=float)
                 t_seen = float(b.obs[i, loop.i_since_apex])
                 if plans is not None:
-                    plans.apex(i, z1, t_seen)
+                    timed_on_apex(lambda z, t, i=i: plans.apex(i, z, t), z1, t_seen)
                 else:
-                    copies[i].on_apex(z1, t_seen)
+                    timed_on_apex(copies[i].on_apex, z1, t_seen)
     STRIDES[0] += int(strides.sum())
     kinds = getattr(ctrl, "decision_kinds", None)
     if copies is not None and kinds is not None:  # the copies' decisions, robot by robot

@@ -380,6 +380,12 @@ def summary_text(r: dict) -> str:
             f"decision time p50 {1e3 * d['p50']:.3g} ms, p99 {1e3 * d['p99']:.3g} ms, mean "
             f"{1e3 * d['mean']:.3g} ms, max {1e3 * d['max']:.3g} ms ({d['n']} decisions)"
         )
+    d = r.get("decision_times")
+    if d:
+        lines.append(
+            f"every apex decision of these measures: p50 {1e3 * d['p50']:.3g} ms, p99 "
+            f"{1e3 * d['p99']:.3g} ms ({d['n']} decisions)"
+        )
     return "\n".join(lines)
 
 

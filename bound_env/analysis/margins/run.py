@@ -16,6 +16,7 @@ import numpy as np
 from bound_env.cache import TaskCache, settings_hash
 from bound_env.parallel import TasksFailed, open_pool, run_tasks
 
+from ..apex_loop import CLOCK
 from .assemble import assemble, controller_name
 from .basin import BASIN_CAP, BASIN_HI, BASIN_LO, task_basin
 from .budget import (
@@ -35,6 +36,7 @@ from .ceiling import CEILING_ES, task_ceiling
 from .closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TOL, Setup
 from .curve import task_curve
 from .cycle import FD_FLOOR, FD_REL, task_cycle
+from .decision_times import histogram
 from .push import task_push
 from .report import Z_LABELS, Z_UNITS, write_outputs
 from .terrain import task_mfpt, task_terrain
@@ -58,10 +60,17 @@ TASKS = {
 def run_task(setup: Setup, name: str, args: tuple) -> dict:
     """Worker entry point: one named task."""
     t0 = time.perf_counter()
+    CLOCK.seconds.clear()
+    CLOCK.on = True  # every apex decision of the task is timed (the real-time yardstick)
     try:
         result = TASKS[name](setup, *args)
     except RuntimeError as e:
         result = {"error": str(e)}
+    finally:
+        CLOCK.on = False
+    if CLOCK.seconds:
+        result["decision_hist"] = histogram(CLOCK.seconds)
+        CLOCK.seconds.clear()
     result["seconds"] = time.perf_counter() - t0
     return result
 
