@@ -208,6 +208,13 @@ def register(sub) -> None:
         "(default: out/margins/<policy name>)",
     )
     p.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
+    p.add_argument(
+        "--mismatch",
+        metavar="SPEC",
+        help="also measure under model error (JSON key mismatch): a preset (pm5, pm10, pm20, "
+        "all5, all10, all20, noise, noise5, delay1, delay2, none; join with +, e.g. "
+        "pm5+delay1) or a YAML file (bound_env.mismatch); quick/full: 32 plants",
+    )
     p.add_argument("--json", action="store_true", help="print the JSON result")
     add_progress_args(p)
     p.set_defaults(func=cmd_margins)
@@ -501,6 +508,11 @@ def cmd_margins(args) -> int:
     out = _checked(args.out or Path("out") / "margins" / name, "--out")  # made by the run
     # a bar on a terminal, else a line every 30 s or 10 % of the tasks (bound_env.parallel)
     progress = not args.no_progress
+    mismatch = None
+    if args.mismatch is not None:
+        from bound_env.mismatch import as_spec
+
+        mismatch = as_spec(args.mismatch)  # a bad spec fails before a policy is loaded
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
     gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"
     r = compute_margins(
@@ -513,11 +525,16 @@ def cmd_margins(args) -> int:
         use_cache=not args.no_cache,
         scheduler=args.scheduler,
         seed=args.seed,
+        mismatch=mismatch,
     )
     if args.json:
         print(strict_json(r))
     else:
         print(summary_text(r))
+        if "mismatch" in r:
+            from bound_env.analysis.margins.mismatch_report import mismatch_text
+
+            print(mismatch_text(r["mismatch"]))
         print(f"outputs in {out}")
     return 0
 
