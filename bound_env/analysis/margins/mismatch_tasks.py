@@ -367,20 +367,20 @@ def mismatch_jobs(mb: MismatchBudget) -> list:
 
 
 def median_interval(values, level: float = 0.95) -> list:
-    """Distribution-free interval of the median: the order statistics (j, k) with
-    P(j <= B < k) >= level for B ~ Binomial(n, 1/2), as wide as needed; [nan, nan] for no
-    value, the whole range when n is too small."""
+    """Distribution-free interval of the median: the narrowest symmetric pair of order
+    statistics [x_(j+1), x_(n-j)] with P(j < B < n - j) >= level for B ~ Binomial(n, 1/2)
+    (n = 32: the 10th and 23rd); [nan, nan] for no value, the whole range when n is too
+    small."""
     from scipy.stats import binom
 
     x = np.sort(np.asarray([v for v in values if v is not None], dtype=float))
     n = len(x)
     if n == 0:
         return [math.nan, math.nan]
-    for j in range(n // 2, -1, -1):
-        k = n - j  # symmetric: x[j] .. x[k - 1] (0-based)
-        cover = binom.cdf(k - 1, n, 0.5) - binom.cdf(j - 1, n, 0.5)
+    for j in range(n // 2, -1, -1):  # [x_(j+1), x_(n-j)] (1-based order statistics)
+        cover = binom.cdf(n - j - 1, n, 0.5) - binom.cdf(j, n, 0.5)  # P(j < B < n - j)
         if cover >= level:
-            return [float(x[j]), float(x[k - 1])]
+            return [float(x[j]), float(x[n - j - 1])]
     return [float(x[0]), float(x[-1])]
 
 
