@@ -290,3 +290,29 @@ def test_cli_margins_mismatch(cli, tmp_path):
     assert "basin" in r and "mismatch" in r
     mm = r["mismatch"]
     assert mm["hold"]["n"] == 8 and len(mm["curve"]) == 2 and "model error pm5" in out
+
+
+def test_noise_and_delay_reach_the_controller():
+    """The runner's noise and delay change what an LQR does; without them the same runs
+    repeat exactly."""
+    from bound_env.analysis.margins.closed_loop import loop_for
+    from bound_env.analysis.margins.mismatch_tasks import plant_runs
+
+    setup = _setup("lqr", "none")
+    loop = loop_for(setup)
+    g = load_gait("default")
+    Z0 = g.z0 + 0.05 * np.abs(g.z0) * np.array([1, -1, 1, -1, 1, -1])
+    plants = [g.params] * 2
+    runs = {
+        name: plant_runs(
+            loop, np.tile(Z0, (2, 1)), plants, 6, as_spec(name), [1, 2], effort_strides=3
+        )
+        for name in ("none", "delay1", "noise5")
+    }
+    again = plant_runs(
+        loop, np.tile(Z0, (2, 1)), plants, 6, as_spec("none"), [1, 2], effort_strides=3
+    )
+    assert again == runs["none"]
+    assert runs["none"]["effort"][0] == runs["none"]["effort"][1]  # the same robot twice
+    assert runs["delay1"]["effort"] != runs["none"]["effort"]
+    assert runs["noise5"]["effort"][0] != runs["noise5"]["effort"][1]  # own noise per robot
