@@ -213,7 +213,8 @@ def register(sub) -> None:
         metavar="SPEC",
         help="also measure under model error (JSON key mismatch): a preset (pm5, pm10, pm20, "
         "all5, all10, all20, noise, noise5, delay1, delay2, none; join with +, e.g. "
-        "pm5+delay1) or a YAML file (bound_env.mismatch); quick/full: 32 plants",
+        "pm5+delay1) or a YAML file (bound_env.mismatch); several separated by commas "
+        "(pm5,pm10); quick/full: 32 plants",
     )
     p.add_argument("--json", action="store_true", help="print the JSON result")
     add_progress_args(p)
@@ -512,7 +513,8 @@ def cmd_margins(args) -> int:
     if args.mismatch is not None:
         from bound_env.mismatch import as_spec
 
-        mismatch = as_spec(args.mismatch)  # a bad spec fails before a policy is loaded
+        # a bad spec fails before a policy is loaded
+        mismatch = [as_spec(t) for t in args.mismatch.split(",")]
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force)
     gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"
     r = compute_margins(

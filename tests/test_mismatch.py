@@ -288,7 +288,7 @@ def test_cli_margins_mismatch(cli, tmp_path):
     assert code == 0, err
     r = json.loads((tmp_path / "margins.json").read_text())
     assert "basin" in r and "mismatch" in r
-    mm = r["mismatch"]
+    mm = r["mismatch"]["pm5"]
     assert mm["hold"]["n"] == 8 and len(mm["curve"]) == 2 and "model error pm5" in out
 
 
@@ -316,3 +316,11 @@ def test_noise_and_delay_reach_the_controller():
     assert runs["none"]["effort"][0] == runs["none"]["effort"][1]  # the same robot twice
     assert runs["delay1"]["effort"] != runs["none"]["effort"]
     assert runs["noise5"]["effort"][0] != runs["noise5"]["effort"][1]  # own noise per robot
+
+
+def test_compute_margins_refuses_a_spec_twice():
+    from agents.controllers import ZeroController
+    from bound_env.analysis.margins import compute_margins
+
+    with pytest.raises(ValueError, match="names a spec twice"):
+        compute_margins(ZeroController(), budget="test", mismatch=["pm5", "pm5"])

@@ -24,7 +24,10 @@ def _num(x, fmt: str = ".3g") -> str:
 
 
 def mismatch_text(mm: dict) -> str:
-    """A few lines: the spec, hold (with its effort), r50 under error, MFPT."""
+    """A few lines per spec: the spec, hold (with its effort), r50 under error, MFPT. ``mm``:
+    a result's ``mismatch`` ({spec name: block}) or one block."""
+    if "hold" not in mm:
+        return "\n".join(mismatch_text(b) for b in mm.values())
     h = mm["hold"]
     spec = mm["spec"]
     lines = [

@@ -269,15 +269,19 @@ def compute_margins(
     bound_env/'s own sources (`setup_key`), so that a change of that code never returns a stale
     result; the controller's ``fingerprint()`` covers its data (weights, gains, settings).
     ``mismatch``: a model-error spec (`bound_env.mismatch.as_spec`: a preset, a YAML file or
-    a `MismatchSpec`): the result then has the key ``mismatch`` too (`mismatch_tasks`), its
-    tasks cached under `mismatch_key`.
+    a `MismatchSpec`) or a list of them: the result then has the key ``mismatch`` too,
+    {spec name: its block} (`mismatch_tasks`), each spec's tasks cached under `mismatch_key`.
     """
     from bound_env.mismatch import as_spec
     from bound_env.params import load_gait
 
     budget = as_budget(budget)
-    spec = as_spec(mismatch) if mismatch is not None else None
-    if spec is not None and budget.name not in MISMATCH_BUDGETS:
+    many = mismatch if isinstance(mismatch, (list, tuple)) else [mismatch]
+    specs = [as_spec(m) for m in many if m is not None]
+    names = [s.name for s in specs]
+    if len(set(names)) < len(names):
+        raise ValueError(f"--mismatch names a spec twice: {names}")
+    if specs and budget.name not in MISMATCH_BUDGETS:
         raise ValueError(f"--mismatch has budgets {sorted(MISMATCH_BUDGETS)}, got {budget.name!r}")
     if workers < 1:
         raise ValueError(f"--workers must be at least 1, got {workers}")
@@ -328,8 +332,8 @@ def compute_margins(
         res = _run_all(
             executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}"
         )
-        mm = None
-        if spec is not None:
+        mm = {}
+        for spec in specs:
             mb = MISMATCH_BUDGETS[budget.name]
             mm_setup = replace(
                 setup, key=mismatch_key(setup.key, spec, budget), mismatch=spec, mismatch_budget=mb
@@ -342,9 +346,9 @@ def compute_margins(
                 progress,
                 f"mismatch {spec.name} {controller_name(controller)}",
             )
-            mm = assemble_mismatch(mm_setup, mm_res)
+            mm[spec.name] = assemble_mismatch(mm_setup, mm_res)
     result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
-    if mm is not None:
+    if mm:
         result["mismatch"] = mm
     result["seconds"] = time.perf_counter() - t0
     if out_dir is not None:
