@@ -216,6 +216,14 @@ def register(sub) -> None:
         "(default: out/margins/<policy name>)",
     )
     p.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
+    p.add_argument(
+        "--mismatch",
+        metavar="SPEC",
+        help="also measure under model error (JSON key mismatch): a preset (pm5, pm10, pm20, "
+        "all5, all10, all20, noise, noise5, delay1, delay2, none; join with +, e.g. "
+        "pm5+delay1) or a YAML file (bound_env.mismatch); several separated by commas "
+        "(pm5,pm10); quick/full: 32 plants",
+    )
     p.add_argument("--json", action="store_true", help="print the JSON result")
     add_progress_args(p)
     p.set_defaults(func=cmd_margins)
@@ -517,36 +525,9 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
 
 
 def cmd_margins(args) -> int:
-    from bound_env.analysis.margins import summary_text
+    from .margins_cli import run_margins  # loaded when the command runs, not when parsing
 
-    from .margins import compute_margins  # the front: the core, with the policy's sources
-    from .policy import load_controller
-
-    name = policy_label(args.policy)
-    if args.seed != 12345:  # a held-out set: not over the test set's outputs
-        name += f"-seed{args.seed}"
-    out = _checked(args.out or Path("out") / "margins" / name, "--out")  # made by the run
-    # a bar on a terminal, else a line every 30 s or 10 % of the tasks (bound_env.parallel)
-    progress = not args.no_progress
-    ctrl = load_controller(args.policy, gait=args.gait, force=args.force, env_id=args.env_id)
-    gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"
-    r = compute_margins(
-        ctrl,
-        budget=args.budget,
-        gait=gait,
-        workers=args.workers,
-        out=out,
-        progress=progress,
-        use_cache=not args.no_cache,
-        scheduler=args.scheduler,
-        seed=args.seed,
-    )
-    if args.json:
-        print(strict_json(r))
-    else:
-        print(summary_text(r))
-        print(f"outputs in {out}")
-    return 0
+    return run_margins(args)
 
 
 def _checked(path, flag: str) -> Path:

@@ -82,6 +82,7 @@ def compute_margins(
     use_cache: bool = True,
     scheduler: str | None = None,
     seed: int = DEFAULT_SEED,
+    mismatch=None,
 ) -> dict:
     """`bound_env.analysis.margins.compute_margins` of ``policy`` (``"passive"``, a name, a
     path or a controller: `as_controller`), with `policy_sources` in its cache key. The other
@@ -104,6 +105,7 @@ def compute_margins(
         scheduler=scheduler,
         seed=seed,
         extra_sources=policy_sources(controller),
+        mismatch=mismatch,
     )
 
 

@@ -608,6 +608,15 @@ class PassiveBoundTask:
         self.cfg = cfg
         self._aux0 = make_aux(self.params.to_array())
 
+    def set_params(self, params) -> None:
+        """Run the robots started from now on (`reset_robot`) on ``params`` (a
+        `bound_env.params.Params`): another plant under the same task (model error,
+        `bound_env.mismatch`). z_ref, the observation bounds and the other settings stay the
+        gait's; rough terrain's mean slope becomes ``params.alpha``."""
+        self.params = params
+        self.cfg[C.ALPHA_NOMINAL] = params.alpha
+        self._aux0 = make_aux(params.to_array())
+
     # -- spaces --------------------------------------------------------------------------------
     @property
     def obs_dim(self) -> int:

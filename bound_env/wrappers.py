@@ -61,3 +61,12 @@ class LibraryActions(gym.ActionWrapper):
             raise ValueError(f"action must be in [0, {len(self.rows)}), got {a}")
         base = self.env.unwrapped
         return base.lqr.coefficients(base.z) if a == 0 else self.rows[a].copy()
+
+
+def __getattr__(name: str):
+    """`RandomizedPlant` (`bound_env.randomized`), importable from here."""
+    if name == "RandomizedPlant":
+        from .randomized import RandomizedPlant
+
+        return RandomizedPlant
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

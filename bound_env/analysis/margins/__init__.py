@@ -96,6 +96,11 @@ Measures (JSON keys)
   size up to which the rate stays >= 50 %.
 - ``effort``: mean |tau| (N m, time average) over one stride of the closed-loop cycle, and
   ``effort_frac`` = effort / max_torque.
+- ``mismatch`` (with ``mismatch=``, ``--mismatch SPEC``): {spec name: block} of the margins
+  under model error, each robot on its own plant with the spec's sensor noise and actuation
+  delay (`bound_env.mismatch`): ``hold``, ``curve`` and ``r50`` (settled, not returned),
+  ``mfpt``; the reference is `mismatch_tasks`' docstring, the text and the results page's
+  section `mismatch_report`.
 
 Controllers
 -----------
@@ -137,6 +142,8 @@ Modules
 - `assemble`: the JSON result from the tasks' results;
 - `report`: margins.json, the CSV tables, the plots and `summary_text`;
 - `stats`: Wilson and Student-t intervals, crossings on a grid, the MFPT estimate.
+- `mismatch_tasks`: the model-error measures (``mm_hold``, ``mm_curve``, ``mm_mfpt``) and
+  `mismatch_tasks.plant_runs`; `mismatch_report`: `mismatch_text`, `mismatch_markdown`.
 """
 
 from .assemble import assemble, controller_name, mfpt_curve

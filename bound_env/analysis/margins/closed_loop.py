@@ -363,6 +363,8 @@ class Setup:
     key: str = ""
     period: float = math.nan  # closed-loop stride period [s]
     seed: int = DEFAULT_SEED  # --seed: the random directions, terrain and push samples
+    mismatch: object = None  # model error (`bound_env.mismatch.MismatchSpec`) of the mm_ tasks
+    mismatch_budget: object = None  # their `mismatch_tasks.MismatchBudget`
 
 
 _LOOPS: dict = {}

@@ -37,6 +37,16 @@ from .closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TO
 from .curve import task_curve
 from .cycle import FD_FLOOR, FD_REL, task_cycle
 from .decision_times import histogram
+from .mismatch_tasks import (
+    MISMATCH_BUDGETS,
+    MISMATCH_SEED,
+    SETTLE_NOISE,
+    assemble_mismatch,
+    mismatch_jobs,
+    task_mm_curve,
+    task_mm_hold,
+    task_mm_mfpt,
+)
 from .push import task_push
 from .report import Z_LABELS, Z_UNITS, write_outputs
 from .terrain import task_mfpt, task_terrain
@@ -54,6 +64,9 @@ TASKS = {
     "ceiling": task_ceiling,
     "terrain": task_terrain,
     "mfpt": task_mfpt,
+    "mm_hold": task_mm_hold,
+    "mm_curve": task_mm_curve,
+    "mm_mfpt": task_mm_mfpt,
 }
 
 
@@ -140,6 +153,8 @@ SETTINGS = {
     "env_id": ENV_ID,
     "cycle_record_dt": CYCLE_RECORD_DT,
 }
+# The model-error tasks' settings (with the spec: `mismatch_key`).
+MISMATCH_SETTINGS = {"mismatch_seed": MISMATCH_SEED, "settle_noise": SETTLE_NOISE}
 
 
 def source_files(extra=()) -> list[Path]:
@@ -196,6 +211,19 @@ def setup_key(
     )
 
 
+def mismatch_key(key: str, spec, budget: Budget) -> str:
+    """Cache key of the model-error tasks: the evaluation's key (`setup_key`), the spec, its
+    budget and `MISMATCH_SETTINGS`."""
+    return settings_hash(
+        {
+            "setup": key,
+            "mismatch": spec.to_dict(),
+            "mismatch_budget": asdict(MISMATCH_BUDGETS[budget.name]),
+            "settings": MISMATCH_SETTINGS,
+        }
+    )
+
+
 def check_controller(controller):
     """``controller`` if it has the controller protocol (``__call__`` and ``fingerprint()``,
     see the package docstring), else ValueError. Names and paths are loaded by the caller."""
@@ -234,6 +262,7 @@ def compute_margins(
     scheduler: str | None = None,
     seed: int = DEFAULT_SEED,
     extra_sources=(),
+    mismatch=None,
 ) -> dict:
     """All margins of ``controller`` (an object with the controller protocol, package
     docstring) as a JSON-able dict.
@@ -248,10 +277,21 @@ def compute_margins(
     code outside bound_env/ (e.g. a learned policy's modules), hashed into the cache key with
     bound_env/'s own sources (`setup_key`), so that a change of that code never returns a stale
     result; the controller's ``fingerprint()`` covers its data (weights, gains, settings).
+    ``mismatch``: a model-error spec (`bound_env.mismatch.as_spec`: a preset, a YAML file or
+    a `MismatchSpec`) or a list of them: the result then has the key ``mismatch`` too,
+    {spec name: its block} (`mismatch_tasks`), each spec's tasks cached under `mismatch_key`.
     """
+    from bound_env.mismatch import as_spec
     from bound_env.params import load_gait
 
     budget = as_budget(budget)
+    many = mismatch if isinstance(mismatch, (list, tuple)) else [mismatch]
+    specs = [as_spec(m) for m in many if m is not None]
+    names = [s.name for s in specs]
+    if len(set(names)) < len(names):
+        raise ValueError(f"--mismatch names a spec twice: {names}")
+    if specs and budget.name not in MISMATCH_BUDGETS:
+        raise ValueError(f"--mismatch has budgets {sorted(MISMATCH_BUDGETS)}, got {budget.name!r}")
     if workers < 1:
         raise ValueError(f"--workers must be at least 1, got {workers}")
     seed = check_seed(seed)
@@ -301,7 +341,24 @@ def compute_margins(
         res = _run_all(
             executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}"
         )
+        mm = {}
+        for spec in specs:
+            mb = MISMATCH_BUDGETS[budget.name]
+            mm_setup = replace(
+                setup, key=mismatch_key(setup.key, spec, budget), mismatch=spec, mismatch_budget=mb
+            )
+            mm_res = _run_all(
+                executor,
+                mm_setup,
+                mismatch_jobs(mb),
+                cache,
+                progress,
+                f"mismatch {spec.name} {controller_name(controller)}",
+            )
+            mm[spec.name] = assemble_mismatch(mm_setup, mm_res)
     result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
+    if mm:
+        result["mismatch"] = mm
     result["seconds"] = time.perf_counter() - t0
     if out_dir is not None:
         write_outputs(result, out_dir)

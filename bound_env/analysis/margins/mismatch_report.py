@@ -1,0 +1,152 @@
+"""Text and markdown of the margins under model error (JSON ``mismatch``, `mismatch_tasks`).
+
+`mismatch_text` is the command line's summary of one result; `mismatch_markdown` the results
+page's section: every column's hold and r50 under each spec (by default ``pm5`` and
+``pm10``), with intervals, and paired against a reference column where both met the same
+plants and directions (the same spec, seeds and budget): McNemar's exact test on the
+per-plant hold outcomes and the bootstrap of Delta r50 over the shared plant-direction pairs
+(`bound_env.analysis.paired`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..paired import bootstrap_delta_x50, mcnemar_exact
+
+DEFAULT_SPECS = ("pm5", "pm10")
+
+
+def _num(x, fmt: str = ".3g") -> str:
+    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+
+
+def mismatch_text(mm: dict) -> str:
+    """A few lines per spec: the spec, hold (with its effort), r50 under error, MFPT. ``mm``:
+    a result's ``mismatch`` ({spec name: block}) or one block."""
+    if "hold" not in mm:
+        return "\n".join(mismatch_text(b) for b in mm.values())
+    h = mm["hold"]
+    spec = mm["spec"]
+    lines = [
+        f"model error {spec['name']}: {h['n']} plants, delay {spec['delay']}, "
+        f"noise {'yes' if any(v > 0 for v in spec['noise'].values()) else 'no'}",
+        f"  hold ({h['strides']} strides from z*): {h['k']}/{h['n']} "
+        f"[{h['ci'][0]:.2f}, {h['ci'][1]:.2f}]; median mean |tau| over the last "
+        f"{h['effort_strides']} strides {_num(h['effort_median'])} N m"
+        + (
+            f" [{_num(h['effort_median_ci'][0])}, {_num(h['effort_median_ci'][1])}]"
+            if h["effort_median_ci"]
+            else ""
+        ),
+        f"  r50 under error (no fall in {mm['curve_strides']} strides, apex settled): "
+        f"{_num(mm['r50'])} [{_num(mm['r50_ci'][0])}, {_num(mm['r50_ci'][1])}]",
+    ]
+    for m in mm["mfpt"]:
+        bound = ">=" if m["lower_bound"] else ""
+        lines.append(f"  MFPT at sigma {m['sigma_deg']} deg: {bound}{_num(m['mfpt'])} strides")
+    return "\n".join(lines)
+
+
+def _blocks(value) -> dict:
+    """{spec name: mismatch block} of a column's value: a margins result (key ``mismatch``),
+    a mismatch block, or a list / dict of them."""
+    if isinstance(value, dict) and "hold" in value:
+        return {value["spec"]["name"]: value}
+    if isinstance(value, dict) and "mismatch" in value:
+        return _blocks(value["mismatch"])
+    items = value.values() if isinstance(value, dict) else value
+    out = {}
+    for v in items:
+        out.update(_blocks(v))
+    return out
+
+
+def paired_with(a: dict, b: dict) -> bool:
+    """Did the two blocks meet the same plants and directions (spec, seeds, budget)?"""
+    return (
+        a["spec"] == b["spec"]
+        and a["seeds"] == b["seeds"]
+        and a["budget"] == b["budget"]
+        and a["plants"] == b["plants"]
+    )
+
+
+def paired_mismatch(a: dict, b: dict, n_boot: int = 2000, seed: int = 0) -> dict:
+    """Column ``a`` against reference ``b`` on shared plants: McNemar on hold, bootstrap of
+    Delta r50 (resampling the plant-direction pairs)."""
+    sizes = [c["size"] for c in a["curve"]]
+    oa = np.array([c["outcomes"] for c in a["curve"]], dtype=float)
+    ob = np.array([c["outcomes"] for c in b["curve"]], dtype=float)
+    return {
+        "hold": mcnemar_exact(a["hold"]["outcomes"], b["hold"]["outcomes"]),
+        "delta_r50": bootstrap_delta_x50(sizes, oa, ob, n_boot=n_boot, seed=seed),
+    }
+
+
+def mismatch_markdown(results_by_column: dict, specs=DEFAULT_SPECS, reference=None) -> str:
+    """The "model error" section: one table per spec with every column's hold (k/n, Wilson
+    interval), the median mean |tau| of its held plants (order-statistic interval) and r50
+    under error (interval from the Wilson bounds), plus the paired comparison with the
+    ``reference`` column (default: the first) where the plants are shared.
+
+    ``results_by_column``: {column label: a margins result with key ``mismatch``, a mismatch
+    block, or a list/dict of those (one per spec)}."""
+    cols = {c: _blocks(v) for c, v in results_by_column.items()}
+    ref = reference if reference is not None else next(iter(cols), None)
+    parts = []
+    for name in specs:
+        have = {c: b[name] for c, b in cols.items() if name in b}
+        if not have:
+            continue
+        any_block = next(iter(have.values()))
+        h0 = any_block["hold"]
+        parts.append(
+            f"#### {name}: {_describe(any_block['spec'])}\n\n"
+            f"{h0['n']} plants; hold: no fall in {h0['strides']} strides from the nominal "
+            f"z*, effort over the last {h0['effort_strides']}; r50: no fall in "
+            f"{any_block['curve_strides']} strides and the apex settled.\n"
+        )
+        rows = [
+            "| column | hold | median mean \\|τ\\| of held [N m] | r50 under error "
+            f"| paired with {ref}: hold b/c, p | Δr50 [95 %] |",
+            "| --- | --- | --- | --- | --- | --- |",
+        ]
+        for c, b in have.items():
+            h = b["hold"]
+            eff = _num(h["effort_median"])
+            if h["effort_median_ci"]:
+                eff += f" [{_num(h['effort_median_ci'][0])}, {_num(h['effort_median_ci'][1])}]"
+            r50 = f"{_num(b['r50'])} [{_num(b['r50_ci'][0])}, {_num(b['r50_ci'][1])}]"
+            hold = f"{h['k']}/{h['n']} [{h['ci'][0]:.2f}, {h['ci'][1]:.2f}]"
+            pair, dr = "–", "–"
+            rb = have.get(ref)
+            if c != ref and rb is not None and paired_with(b, rb):
+                p = paired_mismatch(b, rb)
+                pair = f"{p['hold']['b']}/{p['hold']['c']}, p = {p['hold']['p']:.2g}"
+                d = p["delta_r50"]
+                dr = f"{d['delta']:+.3g} [{d['low']:+.3g}, {d['high']:+.3g}]"
+            rows.append(f"| {c} | {hold} | {eff} | {r50} | {pair} | {dr} |")
+        parts.append("\n".join(rows) + "\n")
+    return "\n".join(parts)
+
+
+def _describe(spec: dict) -> str:
+    params = spec["params"]
+    deltas = sorted(set(params.values()))
+    text = (
+        (
+            f"{', '.join(params)} each x U(1 ± {deltas[0]:g})"
+            if len(deltas) == 1
+            else ", ".join(f"{k} ± {v:g}" for k, v in params.items())
+        )
+        if params
+        else "nominal parameters"
+    )
+    if any(v > 0 for v in spec["noise"].values()):
+        text += "; sensor noise"
+    if spec["delay"]:
+        text += f"; delay {spec['delay']} interval(s)"
+    return text

@@ -1,0 +1,470 @@
+"""Margins under model error (JSON ``mismatch``; ``bound-env margins --mismatch SPEC``).
+
+The controller keeps its nominal design (model, gains, network); robot i runs on its own
+plant, drawn from the spec (`bound_env.mismatch`: relative parameter ranges, sensor noise,
+actuation delay) with the seed's plant seed (`mismatch_seeds`), so every controller meets the
+same plants in the same order (paired comparisons: `mismatch_report`). Every run steps the
+step env interval by interval (`plant_runs`); on smooth ground each stride restarts at its
+apex (the nominal apex map's convention), on rough terrain a run is one long episode (the
+nominal MFPT's); delayed actions stay in flight across apexes.
+
+Measures
+--------
+- ``hold``: robot i starts on the *nominal* z* on plant i; held = no fall in
+  ``hold_strides`` strides (100 in the quick and full budgets). ``k``, ``n``, ``fraction``,
+  ``ci`` (Wilson 95 %), ``outcomes`` (per plant, for McNemar's test) and ``effort``: mean
+  |tau| [N m] over the last ``effort_strides`` (10) strides of each held plant, with
+  ``effort_median`` and its distribution-free 95 % interval (``effort_median_ci``: order
+  statistics of the binomial).
+- ``curve`` / ``r50``: robot i starts at z* + r |z*| xi_i on plant i (xi_i: direction i of
+  `random_directions` of the seed's directions, the nominal curve's first directions);
+  success = no fall in ``curve_strides`` (50) strides *and* the apex settled: the last two
+  apexes within the return tolerance of each other, max_j |z_j(N) - z_j(N - 1)| < tol_j with
+  tol_j = `RETURN_TOL` (SI, unscaled, as the nominal return test) plus 4 sigma_j of the
+  sensor noise on that component (none without noise). Not "returned to the nominal z*",
+  which the plant may not have. Per size: Wilson intervals; ``r50`` (log-interpolated
+  crossing of 1/2, as the nominal curve) and ``r50_ci`` from the intervals' bounds.
+- ``mfpt``: the nominal MFPT's runs (the seed's MFPT env seeds, slope noise sigma) from z*,
+  robot k on plant k mod ``plants``; MFPT = strides attempted / falls with the exact Poisson
+  interval; ``mfpt_sigma_100_deg``. On rough terrain the mean slope is the gait's (the
+  terrain's draws replace a plant's slope error after the first apex).
+
+Noise and delay act on what the controller sees and does: its observation (and the apex
+state handed to ``on_apex``) gets the spec's noise from a per-robot generator; the action it
+returns acts ``delay`` control intervals later (zero torque before).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...dynamics import make_aux
+from ...mismatch import MismatchSpec, sample_plant_params
+from ...params import Z_IN_Y, Z_NAMES
+from ...stride_map import RETURN_TOL, max_intervals
+from ...stride_protocol import reset_controller
+from ...task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_T, S_T_APEX, S_TAU
+from .budget import DEFAULT_SEED, random_directions, sample_seeds
+from .closed_loop import STRIDES, Setup, loop_for
+
+MISMATCH_SEED = 40_000  # the plants of the default (test) seed; any other seed derives its own
+SETTLE_NOISE = 4.0  # settle tolerance: RETURN_TOL + this many noise sigmas per component
+_Z_IDX = np.array(Z_IN_Y)
+
+
+@dataclass(frozen=True)
+class MismatchBudget:
+    """How hard the model-error measures look."""
+
+    name: str
+    plants: int  # plants (robots) of hold and of each curve size
+    hold_strides: int
+    effort_strides: int  # hold's effort: mean |tau| over the last this many strides
+    curve_sizes: tuple
+    curve_strides: int
+    mfpt_sigmas: tuple
+    mfpt_robots: int
+    mfpt_strides: int
+
+
+MISMATCH_BUDGETS = {
+    "test": MismatchBudget("test", 8, 20, 5, (0.01, 0.1), 20, (0.5,), 8, 10),
+    "quick": MismatchBudget(
+        "quick",
+        32,
+        100,
+        10,
+        (0.01, 0.02, 0.04, 0.07, 0.1, 0.15, 0.25, 0.4),
+        50,
+        (0.2, 0.5, 1.0),
+        32,
+        100,
+    ),
+    "full": MismatchBudget(
+        "full",
+        32,
+        100,
+        10,
+        (0.005, 0.01, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.25, 0.4, 0.7),
+        50,
+        (0.1, 0.2, 0.35, 0.5, 0.75, 1.0),
+        64,
+        200,
+    ),
+}
+MISMATCH_BUDGETS["standard"] = MISMATCH_BUDGETS["full"]
+
+
+def mismatch_seeds(seed: int = DEFAULT_SEED) -> dict:
+    """Seeds of the plants and of the sensor noise (``noise`` + robot index) of ``--seed``:
+    fixed ones for the default (test) seed, derived ones (`numpy.random.SeedSequence`) for
+    any other."""
+    if seed == DEFAULT_SEED:
+        return {"plants": MISMATCH_SEED, "noise": MISMATCH_SEED + 1000}
+    plants, noise = (int(v) for v in np.random.SeedSequence([seed, 3]).generate_state(2) >> 2)
+    return {"plants": plants, "noise": noise}
+
+
+def plants_of(setup: Setup, n: int) -> list:
+    """The first ``n`` plants (`bound_env.params.Params`) of ``setup``'s spec and seed."""
+    from ...params import load_gait
+
+    nominal = load_gait(setup.gait).params
+    return sample_plant_params(setup.mismatch, n, mismatch_seeds(setup.seed)["plants"], nominal)
+
+
+def plant_runs(
+    loop,
+    Z0,
+    plants,
+    max_strides: int,
+    spec: MismatchSpec,
+    noise_seeds,
+    terrain_seeds=None,
+    effort_strides: int = 10,
+) -> dict:
+    """One long episode per robot i from the apex state Z0[i] on the plant ``plants[i]``
+    (`Params`), all stepped together through ``loop``'s task, one controller call per
+    control interval (``batch(obs)`` for a controller with one and no ``on_apex``, else a
+    copy per robot with ``on_apex`` at every apex, as `rough_episodes`), with the spec's
+    sensor noise (robot i's generator seeded ``noise_seeds[i]``) and actuation delay, until
+    ``max_strides`` strides or a fall. On smooth ground every stride restarts at its apex
+    (t = 0 there, as the nominal apex map `ClosedLoop.stride`; delayed actions stay in
+    flight); ``terrain_seeds`` (env seeds of the slope draws, rough terrain: the loop's
+    ``slope_noise_deg``) runs one long episode per robot instead, as the nominal MFPT.
+
+    Returns per robot: ``strides``, ``fell`` (0/1), ``failure`` (name or None), ``settle``
+    (per component |z(N) - z(N - 1)| of the last two apexes, None before two), ``effort``
+    (mean |tau| [N m] over the last ``effort_strides`` strides, None before as many)."""
+    from gymnasium.utils import seeding
+
+    task, ctrl = loop.env.task, loop.controller
+    n = len(plants)
+    Z0 = np.atleast_2d(np.asarray(Z0, dtype=float))
+    b = task.new_batch(n)
+    noise_rng = [np.random.default_rng(int(s)) for s in noise_seeds]
+    terrain_rng = None
+    if terrain_seeds is not None:
+        terrain_rng = [seeding.np_random(int(s))[0] for s in terrain_seeds]
+    plant_aux = [make_aux(p.to_array()) for p in plants]
+    for i in range(n):
+        task.reset_robot(b, i, Z0[i])
+        b.aux[i] = plant_aux[i]
+        task.restart_robot(b, i)
+        if terrain_rng is not None:
+            task.draw_slope_noise(b, i, terrain_rng[i])
+    sig_obs = spec.obs_sigma(task.obs_names).astype(np.float32)
+    sig_z = spec.obs_sigma(Z_NAMES)
+    noisy = bool(np.any(sig_obs > 0))
+    low, high = task.obs_bounds()
+
+    def seen_obs(rows):
+        obs = b.obs.copy()
+        if noisy:
+            for i in rows:
+                obs[i] = np.clip(
+                    obs[i] + sig_obs * noise_rng[i].standard_normal(len(sig_obs)), low, high
+                )
+        return obs
+
+    def seen_z(i, z):
+        return z + sig_z * noise_rng[i].standard_normal(6) if noisy else z
+
+    on_apex = getattr(ctrl, "on_apex", None)
+    batched = callable(getattr(ctrl, "batch", None)) and on_apex is None
+    copies = None if batched else [copy.deepcopy(ctrl) for _ in range(n)]
+    live = b.s[:, S_STATUS] < FAIL_FIRST
+    out = {
+        "strides": [0] * n,
+        "fell": [0] * n,
+        "failure": [None] * n,
+        "settle": [None] * n,
+        "effort": [None] * n,
+    }
+    for i in np.flatnonzero(~live):
+        out["fell"][i], out["failure"][i] = 1, FAILURE_NAMES[int(b.s[i, S_STATUS])]
+    if copies is not None and on_apex is not None:
+        for i in range(n):
+            reset_controller(copies[i])  # a controller with memory starts each robot afresh
+            copies[i].on_apex(seen_z(i, Z0[i].copy()), 0.0)
+    queue = [np.zeros(n) for _ in range(spec.delay)]
+    restart = terrain_rng is None
+    dt = task.dt
+    n_max = max_intervals(dt)
+    done = np.zeros(n, dtype=np.int64)  # strides completed
+    steps_since = np.zeros(n, dtype=np.int64)  # intervals since the last apex
+    imp = np.zeros(n)  # integral of |tau| dt since the last apex [N m s]
+    t_start = np.zeros(n)  # time of the last apex [s]
+    per_stride = [[] for _ in range(n)]  # (impulse, duration) of each stride
+    last_z = [None] * n
+    while live.any():
+        rows = np.flatnonzero(live)
+        obs = seen_obs(rows)
+        decided = np.zeros(n)
+        if batched:
+            decided[:] = ctrl.batch(obs)
+        else:
+            for i in rows:
+                decided[i] = copies[i](obs[i])
+        if queue:
+            queue.append(decided)
+            decided = queue.pop(0)
+        b.actions[:] = decided
+        b.active[:] = live
+        task.step(b)
+        steps_since[live] += 1
+        s = b.s
+        tau = np.abs(s[:, S_TAU])
+        apex = live & (s[:, S_NAPEX] > 0)
+        failed = live & (s[:, S_STATUS] >= FAIL_FIRST)
+        timeout = live & ~apex & ~failed & (steps_since >= n_max)
+        imp[live & ~apex] += tau[live & ~apex] * dt
+        if terrain_rng is not None:
+            for i in np.flatnonzero(apex):
+                task.draw_slope_noise(b, i, terrain_rng[i])
+        for i in np.flatnonzero(failed | timeout):
+            out["fell"][i], out["strides"][i] = 1, int(done[i])
+            code = int(s[i, S_STATUS])
+            out["failure"][i] = FAILURE_NAMES[code] if failed[i] else "no_apex"
+        live &= ~(failed | timeout)
+        for i in np.flatnonzero(apex & live):
+            done[i] += 1
+            out["strides"][i] = int(done[i])
+            steps_since[i] = 0
+            t_apex, t_end = float(s[i, S_T_APEX]), float(s[i, S_T])
+            per_stride[i].append((imp[i] + tau[i] * (t_apex - (t_end - dt)), t_apex - t_start[i]))
+            napex = int(s[i, S_NAPEX])
+            z = np.array(b.apex[i, min(napex, b.apex.shape[1]) - 1][_Z_IDX], dtype=float)
+            if last_z[i] is not None:
+                out["settle"][i] = np.abs(z - last_z[i]).tolist()
+            last_z[i] = z
+            if done[i] >= max_strides:
+                live[i] = False
+                tail = per_stride[i][-effort_strides:]
+                if len(tail) == effort_strides:
+                    dur = sum(d for _, d in tail)
+                    out["effort"][i] = sum(m for m, _ in tail) / dur if dur > 0 else None
+                continue
+            if restart:  # the apex map: the next stride from z at t = 0, as the nominal loop
+                task.reset_robot(b, i, z)
+                b.aux[i] = plant_aux[i]
+                task.restart_robot(b, i)
+                imp[i], t_start[i], t_seen = 0.0, 0.0, 0.0
+            else:
+                imp[i], t_start[i] = tau[i] * (t_end - t_apex), t_apex
+                t_seen = float(b.obs[i, loop.i_since_apex])
+            if copies is not None and on_apex is not None:
+                copies[i].on_apex(seen_z(i, z), t_seen)
+    STRIDES[0] += int(sum(out["strides"]))
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Tasks (run in worker processes; ``setup.mismatch`` is the spec)
+# --------------------------------------------------------------------------------------------
+
+
+def settle_tol(spec: MismatchSpec) -> np.ndarray:
+    """Per apex component: the settle test's tolerance (SI), `RETURN_TOL` plus `SETTLE_NOISE`
+    sigmas of the sensor noise on it."""
+    return RETURN_TOL + SETTLE_NOISE * spec.obs_sigma(Z_NAMES)
+
+
+def task_mm_hold(setup: Setup) -> dict:
+    """hold: every plant from the nominal z* for ``hold_strides`` strides."""
+    mb = setup.mismatch_budget
+    loop = loop_for(setup)
+    plants = plants_of(setup, mb.plants)
+    base = mismatch_seeds(setup.seed)["noise"]
+    Z0 = np.tile(setup.z_star, (mb.plants, 1))
+    r = plant_runs(
+        loop,
+        Z0,
+        plants,
+        mb.hold_strides,
+        setup.mismatch,
+        [base + i for i in range(mb.plants)],
+        effort_strides=mb.effort_strides,
+    )
+    outcomes = [int(not f) for f in r["fell"]]
+    return {"outcomes": outcomes, **r}
+
+
+def task_mm_curve(setup: Setup, size: float) -> dict:
+    """r50 under error at one size: robot i from z* + size |z*| xi_i on plant i."""
+    mb = setup.mismatch_budget
+    loop = loop_for(setup)
+    plants = plants_of(setup, mb.plants)
+    dirs = random_directions(mb.plants, sample_seeds(setup.seed)["directions"])
+    zs = setup.z_star
+    base = mismatch_seeds(setup.seed)["noise"] + 10_000  # robot i: the same stream at every size
+    r = plant_runs(
+        loop,
+        zs + size * np.abs(zs) * dirs,
+        plants,
+        mb.curve_strides,
+        setup.mismatch,
+        [base + i for i in range(mb.plants)],
+    )
+    tol = settle_tol(setup.mismatch)
+    outcomes = [
+        int(not f and st is not None and bool(np.all(np.array(st) < tol)))
+        for f, st in zip(r["fell"], r["settle"], strict=True)
+    ]
+    return {
+        "size": size,
+        "n": mb.plants,
+        "k": int(sum(outcomes)),
+        "outcomes": outcomes,
+        "survived": int(mb.plants - sum(r["fell"])),
+        "failures": _count(r["failure"]),
+    }
+
+
+def task_mm_mfpt(setup: Setup, sigma: float) -> dict:
+    """MFPT under error at slope noise sigma [deg]: robot k on plant k mod ``plants``."""
+    mb = setup.mismatch_budget
+    loop = loop_for(setup, env_extra={"slope_noise_deg": float(sigma)})
+    plants = plants_of(setup, mb.plants)
+    robots = range(mb.mfpt_robots)
+    base = sample_seeds(setup.seed)["mfpt"]
+    nbase = mismatch_seeds(setup.seed)["noise"] + 50_000
+    Z0 = np.tile(setup.z_star, (len(robots), 1))
+    r = plant_runs(
+        loop,
+        Z0,
+        [plants[k % mb.plants] for k in robots],
+        mb.mfpt_strides,
+        setup.mismatch,
+        [nbase + k for k in robots],
+        terrain_seeds=[base + k for k in robots],
+    )
+    return {
+        "sigma_deg": sigma,
+        "robots": len(robots),
+        "strides": r["strides"],
+        "fell": r["fell"],
+        "failures": _count(r["failure"]),
+    }
+
+
+def _count(names) -> dict:
+    out: dict = {}
+    for f in names:
+        if f is not None:
+            out[f] = out.get(f, 0) + 1
+    return out
+
+
+def mismatch_jobs(mb: MismatchBudget) -> list:
+    """The (task name, args) of one evaluation under error."""
+    jobs = [("mm_hold", ())]
+    jobs += [("mm_curve", (r,)) for r in mb.curve_sizes]
+    jobs += [("mm_mfpt", (v,)) for v in mb.mfpt_sigmas]
+    return jobs
+
+
+def median_interval(values, level: float = 0.95) -> list:
+    """Distribution-free interval of the median: the narrowest symmetric pair of order
+    statistics [x_(j+1), x_(n-j)] with P(j < B < n - j) >= level for B ~ Binomial(n, 1/2)
+    (n = 32: the 10th and 23rd); [nan, nan] for no value, the whole range when n is too
+    small."""
+    from scipy.stats import binom
+
+    x = np.sort(np.asarray([v for v in values if v is not None], dtype=float))
+    n = len(x)
+    if n == 0:
+        return [math.nan, math.nan]
+    for j in range(n // 2, -1, -1):  # [x_(j+1), x_(n-j)] (1-based order statistics)
+        cover = binom.cdf(n - j - 1, n, 0.5) - binom.cdf(j, n, 0.5)  # P(j < B < n - j)
+        if cover >= level:
+            return [float(x[j]), float(x[n - j - 1])]
+    return [float(x[0]), float(x[-1])]
+
+
+def assemble_mismatch(setup: Setup, res: dict) -> dict:
+    """The JSON ``mismatch`` block from the tasks' results (module docstring)."""
+    from .stats import crossing_on_grid, mfpt_crossing, mfpt_estimate, wilson_interval
+
+    mb, spec = setup.mismatch_budget, setup.mismatch
+    from dataclasses import asdict
+
+    from ...mismatch import plant_values
+
+    hold = res[("mm_hold", ())]
+    k = int(sum(hold["outcomes"]))
+    efforts = [
+        e for e, o in zip(hold["effort"], hold["outcomes"], strict=True) if o and e is not None
+    ]
+    out = {
+        "spec": spec.to_dict(),
+        "budget": asdict(mb),
+        "seeds": mismatch_seeds(setup.seed),
+        "plants": [
+            {key: plant_values(p)[key] for key, d in spec.ranges if d > 0}
+            for p in plants_of(setup, mb.plants)
+        ],
+        "start": "nominal z* (hold, MFPT); z* + r |z*| xi_i (curve)",
+        "hold": {
+            "strides": mb.hold_strides,
+            "k": k,
+            "n": mb.plants,
+            "fraction": k / mb.plants,
+            "ci": list(wilson_interval(k, mb.plants)),
+            "outcomes": hold["outcomes"],
+            "strides_reached": hold["strides"],
+            "failures": _count(hold["failure"]),
+            "effort": hold["effort"],
+            "effort_strides": mb.effort_strides,
+            "effort_median": float(np.median(efforts)) if efforts else None,
+            "effort_median_ci": median_interval(efforts) if efforts else None,
+        },
+    }
+    curve = []
+    for r in mb.curve_sizes:
+        c = res[("mm_curve", (r,))]
+        lo, hi = wilson_interval(c["k"], c["n"])
+        curve.append(
+            {
+                **{x: c[x] for x in ("size", "n", "k", "outcomes", "survived", "failures")},
+                "success": c["k"] / c["n"],
+                "ci_low": lo,
+                "ci_high": hi,
+            }
+        )
+    sizes = [c["size"] for c in curve]
+    out["curve"] = curve
+    out["curve_strides"] = mb.curve_strides
+    out["settle_tol"] = settle_tol(spec).tolist()
+    out["r50"] = crossing_on_grid(sizes, [c["success"] for c in curve])
+    out["r50_ci"] = [
+        crossing_on_grid(sizes, [c["ci_low"] for c in curve]),
+        crossing_on_grid(sizes, [c["ci_high"] for c in curve]),
+    ]
+    mfpt = []
+    for v in mb.mfpt_sigmas:
+        m = res[("mm_mfpt", (v,))]
+        falls = int(sum(m["fell"]))
+        total = int(sum(m["strides"])) + falls  # strides attempted
+        mfpt.append(
+            {
+                "sigma_deg": v,
+                "robots": m["robots"],
+                "strides_total": total,
+                "failures": falls,
+                "fail_reasons": m["failures"],
+                **mfpt_estimate(total, falls),
+            }
+        )
+    out["mfpt"] = mfpt
+    out["mfpt_strides"] = mb.mfpt_strides
+    out["mfpt_sigma_100_deg"] = mfpt_crossing(
+        [m["sigma_deg"] for m in mfpt],
+        [m["mfpt"] for m in mfpt],
+        [m["lower_bound"] for m in mfpt],
+    )
+    return out
