@@ -119,6 +119,11 @@ def policy_names() -> list[str]:
 
 def resolve_policy(spec: str | Path) -> str | Path:
     """A built-in controller's name (returned as is), a shipped policy's folder, or a path."""
+    if not isinstance(spec, (str, Path)) or not str(spec):
+        raise TypeError(
+            f"policy must be a name ({', '.join(policy_names())}) or a run or policy "
+            f"folder's path, got {spec!r} ({type(spec).__name__})"
+        )
     text = str(spec)
     if text in CONTROLLERS:
         return text
@@ -150,7 +155,8 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
     policy for PassiveBound's observation space, or would be evaluated wrongly
     (`check_policy_files`).
     """
-    if Path(str(path)).suffix in (".yaml", ".yml"):  # a classical controller's spec file
+    spec_file = isinstance(path, (str, Path)) and Path(path).suffix in (".yaml", ".yml")
+    if spec_file:  # a classical controller's spec file
         return _classical(str(path), gait)
     path = resolve_policy(path)
     if isinstance(path, str):
@@ -161,7 +167,16 @@ def load_controller(path: str | Path, gait: str | Path | None = None, force: boo
         return load_choice_policy(path, gait=gait, force=force)
     files = find_policy_files(path)
     policy_kind(files.model.parent)  # a choice.npz beside the model: ambiguous, refused
-    if files.config is not None and read_policy_section(files)[1] in STRIDE_ENV_IDS:
+    trained_on = read_policy_section(files)[1] if files.config is not None else None
+    if trained_on is not None and trained_on.startswith("PassiveBoundRescue"):
+        raise ValueError(
+            f"policy {path} was trained on {trained_on} (one profile per stride from the "
+            "rescue task's starts, read from its config.yaml), which margins, rollout, "
+            "compare and load_policy do not evaluate; measure its returns with "
+            f"scripts/rescue_eval.py {path}, or act in gym.make({trained_on!r}) with "
+            "model.predict"
+        )
+    if trained_on in STRIDE_ENV_IDS:
         from .stride import load_stride_policy  # a stride-level policy (agents/stride.py)
 
         return load_stride_policy(path, gait=gait, force=force)

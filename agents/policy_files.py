@@ -200,11 +200,69 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+# The files that define a policy, whatever its kind (a PPO model with its statistics, settings
+# and base gain; a choice policy's network and expert): what a residual's base pin hashes.
+POLICY_CONTENT_FILES = (
+    "model.zip",
+    "vecnormalize.pkl",
+    "config.yaml",
+    "base.json",
+    "choice.npz",
+    "config.json",
+)
+
+
+def policy_content_sha256(policy) -> str:
+    """The sha256 of what defines a controller given by name or path (`agents.policy`): for a
+    policy folder (or a model zip's folder) the sha256 of each of its `POLICY_CONTENT_FILES`,
+    by name; for a classical controller its spec file; for ``passive`` its name. Another
+    policy swapped into the folder, or a file of it changed, changes it."""
+    from .policy import resolve_policy
+
+    resolved = resolve_policy(policy)
+    h = hashlib.sha256(b"policy content v1\n")
+    if isinstance(resolved, str):  # a built-in controller: passive, or a classical spec
+        h.update(f"builtin {resolved}\n".encode())
+        if resolved != "passive":
+            from bound_env.control.spec import resolve_spec_path
+
+            h.update(f"spec {file_sha256(resolve_spec_path(resolved))}\n".encode())
+        return h.hexdigest()
+    p = Path(resolved)
+    if p.is_file():  # a model zip or a spec file: that file, and its folder's settings
+        h.update(f"{p.name} {file_sha256(p)}\n".encode())
+        p = p.parent
+    for name in POLICY_CONTENT_FILES:
+        if (p / name).is_file():
+            h.update(f"{name} {file_sha256(p / name)}\n".encode())
+    return h.hexdigest()
+
+
+def residual_base(section: dict) -> str | None:
+    """The base controller's name of a run whose actor acts through a controller wrapper
+    (`agents.residual.ResidualOver`'s ``base``, default ``"default"``), or None."""
+    from .policy import controller_wrapper
+
+    found = controller_wrapper(section.get("env_wrapper") or [])
+    if found is None:
+        return None
+    cls, kwargs = found
+    if "base" in kwargs:
+        return kwargs["base"]
+    import inspect
+
+    param = inspect.signature(cls.__init__).parameters.get("base")
+    return None if param is None else param.default
+
+
 def write_fingerprint(folder: str | Path, **extra) -> Path:
     """Bind the files of the policy in ``folder`` together: the sha256 of ``model.zip``,
     ``vecnormalize.pkl`` and, when present, ``config.yaml`` and ``base.json``
     (`FINGERPRINTED_SETTINGS`) in ``fingerprint.json`` (written atomically), checked by
-    `check_policy_files`."""
+    `check_policy_files`. A residual over a base controller (its config's
+    `agents.residual.ResidualOver`) also pins the base: ``base: {policy, sha256}``, the
+    sha256 of the base's files (`policy_content_sha256`) as they are now, at the end of
+    training or at export."""
     import json
 
     from bound_env.cache import atomic_write
@@ -214,8 +272,45 @@ def write_fingerprint(folder: str | Path, **extra) -> Path:
     for name in ("vecnormalize.pkl", *FINGERPRINTED_SETTINGS):
         if (folder / name).is_file():
             data[name] = file_sha256(folder / name)
+    if (folder / "config.yaml").is_file():
+        files = PolicyFiles(folder / "model.zip", None, folder / "config.yaml")
+        base = residual_base(read_policy_section(files)[0])
+        if base is not None:
+            data["base"] = {"policy": str(base), "sha256": policy_content_sha256(base)}
     data.update(extra)
     return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
+
+
+def check_base_pin(files: PolicyFiles, section: dict, want: dict, force: bool) -> list[str]:
+    """ValueError when a residual policy's base controller is not the one it was trained over:
+    its fingerprint's ``base`` is missing (a residual policy's fingerprint must pin its base)
+    or names another base or other content (another policy swapped into the base's folder, or
+    a file of it changed); ``force`` evaluates it as it is, with a warning."""
+    base = residual_base(section)
+    if base is None:
+        return []
+    fp = files.fingerprint
+    pin = want.get("base")
+    if pin is None:
+        msg = (
+            f"{fp}: missing key 'base' (the sha256 of the base controller {base!r} the "
+            "residual was trained over), so a changed base would go unnoticed"
+        )
+    elif str(pin["policy"]) != str(base):
+        msg = f"{fp}: base.policy is {pin['policy']!r}, but {files.config} trains over {base!r}"
+    elif policy_content_sha256(base) != pin["sha256"]:
+        msg = (
+            f"base {base!r} does not match {fp} (base.sha256): its files changed since the "
+            "residual was trained over it (another policy in its place?)"
+        )
+    else:
+        return []
+    if not force:
+        raise ValueError(
+            msg + "; pass --force (margins, rollout, basin-map) to evaluate it with the base "
+            "as it is"
+        )
+    return [msg]
 
 
 def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -> list[str]:
@@ -271,6 +366,8 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
                         "policy with it as it is"
                     )
                 warnings.append(msg)
+        if files.config is not None and files.layout == "bound_env":
+            warnings += check_base_pin(files, section, want, force)
     elif files.vecnormalize is not None and files.layout == "bound_env":
         warnings.append(
             f"{files.model.parent}: no {FINGERPRINT_FILE}, so it cannot be checked "
