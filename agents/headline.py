@@ -11,11 +11,11 @@ tests/test_docs.py checks both tables against the JSON.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 from bound_env.cache import atomic_write
+from bound_env.schema import check_keys, load_json_strict
 
 from .compare import HEADLINE_FILE, ROOT, headline_table
 
@@ -24,14 +24,28 @@ README = ROOT / "README.md"
 HEADLINE_JSON = ROOT / "docs" / HEADLINE_FILE
 
 
+# what each row of headline.json holds (`agents.compare.headline_numbers`): a measure is its
+# value and 95 % interval (null where it could not be measured) and the interval's kind
+_MEASURE = {"value": (float, None), "low": (float, None), "high": (float, None), "interval": str}
+_ROW = {
+    "role": str,
+    "label": str,
+    "what": str,
+    "r50": _MEASURE,
+    "mfpt_sigma_100_deg": _MEASURE,
+}
+
+
 def load_headline(path: Path = HEADLINE_JSON) -> dict:
-    """docs/headline.json, checked for its keys (a ValueError naming the file otherwise)."""
-    try:
-        head = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise ValueError(f"{path}: cannot read the headline ({e})") from None
-    if not isinstance(head, dict) or not isinstance(head.get("rows"), list):
-        raise ValueError(f"{path}: no 'rows' list (write it with bound-env compare --docs)")
+    """docs/headline.json, checked: strict JSON (a NaN or Infinity is refused, so it never
+    reaches the README), ``budget``, ``seed`` and ``rows``, and each row's keys and types
+    (`_ROW`); a one-line ValueError naming the file and the key otherwise."""
+    path = Path(path)
+    head = load_json_strict(path, {"budget": str, "seed": int, "rows": list})
+    for i, row in enumerate(head["rows"]):
+        check_keys(row, _ROW, str(path), f"rows[{i}].")
+    if not head["rows"]:
+        raise ValueError(f"{path}: rows: empty (write it with bound-env compare --docs)")
     return head
 
 
