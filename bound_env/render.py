@@ -295,7 +295,11 @@ class _GifStream:
         elif im.size != self.size:
             raise ValueError(f"video frames must all be {self.size}, got {im.size}")
         data = GifImagePlugin.getdata(q, duration=self.duration, include_color_table=True)
-        self.f.write(b"".join(data))
+        for chunk in data:
+            self.f.write(chunk)
+        # the list belongs to a class Pillow makes per call, which only the cyclic garbage
+        # collector frees: empty it now, or the encoded frames pile up until it runs
+        data.clear()
         self.n_frames += 1
 
     def close(self) -> None:
