@@ -189,6 +189,9 @@ class ResidualOver(gym.Wrapper):
         return f.astype(np.float32)
 
     def reset(self, *, seed=None, options=None):
+        from bound_env.task import check_reset_options
+
+        options = check_reset_options(options) or None  # a list or a typo: one line
         if self.r_max is not None and not (options and options.get("apex_state") is not None):
             from .distill import sample_starts
 

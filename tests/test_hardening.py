@@ -538,3 +538,14 @@ def test_video_writer_streams_an_mp4(tmp_path):
 
     write_video(_frames(5, (36, 64, 3)), tmp_path / "v.mp4", fps=10)
     assert len(imageio.mimread(tmp_path / "v.mp4")) == 5
+
+
+@pytest.mark.parametrize(
+    "options, word", [([1, 2], "options must be a dict"), ({"apex_stat": 1}, "apex_stat")]
+)
+def test_residual_reset_checks_its_options(options, word):
+    from agents.residual import ResidualOver
+
+    env = ResidualOver(gym.make("PassiveBound-v0", max_torque=80.0))
+    with pytest.raises(ValueError, match=word):
+        env.reset(seed=0, options=options)
