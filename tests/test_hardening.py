@@ -549,3 +549,14 @@ def test_residual_reset_checks_its_options(options, word):
     env = ResidualOver(gym.make("PassiveBound-v0", max_torque=80.0))
     with pytest.raises(ValueError, match=word):
         env.reset(seed=0, options=options)
+
+
+@pytest.mark.parametrize("env_id", ["PassiveBound-v0", "PassiveBoundStride-v1"])
+@pytest.mark.parametrize("dt", [1e-9, 5.0])
+def test_env_dt_outside_the_files_range_is_refused_at_once(env_id, dt):
+    """The spec files' dt range (`bound_env.schema.dt_value`) applies to the envs' own `dt`:
+    dt = 1e-9 built a 25 GB matrix, dt = 5 s is longer than a stride."""
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=r"dt must be a finite number in \[0.0001, 0.1\]"):
+        gym.make(env_id, dt=dt)
+    assert time.perf_counter() - t0 < 10
