@@ -134,7 +134,9 @@ def rollout(
     |z - z*| / apex_scales component, where z* is the gait's fixed point), ``mean_abs_tau``
     (N m, average over control intervals of equal length), ``max_torque`` (N m), ``steps``,
     ``time`` (s), ``video`` (path or null), ``video_every`` (a frame of every that many
-    control intervals: 1 unless the video would hold more than `MAX_VIDEO_FRAMES` frames).
+    control intervals: 1 unless the run would give more than about `MAX_VIDEO_FRAMES` frames,
+    `video_every`). The frames are streamed to the file (`bound_env.render.VideoWriter`), so
+    memory does not grow with ``strides``.
     """
     from bound_env.task import NO_APEX_TIME
 
