@@ -467,7 +467,8 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
         raise FileNotFoundError(f"no model.zip in {run_dir}")
     best = run_dir / "best"
     src = best if source == "best" and (best / "model.zip").is_file() else run_dir
-    from .policy_files import check_policy_files, find_policy_files, write_fingerprint
+    from .policy import write_policy_fingerprint
+    from .policy_files import check_policy_files, find_policy_files
 
     files = find_policy_files(src)
     check_policy_files(files, {}, force=True)  # refuses statistics of another model
@@ -485,7 +486,7 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
     if (src / "best.json").is_file():
         info.update(json.loads((src / "best.json").read_text()))
     (dest / "exported.json").write_text(json.dumps(info, indent=2) + "\n")
-    write_fingerprint(dest)
+    write_policy_fingerprint(dest)  # a residual's base pinned too
     return dest
 
 

@@ -212,14 +212,12 @@ POLICY_CONTENT_FILES = (
 )
 
 
-def policy_content_sha256(policy) -> str:
-    """The sha256 of what defines a controller given by name or path (`agents.policy`): for a
-    policy folder (or a model zip's folder) the sha256 of each of its `POLICY_CONTENT_FILES`,
-    by name; for a classical controller its spec file; for ``passive`` its name. Another
-    policy swapped into the folder, or a file of it changed, changes it."""
-    from .policy import resolve_policy
-
-    resolved = resolve_policy(policy)
+def policy_content_sha256(resolved) -> str:
+    """The sha256 of what defines a controller, given as `agents.policy.resolve_policy`
+    returns it: for a policy folder (or a model zip's folder) the sha256 of each of its
+    `POLICY_CONTENT_FILES`, by name; for a classical controller (a built-in name) its spec
+    file; for ``passive`` its name. Another policy swapped into the folder, or a file of it
+    changed, changes it; the folder's path does not."""
     h = hashlib.sha256(b"policy content v1\n")
     if isinstance(resolved, str):  # a built-in controller: passive, or a classical spec
         h.update(f"builtin {resolved}\n".encode())
@@ -238,31 +236,12 @@ def policy_content_sha256(policy) -> str:
     return h.hexdigest()
 
 
-def residual_base(section: dict) -> str | None:
-    """The base controller's name of a run whose actor acts through a controller wrapper
-    (`agents.residual.ResidualOver`'s ``base``, default ``"default"``), or None."""
-    from .policy import controller_wrapper
-
-    found = controller_wrapper(section.get("env_wrapper") or [])
-    if found is None:
-        return None
-    cls, kwargs = found
-    if "base" in kwargs:
-        return kwargs["base"]
-    import inspect
-
-    param = inspect.signature(cls.__init__).parameters.get("base")
-    return None if param is None else param.default
-
-
-def write_fingerprint(folder: str | Path, **extra) -> Path:
+def write_fingerprint(folder: str | Path, base: dict | None = None, **extra) -> Path:
     """Bind the files of the policy in ``folder`` together: the sha256 of ``model.zip``,
     ``vecnormalize.pkl`` and, when present, ``config.yaml`` and ``base.json``
     (`FINGERPRINTED_SETTINGS`) in ``fingerprint.json`` (written atomically), checked by
-    `check_policy_files`. A residual over a base controller (its config's
-    `agents.residual.ResidualOver`) also pins the base: ``base: {policy, sha256}``, the
-    sha256 of the base's files (`policy_content_sha256`) as they are now, at the end of
-    training or at export."""
+    `check_policy_files`. ``base`` (``{"policy": name, "sha256": ...}``) pins the base
+    controller of a residual policy (`agents.policy.write_policy_fingerprint` finds it)."""
     import json
 
     from bound_env.cache import atomic_write
@@ -272,23 +251,20 @@ def write_fingerprint(folder: str | Path, **extra) -> Path:
     for name in ("vecnormalize.pkl", *FINGERPRINTED_SETTINGS):
         if (folder / name).is_file():
             data[name] = file_sha256(folder / name)
-    if (folder / "config.yaml").is_file():
-        files = PolicyFiles(folder / "model.zip", None, folder / "config.yaml")
-        base = residual_base(read_policy_section(files)[0])
-        if base is not None:
-            data["base"] = {"policy": str(base), "sha256": policy_content_sha256(base)}
+    if base is not None:
+        data["base"] = {"policy": str(base["policy"]), "sha256": str(base["sha256"])}
     data.update(extra)
     return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
 
 
-def check_base_pin(files: PolicyFiles, section: dict, want: dict, force: bool) -> list[str]:
-    """ValueError when a residual policy's base controller is not the one it was trained over:
-    its fingerprint's ``base`` is missing (a residual policy's fingerprint must pin its base)
-    or names another base or other content (another policy swapped into the base's folder, or
-    a file of it changed); ``force`` evaluates it as it is, with a warning."""
-    base = residual_base(section)
-    if base is None:
-        return []
+def check_base_pin(
+    files: PolicyFiles, want: dict, base: str, current_sha256: str, force: bool
+) -> list[str]:
+    """ValueError when a residual policy's base controller ``base`` (its files' sha256 now:
+    ``current_sha256``) is not the one it was trained over: its fingerprint ``want`` has no
+    ``base`` (a residual's fingerprint must pin its base), or names another base or other
+    content (another policy swapped into the base's folder, or a file of it changed);
+    ``force`` evaluates it as it is, and the mismatch comes back as a warning."""
     fp = files.fingerprint
     pin = want.get("base")
     if pin is None:
@@ -298,7 +274,7 @@ def check_base_pin(files: PolicyFiles, section: dict, want: dict, force: bool) -
         )
     elif str(pin["policy"]) != str(base):
         msg = f"{fp}: base.policy is {pin['policy']!r}, but {files.config} trains over {base!r}"
-    elif policy_content_sha256(base) != pin["sha256"]:
+    elif current_sha256 != pin["sha256"]:
         msg = (
             f"base {base!r} does not match {fp} (base.sha256): its files changed since the "
             "residual was trained over it (another policy in its place?)"
@@ -366,8 +342,6 @@ def check_policy_files(files: PolicyFiles, section: dict, force: bool = False) -
                         "policy with it as it is"
                     )
                 warnings.append(msg)
-        if files.config is not None and files.layout == "bound_env":
-            warnings += check_base_pin(files, section, want, force)
     elif files.vecnormalize is not None and files.layout == "bound_env":
         warnings.append(
             f"{files.model.parent}: no {FINGERPRINT_FILE}, so it cannot be checked "

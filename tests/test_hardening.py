@@ -209,12 +209,11 @@ def shipped_copy(tmp_path, monkeypatch):
 
 
 def test_step_ppo_pins_the_content_of_its_base(shipped_copy, capsys):
-    from agents.policy import load_controller
-    from agents.policy_files import policy_content_sha256
+    from agents.policy import base_pin, load_controller
 
     step = shipped_copy / "step-ppo" / "s0"
     pin = json.loads((step / "fingerprint.json").read_text())["base"]
-    assert pin == {"policy": "default", "sha256": policy_content_sha256("default")}
+    assert pin == base_pin("default")
     load_controller(step)  # as shipped: loads
     # the base folder swapped for another policy: refused, in one line
     shutil.rmtree(shipped_copy / "default")
