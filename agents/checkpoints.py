@@ -28,7 +28,7 @@ CHECKPOINT_SLEEP_ENV = "BOUND_ENV_TEST_CHECKPOINT_SLEEP"
 def save_policy(model, folder: Path) -> None:
     """Save ``model.zip``, its ``vecnormalize.pkl`` (when normalizing) and ``fingerprint.json``
     binding the two, each under a temporary name and then renamed; the fingerprint last."""
-    from .policy_files import write_fingerprint
+    from .policy import write_policy_fingerprint
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -38,7 +38,7 @@ def save_policy(model, folder: Path) -> None:
     if vn is not None:
         with atomic_path(folder / "vecnormalize.pkl") as tmp:
             vn.save(str(tmp))
-    write_fingerprint(folder)
+    write_policy_fingerprint(folder)  # a residual's base pinned too
 
 
 def checkpoint_paths(folder: Path, n: int) -> tuple[Path, Path, Path]:

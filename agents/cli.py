@@ -495,7 +495,8 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
         raise FileNotFoundError(f"no model.zip in {run_dir}")
     best = run_dir / "best"
     src = best if source == "best" and (best / "model.zip").is_file() else run_dir
-    from .policy_files import check_policy_files, find_policy_files, write_fingerprint
+    from .policy import write_policy_fingerprint
+    from .policy_files import check_policy_files, find_policy_files
 
     files = find_policy_files(src)
     check_policy_files(files, {}, force=True)  # refuses statistics of another model
@@ -520,7 +521,7 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
             plot_eval(dest / "eval.csv", dest / "eval.png", kept="best" if src == best else "final")
         except Exception as e:  # noqa: BLE001 - a plot must never stop an export
             print(f"eval plot failed: {e}", file=sys.stderr)
-    write_fingerprint(dest)
+    write_policy_fingerprint(dest)  # a residual's base pinned too
     return dest
 
 

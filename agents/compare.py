@@ -28,6 +28,7 @@ from pathlib import Path
 from bound_env.analysis.margins import DEFAULT_SEED, check_seed, plot_margins
 from bound_env.analysis.paired_text import paired_text as paired_text
 from bound_env.cache import atomic_write
+from bound_env.cli_args import strict_json
 from bound_env.parallel import open_pool
 
 # `X as X`: re-exported, the names the page's modules define stay importable from here
@@ -271,7 +272,8 @@ def compare(
     page += real_time_text(groups)  # each column's own decisions (empty before they were timed)
     body = {"budget": budget, "seed": seed, "pairs": pairs, "decision_times": times}
     atomic_write(path.with_name("paired.json"), json.dumps(body, indent=2) + "\n")
-    atomic_write(path.with_name(HEADLINE_FILE), json.dumps(head, indent=2) + "\n")
+    # strict JSON: a measure that could not be made is null (and listed under "nonfinite")
+    atomic_write(path.with_name(HEADLINE_FILE), strict_json(head, indent=2) + "\n")
     atomic_write(path, page)
     return path
 

@@ -90,7 +90,9 @@ def run_settings(student_dir, cfg: FinetuneConfig) -> dict:
 
 def check_settings(out_dir: Path, student_dir, cfg: FinetuneConfig) -> None:
     """ValueError (one line) when ``out_dir`` holds a run of other settings (`run_settings`),
-    or checkpoints of a run that recorded none, so that a rerun never resumes a foreign one."""
+    or checkpoints of a run that recorded none, so that a rerun never resumes a foreign one;
+    or a run of more ``timesteps`` (recorded in `SETTINGS_FILE`): a shorter rerun would
+    replace its policy by a less trained one (a rerun may train longer: it resumes)."""
     path = Path(out_dir) / SETTINGS_FILE
     want = run_settings(student_dir, cfg)
     if path.is_file():
@@ -98,17 +100,39 @@ def check_settings(out_dir: Path, student_dir, cfg: FinetuneConfig) -> None:
             have = json.loads(path.read_text())
         except (OSError, ValueError) as e:
             raise ValueError(f"{path}: not a finetune settings file ({e})") from None
+        if not isinstance(have, dict):
+            raise ValueError(f"{path}: not a finetune settings file (not a mapping)")
+        done = have.pop("timesteps", None)
         if have != want:
-            keys = sorted(k for k in want if not isinstance(have, dict) or have.get(k) != want[k])
+            keys = sorted(k for k in want if have.get(k) != want[k])
             raise ValueError(
                 f"--out {out_dir} holds a run with other settings ({', '.join(keys)}); use "
                 "another --out"
+            )
+        if done is None:  # written before timesteps were recorded: the summary has them
+            done = _summary(out_dir).get("timesteps")
+        if done is not None and (
+            isinstance(done, bool) or not isinstance(done, int) or cfg.timesteps < done
+        ):
+            raise ValueError(
+                f"--timesteps {cfg.timesteps}: --out {out_dir} holds a run of --timesteps "
+                f"{done} ({path.name}); a shorter rerun would replace its policy by a less "
+                f"trained one: use another --out, or --timesteps {done} or more to resume it"
             )
     elif any(Path(out_dir).glob("ckpt_*_steps.zip")):
         raise ValueError(
             f"--out {out_dir} holds checkpoints without {SETTINGS_FILE} (of which student and "
             "seed?); use another --out"
         )
+
+
+def _summary(out_dir) -> dict:
+    """The ``summary.json`` of a finished run in ``out_dir`` ({} if there is none)."""
+    try:
+        data = json.loads((Path(out_dir) / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
 
 
 def _copy_actor(model, layers) -> None:
@@ -145,8 +169,18 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
     out_dir = Path(out_dir)
     student = load_choice_policy(student_dir)
     check_settings(out_dir, student_dir, cfg)  # before the run folder is written to
+    done = _summary(out_dir)
+    if (out_dir / "policy" / "choice.npz").is_file() and done.get(
+        "requested_timesteps"
+    ) == cfg.timesteps:
+        if progress:
+            print(
+                f"[finetune] {out_dir} is complete ({done['timesteps']} strides)", file=sys.stderr
+            )
+        return done  # a finished run is not trained or saved again
     out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write(out_dir / SETTINGS_FILE, json.dumps(run_settings(student_dir, cfg)) + "\n")
+    settings = {**run_settings(student_dir, cfg), "timesteps": cfg.timesteps}
+    atomic_write(out_dir / SETTINGS_FILE, json.dumps(settings) + "\n")
     # PPO learns in whole rollouts: --timesteps rounded up to them, the critic's warm-up
     # (10 rollouts) included in it rather than added to it
     rollout = cfg.n_steps * cfg.n_envs
@@ -214,6 +248,12 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
             callback=CheckpointCallback(50_000 // cfg.n_envs, str(out_dir), "ckpt"),
             progress_bar=False,
         )
+    final = out_dir / f"ckpt_{model.num_timesteps}_steps.zip"
+    if not final.is_file():  # a longer rerun resumes from the end of this one
+        from bound_env.cache import atomic_path
+
+        with atomic_path(final, suffix=".zip") as tmp:  # SB3 appends .zip otherwise
+            model.save(tmp)
     layers = _actor_layers(model)
     save_policy(
         out_dir / "policy",
@@ -225,6 +265,7 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
     ep = [e["r"] for e in model.ep_info_buffer] if model.ep_info_buffer else []
     summary = {
         "timesteps": int(model.num_timesteps),
+        "requested_timesteps": cfg.timesteps,
         "seconds": time.perf_counter() - t0,
         "mean_return_last": float(np.mean(ep)) if ep else None,
         "policy": str(out_dir / "policy"),

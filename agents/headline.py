@@ -19,9 +19,9 @@ from pathlib import Path
 
 from bound_env.analysis.margins.stats import t_interval
 from bound_env.cache import atomic_write
+from bound_env.schema import check_keys, load_json_strict
 
 from .formatting import ROOT, num3, rel, value
-from .page_inputs import check_fields, read_json_object
 
 # The headline table (the page's first table and the README's): (role, column label, what it
 # is). The step-level PPO row is the shipped step-level recipe's column (`step-ppo`: residual
@@ -145,30 +145,28 @@ README = ROOT / "README.md"
 HEADLINE_JSON = ROOT / "docs" / HEADLINE_FILE
 
 
-# What the README's block and the table read of headline.json (`agents.page_inputs`)
-HEADLINE_FIELDS = [
-    (("budget",), "str"),
-    (("seed",), "int"),
-    (("rows",), "list"),
-    (("rows", "*"), "map"),
-    *[(("rows", "*", k), "str") for k in ("role", "label", "what")],
-    *[(("rows", "*", m), "map") for m in ("r50", "mfpt_sigma_100_deg")],
-    *[
-        (("rows", "*", m, k), "num|null")
-        for m in ("r50", "mfpt_sigma_100_deg")
-        for k in ("value", "low", "high")
-    ],
-    *[(("rows", "*", m, "interval"), "str") for m in ("r50", "mfpt_sigma_100_deg")],
-]
+# what each row of headline.json holds (`agents.compare.headline_numbers`): a measure is its
+# value and 95 % interval (null where it could not be measured) and the interval's kind
+_MEASURE = {"value": (float, None), "low": (float, None), "high": (float, None), "interval": str}
+_ROW = {
+    "role": str,
+    "label": str,
+    "what": str,
+    "r50": _MEASURE,
+    "mfpt_sigma_100_deg": _MEASURE,
+}
 
 
 def load_headline(path: Path = HEADLINE_JSON) -> dict:
-    """docs/headline.json, checked for every key the table reads (a ValueError of one line
-    naming the file and the key otherwise)."""
-    head = read_json_object(path)
-    if not isinstance(head.get("rows"), list):
-        raise ValueError(f"{path}: no 'rows' list (write it with bound-env compare --docs)")
-    check_fields(head, HEADLINE_FIELDS, path)
+    """docs/headline.json, checked: strict JSON (a NaN or Infinity is refused, so it never
+    reaches the README), ``budget``, ``seed`` and ``rows``, and each row's keys and types
+    (`_ROW`); a one-line ValueError naming the file and the key otherwise."""
+    path = Path(path)
+    head = load_json_strict(path, {"budget": str, "seed": int, "rows": list})
+    for i, row in enumerate(head["rows"]):
+        check_keys(row, _ROW, str(path), f"rows[{i}].")
+    if not head["rows"]:
+        raise ValueError(f"{path}: rows: empty (write it with bound-env compare --docs)")
     return head
 
 

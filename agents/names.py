@@ -89,6 +89,11 @@ def unwrapped_name(spec: str | Path) -> str | Path:
 
 def resolve_policy(spec: str | Path) -> str | Path:
     """A built-in controller's name (returned as is), a shipped policy's folder, or a path."""
+    if not isinstance(spec, (str, Path)) or not str(spec):
+        raise TypeError(
+            f"policy must be a name ({', '.join(policy_names())}) or a run or policy "
+            f"folder's path, got {spec!r} ({type(spec).__name__})"
+        )
     text = str(spec)
     if text in CONTROLLERS:
         return text

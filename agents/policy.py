@@ -41,10 +41,12 @@ from .policy_files import (  # noqa: F401 - the policy-file API, importable from
     FINGERPRINTED_SETTINGS,
     SHIPPED,
     PolicyFiles,
+    check_base_pin,
     check_policy_files,
     file_sha256,
     find_policy_files,
     load_vecnormalize,
+    policy_content_sha256,
     read_policy_section,
     read_run_config,
     resolve_policy_files,
@@ -52,7 +54,7 @@ from .policy_files import (  # noqa: F401 - the policy-file API, importable from
     source_name,
     write_fingerprint,
 )
-from .schema import check_env_kwargs, check_layers, check_obs_stats
+from .schema import check_env_kwargs, check_layers, check_obs_stats, read_fingerprint
 
 _INFERENCE_ONLY = {
     "learning_rate": 0.0,
@@ -110,6 +112,15 @@ def load_controller(
         return ctrl
     path = resolve_policy(path)  # a step-level PPO policy's folder or zip
     files = find_policy_files(path)
+    trained_on = read_policy_section(files)[1] if files.config is not None else None
+    if trained_on is not None and trained_on.startswith("PassiveBoundRescue"):
+        raise ValueError(
+            f"policy {path} was trained on {trained_on} (one profile per stride from the "
+            "rescue task's starts, read from its config.yaml), which margins, rollout, "
+            "compare and load_policy do not evaluate; measure its returns with "
+            f"scripts/rescue_eval.py {path}, or act in gym.make({trained_on!r}) with "
+            "model.predict"
+        )
     model_path, vecnorm_path = files.model, files.vecnormalize
     from stable_baselines3 import PPO
 
@@ -132,7 +143,13 @@ def load_controller(
         obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
     else:
         obs_index = None
-    for w in check_policy_files(files, section, force, env_given=env_id is not None):
+    warnings = check_policy_files(files, section, force, env_given=env_id is not None)
+    base = residual_base(section)
+    want = read_fingerprint(files.model.parent) if files.layout == "bound_env" else None
+    if base is not None and want is not None:  # a residual's base: the one it was trained over
+        sha = policy_content_sha256(resolve_policy(base))
+        warnings += check_base_pin(files, want, base, sha, force)
+    for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     layers, activation = extract_actor(model, model_path)
     check_layers(layers, str(model_path))
@@ -151,6 +168,41 @@ def load_controller(
         ctrl = cls.policy_controller(ctrl, kwargs, model, model_path)
     check_gait(ctrl, gait, force)
     return ctrl
+
+
+def residual_base(section: dict) -> str | None:
+    """The base controller's name of a run whose actor acts through a controller wrapper
+    (`controller_wrapper`: `agents.residual.ResidualOver`'s ``base``, by default
+    ``"default"``), or None."""
+    import inspect
+
+    found = controller_wrapper(section.get("env_wrapper") or [])
+    if found is None:
+        return None
+    cls, kwargs = found
+    if "base" in kwargs:
+        return kwargs["base"]
+    param = inspect.signature(cls.__init__).parameters.get("base")
+    return None if param is None else param.default
+
+
+def base_pin(base) -> dict:
+    """``{"policy": base, "sha256": ...}``: the content of a residual's base controller now
+    (`agents.policy_files.policy_content_sha256`), what its fingerprint pins."""
+    return {"policy": str(base), "sha256": policy_content_sha256(resolve_policy(base))}
+
+
+def write_policy_fingerprint(folder) -> Path:
+    """`agents.policy_files.write_fingerprint` of a saved PPO policy, with the pin of its base
+    controller when its ``config.yaml`` trains a residual over one (`residual_base`): written
+    at the end of training and at export, so a base changed later is refused at load."""
+    folder = Path(folder)
+    base = None
+    if (folder / "config.yaml").is_file():
+        files = PolicyFiles(folder / "model.zip", None, folder / "config.yaml")
+        name = residual_base(read_policy_section(files)[0])
+        base = None if name is None else base_pin(name)
+    return write_fingerprint(folder, base=base)
 
 
 def controller_wrapper(env_wrappers) -> tuple | None:

@@ -200,11 +200,48 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def write_fingerprint(folder: str | Path, **extra) -> Path:
+# The files that define a policy, whatever its kind (a PPO model with its statistics, settings
+# and base gain; a choice policy's network and expert): what a residual's base pin hashes.
+POLICY_CONTENT_FILES = (
+    "model.zip",
+    "vecnormalize.pkl",
+    "config.yaml",
+    "base.json",
+    "choice.npz",
+    "config.json",
+)
+
+
+def policy_content_sha256(resolved) -> str:
+    """The sha256 of what defines a controller, given as `agents.policy.resolve_policy`
+    returns it: for a policy folder (or a model zip's folder) the sha256 of each of its
+    `POLICY_CONTENT_FILES`, by name; for a classical controller (a built-in name) its spec
+    file; for ``passive`` its name. Another policy swapped into the folder, or a file of it
+    changed, changes it; the folder's path does not."""
+    h = hashlib.sha256(b"policy content v1\n")
+    if isinstance(resolved, str):  # a built-in controller: passive, or a classical spec
+        h.update(f"builtin {resolved}\n".encode())
+        if resolved != "passive":
+            from bound_env.control.spec import resolve_spec_path
+
+            h.update(f"spec {file_sha256(resolve_spec_path(resolved))}\n".encode())
+        return h.hexdigest()
+    p = Path(resolved)
+    if p.is_file():  # a model zip or a spec file: that file, and its folder's settings
+        h.update(f"{p.name} {file_sha256(p)}\n".encode())
+        p = p.parent
+    for name in POLICY_CONTENT_FILES:
+        if (p / name).is_file():
+            h.update(f"{name} {file_sha256(p / name)}\n".encode())
+    return h.hexdigest()
+
+
+def write_fingerprint(folder: str | Path, base: dict | None = None, **extra) -> Path:
     """Bind the files of the policy in ``folder`` together: the sha256 of ``model.zip``,
     ``vecnormalize.pkl`` and, when present, ``config.yaml`` and ``base.json``
     (`FINGERPRINTED_SETTINGS`) in ``fingerprint.json`` (written atomically), checked by
-    `check_policy_files`."""
+    `check_policy_files`. ``base`` (``{"policy": name, "sha256": ...}``) pins the base
+    controller of a residual policy (`agents.policy.write_policy_fingerprint` finds it)."""
     import json
 
     from bound_env.cache import atomic_write
@@ -214,8 +251,42 @@ def write_fingerprint(folder: str | Path, **extra) -> Path:
     for name in ("vecnormalize.pkl", *FINGERPRINTED_SETTINGS):
         if (folder / name).is_file():
             data[name] = file_sha256(folder / name)
+    if base is not None:
+        data["base"] = {"policy": str(base["policy"]), "sha256": str(base["sha256"])}
     data.update(extra)
     return atomic_write(folder / FINGERPRINT_FILE, json.dumps(data, indent=2) + "\n")
+
+
+def check_base_pin(
+    files: PolicyFiles, want: dict, base: str, current_sha256: str, force: bool
+) -> list[str]:
+    """ValueError when a residual policy's base controller ``base`` (its files' sha256 now:
+    ``current_sha256``) is not the one it was trained over: its fingerprint ``want`` has no
+    ``base`` (a residual's fingerprint must pin its base), or names another base or other
+    content (another policy swapped into the base's folder, or a file of it changed);
+    ``force`` evaluates it as it is, and the mismatch comes back as a warning."""
+    fp = files.fingerprint
+    pin = want.get("base")
+    if pin is None:
+        msg = (
+            f"{fp}: missing key 'base' (the sha256 of the base controller {base!r} the "
+            "residual was trained over), so a changed base would go unnoticed"
+        )
+    elif str(pin["policy"]) != str(base):
+        msg = f"{fp}: base.policy is {pin['policy']!r}, but {files.config} trains over {base!r}"
+    elif current_sha256 != pin["sha256"]:
+        msg = (
+            f"base {base!r} does not match {fp} (base.sha256): its files changed since the "
+            "residual was trained over it (another policy in its place?)"
+        )
+    else:
+        return []
+    if not force:
+        raise ValueError(
+            msg + "; pass --force (margins, rollout, basin-map) to evaluate it with the base "
+            "as it is"
+        )
+    return [msg]
 
 
 def check_policy_files(

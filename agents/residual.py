@@ -38,14 +38,19 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import inspect
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
+from bound_env import schema as check
 from bound_env.stride_protocol import OBS_TIME, OBS_Z, notify_apex
 
 from .wrappers import ObservationFilter
+
+MAX_START_DRAWS = 10_000  # draws of a start past the safe radius before reset gives up
 
 
 def _keep_index(obs_names) -> np.ndarray:
@@ -126,10 +131,19 @@ class ResidualOver(gym.Wrapper):
         ramp: float = 0.0,
     ):
         super().__init__(env)
-        if not (np.isfinite(scale) and 0 < scale <= 2):
-            raise ValueError(f"ResidualOver scale must lie in (0, 2], got {scale!r}")
-        if r_max is not None and not (np.isfinite(r_max) and r_max > 0):
-            raise ValueError(f"ResidualOver r_max must be positive, got {r_max!r}")
+        w = "ResidualOver"
+        scale = check.real(scale, f"{w} scale", 0.0, 2.0, lo_open=True)
+        if r_max is not None:
+            r_max = check.real(r_max, f"{w} r_max", 0.0, 10.0, lo_open=True)
+        axis_prob = check.real(axis_prob, f"{w} axis_prob", 0.0, 1.0)
+        if not isinstance(end_on_return, (bool, np.bool_)):
+            raise ValueError(f"{w} end_on_return must be true or false, got {end_on_return!r}")
+        max_steps = check.integer(max_steps, f"{w} max_steps", 1, 10**7)
+        alive_reward = check.real(alive_reward, f"{w} alive_reward", -1e6, 1e6)
+        residual_cost = check.real(residual_cost, f"{w} residual_cost", 0.0, 1e6)
+        ramp = check.real(ramp, f"{w} ramp", 0.0, 10.0)
+        if not isinstance(base, (str, Path)) or not str(base):
+            raise ValueError(f"{w} base must be a policy name or folder, got {base!r}")
         task = env.unwrapped.task
         self.base_name = str(base)
         self.base_ctrl = load_base(self.base_name)
@@ -139,9 +153,15 @@ class ResidualOver(gym.Wrapper):
                 raise ValueError(
                     f"ResidualOver base {base!r} acts with {key} {kw[key]}, the env has {have}"
                 )
-        if not (np.isfinite(ramp) and 0 <= ramp <= 10):
-            raise ValueError(f"ResidualOver ramp must lie in [0, 10], got {ramp!r}")
         self.gate_of = _Gate(self.base_ctrl, ramp)
+        if r_max is not None:  # the largest start error: r_max along the widest axis
+            widest = float(np.max(np.abs(self.gate_of.z_ref) / self.gate_of.scales))
+            if r_max * widest <= self.gate_of.safe:
+                raise ValueError(
+                    f"ResidualOver r_max {r_max:g} cannot start past the base's safe radius "
+                    f"{self.gate_of.safe:g} (its largest start error is r_max x "
+                    f"{widest:.4g}); use r_max > {self.gate_of.safe / widest:.4g} or null"
+                )
         self.keep = _keep_index(task.obs_names)
         self.scale, self.r_max, self.axis_prob = float(scale), r_max, float(axis_prob)
         self.end_on_return, self.max_steps = bool(end_on_return), int(max_steps)
@@ -172,6 +192,9 @@ class ResidualOver(gym.Wrapper):
         return f.astype(np.float32)
 
     def reset(self, *, seed=None, options=None):
+        from bound_env.task import check_reset_options
+
+        options = check_reset_options(options) or None  # a list or a typo: one line
         if self.r_max is not None and not (options and options.get("apex_state") is not None):
             from .distill import sample_starts
 
@@ -179,10 +202,15 @@ class ResidualOver(gym.Wrapper):
                 self.env.reset(seed=seed)
                 seed = None
             rng = self.env.unwrapped.np_random
-            while True:
+            for _ in range(MAX_START_DRAWS):
                 z = sample_starts(rng, 1, self.gate_of.z_ref, self.r_max, self.axis_prob)[0]
                 if self.gate_of(z)[1]:
                     break
+            else:
+                raise ValueError(
+                    f"ResidualOver r_max {self.r_max:g}: no start past the base's safe radius "
+                    f"{self.gate_of.safe:g} in {MAX_START_DRAWS} draws; use a larger r_max"
+                )
             options = {**(options or {}), "apex_state": z}
         obs, info = self.env.reset(seed=seed, options=options)
         self.k = 0
@@ -255,6 +283,13 @@ class ResidualController:
         return state
 
 
+def check_settings(settings, where: str) -> dict:
+    """``settings`` as `ResidualOver`'s keyword arguments: a mapping of its parameters' names
+    (an unknown key, e.g. a typo, is a one-line ValueError naming it and ``where``)."""
+    allowed = [p for p in inspect.signature(ResidualOver.__init__).parameters][2:]
+    return check.mapping(settings, where, allowed=allowed)
+
+
 def residual_controller(net, settings: dict, model, model_path) -> ResidualController:
     """A `ResidualController` from a loaded PPO actor ``net`` (an MLPController on
     `residual_features`) and its run's `ResidualOver` settings; checks the spaces."""
@@ -263,11 +298,15 @@ def residual_controller(net, settings: dict, model, model_path) -> ResidualContr
     import bound_env
 
     gym.register_envs(bound_env)
+    where = f"{Path(model_path).parent / 'config.yaml'}: env_wrapper ResidualOver"
+    check_settings(settings, where)
     env = gym.make("PassiveBound-v0", **net.env_kwargs)
     try:
         wrapped = ResidualOver(env, **settings)
         want, keep = wrapped.observation_space.shape, wrapped.keep
         base, scale, ramp = wrapped.base_ctrl, wrapped.scale, wrapped.gate_of.ramp
+    except ValueError as e:  # a value of the run's config: name the file
+        raise ValueError(f"{Path(model_path).parent / 'config.yaml'}: {e}") from None
     finally:
         env.close()
     if tuple(model.observation_space.shape) != want or tuple(model.action_space.shape) != (1,):

@@ -31,6 +31,7 @@ wrappers) are applied; training-only wrappers such as `agents.wrappers.Perturbed
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
@@ -45,7 +46,10 @@ from .controllers import MLPController, check_gait
 from .policy import load_controller, resolve_policy, unwrapped_name
 from .policy_files import find_policy_files, read_policy_section
 
-MAX_VIDEO_FRAMES = 2000  # frames a rollout's video holds in memory (~0.7 MB each at 640x360)
+# About how many frames a rollout's video has at most. Frames are streamed to the file
+# (`bound_env.render.VideoWriter`), so memory does not grow with them; the cap keeps the
+# file's size and the rendering time bounded (a frame is ~0.7 MB raw, ~50-100 kB in a GIF).
+MAX_VIDEO_FRAMES = 2000
 ENV_ID = "PassiveBound-v0"  # the env class; the policy's env id only adds its registered kwargs
 
 
@@ -133,7 +137,9 @@ def rollout(
     |z - z*| / apex_scales component, where z* is the gait's fixed point), ``mean_abs_tau``
     (N m, average over control intervals of equal length), ``max_torque`` (N m), ``steps``,
     ``time`` (s), ``video`` (path or null), ``video_every`` (a frame of every that many
-    control intervals: 1 unless the video would hold more than `MAX_VIDEO_FRAMES` frames).
+    control intervals: 1 unless the run would give more than about `MAX_VIDEO_FRAMES` frames,
+    `video_every`). The frames are streamed to the file (`bound_env.render.VideoWriter`), so
+    memory does not grow with ``strides``.
     """
     from bound_env.task import NO_APEX_TIME
 
@@ -157,44 +163,39 @@ def rollout(
         max_episode_steps=max_steps,
         render_mode="rgb_array" if video else None,
     )
-    frames, every = [], 1  # a frame of every `every`-th control interval (bounded below)
     task = env.unwrapped.task
     z_ref, scales = np.asarray(task.z_ref), np.asarray(task.apex_scales)
-    obs, info = env.reset(seed=seed)
-    failure, errors, taus, steps = info.get("failure"), [], [], 0
-
-    def record() -> None:  # at most MAX_VIDEO_FRAMES frames in memory, evenly spaced
-        nonlocal every
-        if steps % every == 0:
-            frames.append(env.render())
-        if len(frames) > MAX_VIDEO_FRAMES:
-            frames[:] = frames[::2]
-            every *= 2
-
-    if video:
-        record()
-    while failure is None and len(errors) < strides:
-        # act announces every apex to a stride controller (bound_env.control.plain)
-        obs, _, terminated, truncated, info = env.step(act(obs, info))
-        steps += 1
-        taus.append(abs(float(info["tau"])))
-        if video:
-            record()
-        if "apex_z" in info:
-            errors.append(float(np.max(np.abs((np.asarray(info["apex_z"]) - z_ref) / scales))))
-        if terminated:
-            failure = info.get("failure") or "terminated"
-        elif truncated:
-            break
-    env.close()
-    if video:
-        if every > 1:
-            print(
-                f"[rollout] --video: {steps} control intervals, a frame of every {every}th "
-                f"(at most {MAX_VIDEO_FRAMES} frames; it plays in real time)",
-                file=sys.stderr,
-            )
-        write_video(frames, video, fps=max(1, round(1 / dt / every)))
+    every = video_every(task, strides, dt) if video else 1
+    fps = max(1, round(1 / dt / every))
+    if video and Path(video).suffix.lower() == ".gif":
+        fps = min(fps, 50)  # players honour at most 50 frames per second in a GIF
+    with contextlib.ExitStack() as stack:
+        writer = stack.enter_context(_video_writer(video, fps)) if video else None
+        obs, info = env.reset(seed=seed)
+        failure, errors, taus, steps = info.get("failure"), [], [], 0
+        if writer is not None:
+            writer.append(env.render())
+        while failure is None and len(errors) < strides:
+            # act announces every apex to a stride controller (bound_env.control.plain)
+            obs, _, terminated, truncated, info = env.step(act(obs, info))
+            steps += 1
+            taus.append(abs(float(info["tau"])))
+            if writer is not None and steps % every == 0:
+                writer.append(env.render())  # encoded and let go: nothing accumulates
+            if "apex_z" in info:
+                z = np.asarray(info["apex_z"])
+                errors.append(float(np.max(np.abs((z - z_ref) / scales))))
+            if terminated:
+                failure = info.get("failure") or "terminated"
+            elif truncated:
+                break
+        env.close()
+    if video and every > 1:
+        print(
+            f"[rollout] --video: {steps} control intervals, a frame of every {every}th "
+            f"(about {MAX_VIDEO_FRAMES} frames at most; it plays in real time)",
+            file=sys.stderr,
+        )
     return {
         "policy": str(policy),
         "gait": str(make_env.env_kwargs.get("gait", "default")),
@@ -219,13 +220,25 @@ def _jsonable(d: dict) -> dict:
     return json.loads(json.dumps(d, default=lambda v: np.asarray(v).tolist()))
 
 
-def write_video(frames, path, fps: int) -> Path:
-    """A GIF (Pillow, always available; at most 50 frames per second) or an MP4 (needs
-    imageio-ffmpeg or moviepy), written atomically: `bound_env.render.write_video`."""
-    from bound_env.render import write_video as write
+def video_every(task, strides: int, dt: float) -> int:
+    """Frames are taken of every ``video_every``-th control interval: 1 unless ``strides``
+    strides of the gait's own period (one passive stride from z*) would give more than
+    `MAX_VIDEO_FRAMES` frames. Chosen before the run, so frames can be streamed."""
+    from bound_env.stride import simulate_stride
+    from bound_env.task import NO_APEX_TIME
 
-    path = Path(path)
-    return write(frames, path, fps=min(fps, 50) if path.suffix.lower() == ".gif" else fps)
+    period = simulate_stride(task.z_ref, task.params).t_end
+    if not (math.isfinite(period) and period > 0):  # a gait that fails: its longest stride
+        period = NO_APEX_TIME
+    return max(1, math.ceil(strides * period / dt / MAX_VIDEO_FRAMES))
+
+
+def _video_writer(path, fps):
+    """A `bound_env.render.VideoWriter` (a GIF, or an MP4 through imageio-ffmpeg) that streams
+    the frames to ``path`` and writes it atomically."""
+    from bound_env.render import VideoWriter
+
+    return VideoWriter(path, fps)
 
 
 def summary_text(r: dict) -> str:

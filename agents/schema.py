@@ -33,6 +33,9 @@ MAX_ROWS = 4096  # rows of a choice policy's library (the shipped ones have 66)
 APEX_DIM = 6  # the network's input: the apex state
 MAX_RESIDUAL_SCALE = 100.0
 _SHA256 = re.compile(r"[0-9a-f]{64}")
+_FINGERPRINTED_EXT = (".zip", ".pkl", ".yaml", ".json", ".npz")
+# the files a fingerprint must cover, by policy kind (`policy_kind`)
+FINGERPRINT_REQUIRED = {"ppo": ("model.zip",), "choice": (CHOICE_FILE, CHOICE_CONFIG)}
 
 
 def policy_kind(folder) -> str | None:
@@ -52,16 +55,37 @@ def policy_kind(folder) -> str | None:
 def read_fingerprint(folder) -> dict | None:
     """The ``fingerprint.json`` of a policy folder as {file name: sha256}, or None if there is
     none. Anything else in its place (a folder, a broken link, another JSON value) is an error:
-    it never counts as "no fingerprint"."""
+    it never counts as "no fingerprint". A fingerprint must check something: it names the
+    files that define the policy of its kind (`FINGERPRINT_REQUIRED`: ``model.zip``, and
+    ``vecnormalize.pkl`` beside it; ``choice.npz`` and ``config.json``), so ``{}`` is refused.
+    An optional ``base`` entry pins the base controller of a residual policy (`check_base_pin`):
+    ``{"policy": its name, "sha256": the sha256 of its files}``."""
     fp = Path(folder) / FINGERPRINT
     if not os.path.lexists(fp):
         return None
     data = field.read_json(fp)
     field.mapping(data, str(fp))
+    kind = policy_kind(folder)
+    required = list(FINGERPRINT_REQUIRED.get(kind, ()))
+    if kind == "ppo" and os.path.lexists(Path(folder) / "vecnormalize.pkl"):
+        required.append("vecnormalize.pkl")  # the statistics belong to the model: one unit
+    for name in required:
+        if name not in data:
+            raise ValueError(
+                f"{fp}: missing key {name!r} (a fingerprint holds the sha256 of the files that "
+                f"define the policy: {', '.join(required)})"
+            )
+    if not any(name.endswith(_FINGERPRINTED_EXT) for name in data):
+        raise ValueError(f"{fp}: names no file, so it checks nothing")
     for name, digest in data.items():
-        if name.endswith((".zip", ".pkl", ".yaml", ".json", ".npz")):
+        if name.endswith(_FINGERPRINTED_EXT):
             if not isinstance(digest, str) or not _SHA256.fullmatch(digest):
                 raise ValueError(f"{fp}: {name} must be a sha256 (64 hex digits), got {digest!r}")
+    if "base" in data:
+        base = field.mapping(data["base"], f"{fp}: base", required=("policy", "sha256"))
+        field.text(base["policy"], f"{fp}: base.policy")
+        if not isinstance(base["sha256"], str) or not _SHA256.fullmatch(base["sha256"]):
+            raise ValueError(f"{fp}: base.sha256 must be a sha256 (64 hex digits)")
     return data
 
 

@@ -68,7 +68,7 @@ def say(args, *parts) -> None:
     print(*parts, file=sys.stderr if getattr(args, "json", False) else sys.stdout)
 
 
-def strict_json(obj) -> str:
+def strict_json(obj, indent: int | None = None) -> str:
     """JSON text with no NaN/Infinity tokens: a non-finite number becomes null, and its path is
     listed under ``"nonfinite"`` (the reason: "nan", "inf" or "-inf")."""
     import math
@@ -90,7 +90,7 @@ def strict_json(obj) -> str:
     out = clean(obj, "")
     if reasons and isinstance(out, dict):
         out["nonfinite"] = {**(out.get("nonfinite") or {}), **reasons}
-    return json.dumps(out, allow_nan=False, default=str)  # paths and the like as text
+    return json.dumps(out, allow_nan=False, default=str, indent=indent)  # paths as text
 
 
 def out_dir(path, flag: str = "--out"):

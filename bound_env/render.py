@@ -252,44 +252,141 @@ class Renderer:
 
 
 def save_gif(frames, path, fps=30):
-    """Write ``frames`` (H x W x 3 uint8 arrays) as an animated GIF that loops forever.
+    """Write ``frames`` (an iterable of H x W x 3 uint8 arrays) as an animated GIF that loops
+    forever, streamed (`VideoWriter`: one frame in memory at a time).
 
-    GIF stores delays in hundredths of a second, so the frame time is rounded to 10 ms; Pillow
-    merges consecutive identical frames into one longer frame.
+    GIF stores delays in hundredths of a second, so the frame time is rounded to 10 ms.
     """
-    images = [Image.fromarray(np.ascontiguousarray(f, dtype=np.uint8)) for f in frames]
-    if not images:
-        raise ValueError("save_gif needs at least one frame")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    images[0].save(
-        path, save_all=True, append_images=images[1:], duration=max(10, round(1000 / fps)), loop=0
-    )
+    with open(path, "wb") as f:
+        gif = _GifStream(f, fps)
+        for frame in frames:
+            gif.append(frame)
+        if gif.n_frames == 0:
+            raise ValueError("save_gif needs at least one frame")
+        gif.close()
     return path
 
 
-def write_video(frames, path, fps) -> Path:
-    """An animation file, written atomically (`bound_env.cache.atomic_path`): a GIF
-    (`save_gif`, Pillow) or an MP4 (needs imageio with ffmpeg: ``pip install imageio-ffmpeg``)."""
-    from .cache import atomic_path
+class _GifStream:
+    """An animated GIF written frame by frame to an open binary file: each frame is quantized
+    to its own 256-colour palette (a local colour table; fast octree, a mean error of about
+    one level in 255 on the rendered frames) and encoded at once, so memory does
+    not grow with the number of frames (Pillow's ``save_all`` keeps every frame until the end).
+    """
 
+    def __init__(self, f, fps):
+        self.f, self.n_frames = f, 0
+        self.duration = max(10, round(1000 / fps))  # ms, a multiple of 10 in the file
+
+    def append(self, frame) -> None:
+        from PIL import GifImagePlugin
+
+        frame = np.asarray(frame)
+        if frame.ndim != 3 or frame.shape[2] != 3:
+            raise ValueError(f"a video frame must be H x W x 3, got shape {frame.shape}")
+        im = Image.fromarray(np.ascontiguousarray(frame, dtype=np.uint8))
+        q = im.quantize(256, method=Image.Quantize.FASTOCTREE)  # ~5x faster than median cut
+        if self.n_frames == 0:
+            self.size = im.size
+            header, _ = GifImagePlugin.getheader(q.copy(), info={"loop": 0, "duration": 1})
+            self.f.write(b"".join(header))
+        elif im.size != self.size:
+            raise ValueError(f"video frames must all be {self.size}, got {im.size}")
+        data = GifImagePlugin.getdata(q, duration=self.duration, include_color_table=True)
+        for chunk in data:
+            self.f.write(chunk)
+        # the list belongs to a class Pillow makes per call, which only the cyclic garbage
+        # collector frees: empty it now, or the encoded frames pile up until it runs
+        data.clear()
+        self.n_frames += 1
+
+    def close(self) -> None:
+        self.f.write(b";")  # the GIF trailer
+
+
+class VideoWriter:
+    """Streams frames to an animation file: ``append(frame)`` encodes the frame and lets it
+    go, so a video's memory does not depend on its length. A GIF (Pillow, at most 50 frames
+    per second are honoured by players) or an MP4 (needs imageio with ffmpeg: ``pip install
+    imageio-ffmpeg``). Written atomically (`bound_env.cache.atomic_path`): the file appears
+    when the ``with`` block ends without error, and nothing is left behind otherwise::
+
+        with VideoWriter("run.gif", fps=25) as video:
+            for frame in frames:
+                video.append(frame)
+    """
+
+    def __init__(self, path, fps):
+        self.path = Path(path)
+        suffix = self.path.suffix.lower()
+        if suffix not in (".gif", ".mp4"):
+            raise ValueError(f"{self.path}: an animation must end in .gif or .mp4")
+        if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
+            raise ValueError(f"fps must be a positive number, got {fps!r}")
+        self.fps, self.n_frames = fps, 0
+        self._stack = self._sink = None
+
+    def __enter__(self) -> VideoWriter:
+        from contextlib import ExitStack
+
+        from .cache import atomic_path
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with ExitStack() as stack:
+            tmp = stack.enter_context(atomic_path(self.path, suffix=self.path.suffix))
+            if self.path.suffix.lower() == ".gif":
+                self._sink = _GifStream(stack.enter_context(open(tmp, "wb")), self.fps)
+            else:
+                self._sink = _mp4_writer(tmp, self.path, self.fps)
+                stack.callback(self._sink.close)
+            self._stack = stack.pop_all()
+        return self
+
+    def append(self, frame) -> None:
+        """Encode one H x W x 3 uint8 frame."""
+        try:
+            if isinstance(self._sink, _GifStream):
+                self._sink.append(frame)
+            else:
+                self._sink.append_data(np.ascontiguousarray(frame, dtype=np.uint8))
+        except ValueError:
+            raise
+        except Exception as e:  # noqa: BLE001 - an ffmpeg pipe that broke
+            raise ValueError(f"cannot write {self.path}: {e}") from None
+        self.n_frames += 1
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None and self.n_frames == 0:
+            exc_type, exc = ValueError, ValueError(f"{self.path}: a video needs at least one frame")
+            self._stack.__exit__(exc_type, exc, None)
+            raise exc
+        if exc_type is None and isinstance(self._sink, _GifStream):
+            self._sink.close()
+        return self._stack.__exit__(exc_type, exc, tb)
+
+
+def _mp4_writer(tmp, path, fps):
+    try:
+        import imageio.v2 as imageio
+    except ModuleNotFoundError:
+        raise ValueError(
+            f"{path}: an .mp4 needs imageio with ffmpeg (pip install imageio-ffmpeg); "
+            "a .gif works without it"
+        ) from None
+    try:
+        # macro_block_size=1: keep the frame size (640 x 360 is not a multiple of 16)
+        return imageio.get_writer(tmp, format="FFMPEG", fps=fps, macro_block_size=1)
+    except Exception as e:  # noqa: BLE001 - no ffmpeg backend
+        raise ValueError(f"cannot write {path}: {e}; write a .gif instead") from None
+
+
+def write_video(frames, path, fps) -> Path:
+    """An animation file of ``frames`` (any iterable: a generator is never held in memory),
+    streamed through `VideoWriter` and written atomically (`bound_env.cache.atomic_path`)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path, suffix=path.suffix) as tmp:  # the writers go by the extension
-        if path.suffix.lower() == ".gif":
-            save_gif(frames, tmp, fps=fps)
-        elif path.suffix.lower() == ".mp4":
-            try:
-                import imageio.v2 as imageio
-            except ModuleNotFoundError:
-                raise ValueError(
-                    f"{path}: an .mp4 needs imageio with ffmpeg (pip install imageio-ffmpeg); "
-                    "a .gif works without it"
-                ) from None
-            try:
-                imageio.mimwrite(tmp, frames, fps=fps)
-            except Exception as e:  # noqa: BLE001 - no ffmpeg backend
-                raise ValueError(f"cannot write {path}: {e}; write a .gif instead") from None
-        else:
-            raise ValueError(f"{path}: an animation must end in .gif or .mp4")
+    with VideoWriter(path, fps) as video:
+        for frame in frames:
+            video.append(frame)
     return path

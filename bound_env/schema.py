@@ -137,12 +137,17 @@ def regular_file(path, what: str = "file") -> Path:
     return p
 
 
-def read_json(path, max_bytes: int = MAX_JSON_BYTES, max_depth: int = MAX_JSON_DEPTH):
+def read_json(
+    path, max_bytes: int = MAX_JSON_BYTES, max_depth: int = MAX_JSON_DEPTH, strict: bool = False
+):
     """A JSON file's value: a regular file of at most ``max_bytes``, nested at most
-    ``max_depth`` deep; ValueError naming the file otherwise."""
+    ``max_depth`` deep; ValueError naming the file otherwise. ``strict``: strict JSON, so
+    ``NaN``, ``Infinity`` and ``-Infinity`` (which Python's json writes by default) are
+    refused too."""
     p = regular_file(path, "a JSON file")
     if p.stat().st_size > max_bytes:
         raise ValueError(f"{p}: larger than {max_bytes} bytes, not a policy's JSON file")
+
     try:
         data = json.loads(p.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
@@ -151,7 +156,69 @@ def read_json(path, max_bytes: int = MAX_JSON_BYTES, max_depth: int = MAX_JSON_D
         raise ValueError(f"{p}: nested deeper than {max_depth} levels") from None
     if depth(data, max_depth + 1) > max_depth:
         raise ValueError(f"{p}: nested deeper than {max_depth} levels")
+    if strict:
+        bad = nonfinite_path(data)
+        if bad is not None:
+            raise ValueError(
+                f"{p}: {bad[0]} is {bad[1]}, which is not strict JSON (a number went non-finite)"
+            )
     return data
+
+
+def nonfinite_path(value, path: str = ""):
+    """(path, token) of the first NaN or infinite number in a JSON value (``rows[2].r50.value``,
+    ``"NaN"``), or None."""
+    stack = [(value, path)]
+    while stack:
+        v, at = stack.pop()
+        if isinstance(v, float) and not math.isfinite(v):
+            return at or ".", "NaN" if math.isnan(v) else ("Infinity" if v > 0 else "-Infinity")
+        if isinstance(v, dict):
+            stack.extend((x, f"{at}.{k}" if at else str(k)) for k, x in reversed(v.items()))
+        elif isinstance(v, list):
+            stack.extend((x, f"{at}[{i}]") for i, x in reversed(list(enumerate(v))))
+    return None
+
+
+def load_json_strict(path, required: dict | None = None, max_bytes: int = MAX_JSON_BYTES):
+    """A strict JSON file (`read_json` with ``strict``: no NaN or Infinity) holding a mapping
+    with every key of ``required``, checked by type: ``{key: type, a tuple of types, or a dict
+    (a mapping checked the same way)}``; ``float`` accepts an int (not a bool) and must be
+    finite, ``None`` in a tuple allows null. A one-line ValueError naming the file and the key
+    (``rows``, ``r50.value``) otherwise::
+
+        head = load_json_strict("docs/headline.json", {"budget": str, "seed": int, "rows": list})
+    """
+    data = read_json(path, max_bytes=max_bytes, strict=True)
+    return check_keys(data, required or {}, str(path))
+
+
+def check_keys(value, required: dict, where: str, prefix: str = "") -> dict:
+    """``value`` if it is a mapping holding every key of ``required`` with the type given
+    there (`load_json_strict`'s convention); ValueError ``"{where}: {key} ..."`` otherwise."""
+    if not isinstance(value, dict):
+        name = prefix[:-1] if prefix else "the file"
+        raise ValueError(f"{where}: {name} must be a mapping, got {_show(value)}")
+    for key, want in required.items():
+        name = f"{prefix}{key}"
+        if key not in value:
+            raise ValueError(f"{where}: {name}: missing")
+        v = value[key]
+        if isinstance(want, dict):
+            check_keys(v, want, where, f"{name}.")
+            continue
+        kinds = want if isinstance(want, tuple) else (want,)
+        nullable = None in kinds
+        if v is None and nullable:
+            continue
+        kinds = tuple(k for k in kinds if k is not None)
+        if float in kinds and not isinstance(v, bool) and isinstance(v, (int, float)):
+            real(v, f"{where}: {name}")  # finite
+            continue
+        if (isinstance(v, bool) and bool not in kinds) or not isinstance(v, kinds):
+            names = " or ".join(k.__name__ for k in kinds) + (" or null" if nullable else "")
+            raise ValueError(f"{where}: {name} must be {names}, got {_show(v)}")
+    return value
 
 
 def depth(value, limit: int) -> int:

@@ -46,6 +46,7 @@ from .events import (
 from .fast import EV_APEXES, EV_LOGGED, Options, advance, event_log, recorder
 from .layout import Layout
 from .params import P_ALPHA, P_GB, P_GF, P_LB, P_LF, P_TAU, Z_IN_Y, Z_NAMES, Gait, load_gait
+from .schema import dt_value
 from .stride import DEFAULT_T_MAX
 from .terrain import change_slope
 
@@ -460,6 +461,9 @@ class TaskConfig:
         put = object.__setattr__  # normalize the values of a frozen instance
         for name in ("dt", "max_torque", "rtol"):
             put(self, name, check_number(name, getattr(self, name), 0.0, strict=True))
+        # the range a file may set (bounded work per stride: dt = 1e-9 would build a matrix of
+        # 25 GB); the stride env's plant is one of these too
+        put(self, "dt", dt_value(self.dt, "dt"))
         for name in (
             "slope_noise_deg",
             "reset_noise_scale",

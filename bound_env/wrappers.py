@@ -17,6 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 from .control.mpc import library
+from .schema import integer, real_array
 
 LIBRARY_N_RANDOM = 48  # random sign rows of the default library (distillation's default)
 LIBRARY_SEED = 5  # their generator's seed (distillation's default)
@@ -30,35 +31,40 @@ def default_library(K: int, n_random: int = LIBRARY_N_RANDOM, seed: int = LIBRAR
     return library(K, np.zeros(K), np.random.default_rng(seed), n_random, 0, 0.0)
 
 
-class LibraryActions(gym.ActionWrapper):
+class LibraryActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """``Discrete(len(rows))`` actions for an env whose action is the coefficients of a stride
     profile (`PassiveBoundRescue-v0`): action 0 plays the LQR's plan at the current apex
     state (``env.unwrapped.lqr.coefficients(env.unwrapped.z)``), action j > 0 the row
     ``rows[j]`` (row 0 of ``rows`` is not used). ``rows`` defaults to `default_library`;
-    rows must be finite, within [-1, 1], and have one column per coefficient."""
+    rows must be finite, within [-1, 1], and have one column per coefficient.
+
+    An action is one integer in [0, len(rows)) (a Python or numpy integer, or a numpy array
+    holding one); a bool, a float (``1.5``, ``inf``, even ``2.0``) or a row out of range is
+    refused with a ValueError naming the action. The wrapper records its constructor's
+    arguments (`gymnasium.utils.RecordConstructorArgs`), so ``gymnasium``'s ``check_env`` and
+    ``gym.make(env.spec)`` can recreate it.
+    """
 
     def __init__(self, env: gym.Env, rows=None):
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self, rows=rows)
+        gym.ActionWrapper.__init__(self, env)
         base = env.unwrapped
         if not (hasattr(base, "lqr") and hasattr(base, "z")):
             raise ValueError("LibraryActions needs an env with an LQR and an apex state z "
                              "(PassiveBoundRescue-v0)")  # fmt: skip
         K = int(env.action_space.shape[0])
-        rows = default_library(K) if rows is None else np.array(rows, dtype=float)
-        if rows.ndim != 2 or rows.shape[1] != K or len(rows) < 1:
-            raise ValueError(f"rows must be an (n, K={K}) array, got shape {rows.shape}")
-        if not np.isfinite(rows).all() or np.abs(rows).max() > 1.0:
-            raise ValueError("rows must be finite and within [-1, 1]")
-        self.rows = rows
-        self.action_space = gym.spaces.Discrete(len(rows))
+        if rows is None:
+            rows = default_library(K)
+        self.rows = real_array(rows, "LibraryActions rows", shape=(None, K), lo=-1.0, hi=1.0)
+        self.action_space = gym.spaces.Discrete(len(self.rows))
 
     def action(self, action) -> np.ndarray:
-        a = np.asarray(action)
-        if a.size != 1 or not np.issubdtype(a.dtype, np.integer) and a.item() != int(a.item()):
-            raise ValueError(f"action must be one integer, got {action!r}")
-        a = int(a.item())
+        a = action
+        if isinstance(a, np.ndarray) and a.size == 1 and a.dtype.kind in "iu":
+            a = a.reshape(()).item()  # SB3 and vector envs pass a 0-d or (1,) array
+        a = integer(a, "LibraryActions action")
         if not 0 <= a < len(self.rows):
-            raise ValueError(f"action must be in [0, {len(self.rows)}), got {a}")
+            raise ValueError(f"LibraryActions action must be in [0, {len(self.rows)}), got {a}")
         base = self.env.unwrapped
         return base.lqr.coefficients(base.z) if a == 0 else self.rows[a].copy()
 

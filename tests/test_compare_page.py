@@ -149,10 +149,10 @@ def test_render_only_refuses_a_paired_json_that_is_not_an_object(tmp_path, text)
 @pytest.mark.parametrize(
     "change, key",
     [
-        (lambda d: d["rows"][0]["r50"].pop("value"), "rows.0.r50.value"),
-        (lambda d: d["rows"][0].update(what=3), "rows.0.what"),
+        (lambda d: d["rows"][0]["r50"].pop("value"), "rows[0].r50.value"),
+        (lambda d: d["rows"][0].update(what=3), "rows[0].what"),
         (lambda d: d.pop("budget"), "budget"),
-        (lambda d: d["rows"].append("x"), "rows.2"),
+        (lambda d: d["rows"].append("x"), "rows[2]"),
     ],
 )
 def test_a_malformed_headline_json_is_one_line(tmp_path, capsys, change, key):

@@ -332,7 +332,7 @@ def test_headline_cli_check(tmp_path, capsys):
         update_readme("text", load_headline())
     bad = tmp_path / "h.json"
     bad.write_text("{}")
-    with pytest.raises(ValueError, match="h.json: no 'rows'"):
+    with pytest.raises(ValueError, match="h.json: budget: missing"):
         load_headline(bad)
 
 

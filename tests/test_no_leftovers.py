@@ -157,21 +157,46 @@ def test_scheduler_and_workers_are_bounded_and_named(tmp_path, capsys, argv, wor
     assert not (tmp_path / "m").exists()
 
 
-def test_rollout_video_holds_a_bounded_number_of_frames(tmp_path, monkeypatch):
+def test_rollout_video_streams_its_frames_and_thins_long_runs(tmp_path, monkeypatch):
     from agents import rollout as ro
+
+    class Sink:  # stands for bound_env.render.VideoWriter: counts what reaches the file
+        def __init__(self, path, fps):
+            self.fps, self.n = fps, 0
+            seen.append(self)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def append(self, frame):
+            assert frame.shape == (360, 640, 3) and str(frame.dtype) == "uint8"
+            self.n += 1
 
     seen = []
     monkeypatch.setattr(ro, "MAX_VIDEO_FRAMES", 16)
-    monkeypatch.setattr(
-        ro, "write_video", lambda frames, path, fps: seen.append((len(frames), fps))
-    )
+    monkeypatch.setattr(ro, "_video_writer", Sink)
     r = ro.rollout("passive", strides=2, video=tmp_path / "v.gif")
-    ((n, fps),) = seen
-    assert r["video_every"] >= 8 and n <= 16  # ~80 intervals, evenly thinned
-    assert n == r["steps"] // r["video_every"] + 1
-    assert fps == round(100 / r["video_every"])  # still real time
+    (sink,) = seen
+    assert r["video_every"] >= 4 and sink.n <= 24  # ~80 intervals, evenly thinned
+    assert sink.n == r["steps"] // r["video_every"] + 1
+    assert sink.fps == round(100 / r["video_every"])  # still real time
     with pytest.raises(ValueError, match="--video"):
         ro.rollout("passive", strides=1, video="/sys/x/v.gif")  # checked before the run
+
+
+def test_rollout_video_file_has_every_streamed_frame(tmp_path):
+    from PIL import Image
+
+    from agents import rollout as ro
+
+    r = ro.rollout("passive", strides=1, video=tmp_path / "v.gif")
+    with Image.open(tmp_path / "v.gif") as im:
+        assert im.n_frames == r["steps"] // r["video_every"] + 1
+        assert im.size == (640, 360) and im.info["loop"] == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["v.gif"]  # no temporary left
 
 
 def _children(pid: int) -> list[int]:

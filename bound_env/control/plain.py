@@ -34,6 +34,7 @@ It fails loudly where the loop would silently go wrong:
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Mapping
 
 import numpy as np
@@ -43,6 +44,7 @@ from ..task import DEFAULT_DT, OBS_NAMES
 
 FULL_OBS_DIM = len(OBS_NAMES) - 1  # the default observation (x_g excluded)
 _MAKE = 'gym.make("PassiveBound-v1") (or the env factory of agents.rollout.load_policy)'
+_SHARED = "one act per env: call load_policy once per env, or copy.deepcopy(act)"
 
 
 class PlainPolicy:
@@ -53,6 +55,12 @@ class PlainPolicy:
     env's full observation (default: x_g excluded, 16)."""
 
     def __init__(self, controller, obs_index=None, full_dim: int = FULL_OBS_DIM, name=None):
+        if not callable(controller):
+            raise TypeError(
+                "PlainPolicy: controller must be a callable controller (obs -> action in "
+                f"[-1, 1]), got {type(controller).__name__}; load one with "
+                "agents.rollout.load_policy(NAME) or bound_env.control.load_controller(NAME)"
+            )
         self.controller = controller  # public; the loop below calls its own reference
         self._ctrl = controller
         self.name = str(name if name is not None else getattr(controller, "name", controller))
@@ -65,6 +73,7 @@ class PlainPolicy:
         self._read = {int(full_dim): self.obs_index}  # observation length -> entries read
         if self.obs_index is not None:
             self._read[len(self.obs_index)] = None
+        self._answers = deque(maxlen=8)  # the last actions returned (any episode)
         self.restart()
 
     def restart(self) -> None:
@@ -85,6 +94,12 @@ class PlainPolicy:
             raise ValueError(
                 f"policy {self.name}: obs must be one observation of PassiveBound (length "
                 f"{lengths}), got shape {x.shape}; make the env with {_MAKE}"
+            )
+        if not np.all(np.isfinite(x)):
+            bad = int(np.flatnonzero(~np.isfinite(x))[0])
+            raise ValueError(
+                f"policy {self.name}: obs[{bad}] is {x[bad]} (an observation must be finite); "
+                "a fallen or diverged env must be reset before acting"
             )
         index = self._read[x.shape[0]]
         return x if index is None else x[index]
@@ -125,14 +140,16 @@ class PlainPolicy:
             if passed > (1 if "apex_z" in info else 0):
                 raise ValueError(
                     f"policy {self.name}: an apex passed without being announced (stride "
-                    f"{self._stride} -> {stride}); call act(obs, info) after every step"
+                    f"{self._stride} -> {stride}); call act(obs, info) after every step "
+                    f"({_SHARED})"
                 )
         if t is not None and self._time is not None:
             step = float(t) - float(self._time)
             if step <= 0.0:
                 raise ValueError(
                     f"policy {self.name}: info is not newer than the last one (time {t} after "
-                    f"{self._time}); pass the info that env.step returned with obs"
+                    f"{self._time}); pass the info that env.step returned with obs, and give "
+                    f"each env its own act ({_SHARED})"
                 )
             if not math.isclose(step, self.dt, rel_tol=1e-9, abs_tol=1e-12):
                 raise ValueError(
@@ -143,12 +160,25 @@ class PlainPolicy:
         tau, a = info.get("tau"), self._action
         if self.max_torque is not None and tau is not None and a is not None and a != 0.0:
             if not math.isclose(float(tau), self.max_torque * a, rel_tol=1e-9, abs_tol=1e-12):
+                if self._answered(float(tau)):
+                    raise ValueError(
+                        f"policy {self.name}: the env applied tau = {float(tau):.6g} N m, the "
+                        f"torque of an earlier answer of act, not of its last one ({a:.6g}): "
+                        f"act is shared between two envs or loops ({_SHARED})"
+                    )
                 raise ValueError(
                     f"policy {self.name}: the env applied tau = {float(tau):.6g} N m for the "
                     f"action {a:.6g}, i.e. max_torque = {float(tau) / a:.6g} N m; the policy "
                     f"acts with max_torque = {self.max_torque:g} N m: make the env with "
                     f"{_MAKE} and step with the action act returned"
                 )
+
+    def _answered(self, tau: float) -> bool:
+        """Whether ``tau`` is the torque of one of act's earlier answers (not its last)."""
+        earlier = list(self._answers)[:-1]
+        return any(
+            math.isclose(tau, self.max_torque * b, rel_tol=1e-9, abs_tol=1e-12) for b in earlier
+        )
 
     # -- the policy -------------------------------------------------------------------------
     def __call__(self, obs, info=None) -> np.ndarray:
@@ -166,6 +196,7 @@ class PlainPolicy:
         a = float(self._ctrl(x))
         out = np.array([a], dtype=np.float32)
         self._action = float(out[0])
+        self._answers.append(self._action)
         return out
 
     def __repr__(self) -> str:

@@ -101,6 +101,11 @@ class ControllerSpec:
 
 def resolve_spec_path(spec: str | Path) -> Path:
     """A path to a YAML file, or a name under ``configs/controllers/`` (``"lqr"``)."""
+    if not isinstance(spec, (str, Path)) or not str(spec):
+        raise TypeError(
+            f"controller must be a name (lqr, deadbeat, mpc, damping) or a spec file's path, "
+            f"got {spec!r} ({type(spec).__name__})"
+        )
     p = Path(spec)
     if p.suffix in (".yaml", ".yml"):
         if not p.is_file():
@@ -262,10 +267,12 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
     """The explicit gain of the spec (K x 6, SI) for ``gait`` (default: the spec's), or None
     (to be designed); ValueError if its shape does not match the basis. ``gain`` is one
     matrix (for every gait), a file, or a mapping of gait names to matrices (a gait it does
-    not list is designed)."""
-    g = spec.gain
+    not list is designed). Errors name where the gain came from: the spec's field
+    (``gain`` or ``gain.<gait>``) or the gain file."""
+    g, where = spec.gain, f"{spec.path}: gain"
     if isinstance(g, dict):
-        g = g.get(_gait_key(g, gait if gait is not None else spec.gait))
+        key = _gait_key(g, gait if gait is not None else spec.gait)
+        g, where = g.get(key), f"{where}.{key}"
     if g is None:
         return None
     if isinstance(g, str):
@@ -273,7 +280,7 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
         if not p.is_absolute() and spec.path is not None:
             p = spec.path.parent / p
         if not p.is_file():
-            raise FileNotFoundError(f"{spec.path}: gain file {str(p)!r} does not exist")
+            raise FileNotFoundError(f"{where}: gain file {str(p)!r} does not exist")
         try:
             if p.suffix == ".npy":
                 g = np.load(p, allow_pickle=False)
@@ -282,16 +289,15 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
             else:
                 g = np.loadtxt(p, delimiter=",", ndmin=2)
         except (OSError, EOFError, UnicodeDecodeError, ValueError) as e:
-            raise ValueError(f"{spec.path}: gain file {str(p)!r} is not readable ({e})") from None
+            raise ValueError(f"{where}: gain file {str(p)!r} is not readable ({e})") from None
+        where = f"{p}: gain (from {spec.path})"
     try:
         G = np.array(g, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{spec.path}: gain must be a K x 6 matrix of numbers") from None
+        raise ValueError(f"{where} must be a K x 6 matrix of numbers") from None
     if G.shape != (K, 6):
         raise ValueError(
-            f"{spec.path}: gain has shape {G.shape}, but basis {basis!r} with "
+            f"{where} has shape {G.shape}, but basis {basis!r} with "
             f"K={K} needs a ({K}, 6) gain (one row per basis function)"
         )
-    if not np.all(np.isfinite(G)):
-        raise ValueError(f"{spec.path}: gain must be finite")
-    return G
+    return schema.real_array(G, where, shape=(K, 6))  # finite: no NaN or inf
