@@ -510,6 +510,9 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
     does (`TimeLimit.truncated`: it adds `gamma` V(z_horizon) to the last reward). This does
     not give survival a value of its own: V is the discounted prospect of a later return,
     so a return within the horizon is still worth more than reaching the horizon.
+    `terminate_at_horizon=True` makes the horizon a termination instead (no bootstrap; with
+    shaping, Phi = 0 there as after a fall, so every episode without a return then sums to
+    -Phi(z_0) whatever it did: only returns tell policies apart).
     `step` after a termination or a truncation raises `ValueError` (call `reset`).
 
     ## Info
@@ -548,6 +551,7 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
     | `gamma` | **float** | `0.99` | discount of the shaping, the learner's gamma, in (0, 1] |
     | `action_mode` | **str** | `"direct"` | `"direct"` or `"lqr_residual"` |
     | `residual_scale` | **float** | `0.25` | coefficients per unit of action (`"lqr_residual"`) |
+    | `terminate_at_horizon` | **bool** | `False` | the horizon a termination, not a truncation |
 
     (1) As v0: the spec's stored gain is used when `basis`, `K`, `max_torque` and `dt` are
     the spec's; otherwise the LQR is designed with the spec's Q and R (`bound_env.control`).
@@ -559,7 +563,7 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
       left on a return); optional potential-based shaping (`shaping`, `gamma`); the
       observation scaled per component to O(1) by the spread of the starts (v0: by the apex
       scales, up to 12.7); `r_min` and `set_start_radius` for a curriculum; `action_mode`
-      and `residual_scale` for a residual on the LQR's plan. Same plant, starts (with
+      and `residual_scale` for a residual on the LQR's plan; `terminate_at_horizon`. Same plant, starts (with
       `r_min` = 0), safe radius and episode ends as v0.
     * v0: Initial version: `PassiveBoundRescue-v0`, still registered and unchanged.
     """
@@ -582,11 +586,18 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
         gamma: float = DEFAULT_GAMMA,
         action_mode: str = "direct",
         residual_scale: float = DEFAULT_RESIDUAL_SCALE,
+        terminate_at_horizon: bool = False,
     ):
         utils.EzPickle.__init__(
             self, gait, controller, basis, K, max_torque, dt, gain, safe, r_min, r_max,
             axis_prob, horizon, shaping, gamma, action_mode, residual_scale,
+            terminate_at_horizon,
         )  # fmt: skip
+        if not isinstance(terminate_at_horizon, (bool, np.bool_)):
+            raise ValueError(
+                f"terminate_at_horizon must be true or false, got {terminate_at_horizon!r}"
+            )
+        self.terminate_at_horizon = bool(terminate_at_horizon)
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode must be one of {', '.join(ACTION_MODES)}, "
                              f"got {action_mode!r}")  # fmt: skip
@@ -637,9 +648,11 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
         z1, info = self._stride(u)
         info["u"] = u
         terminated = z1 is None or info["returned"]
+        at_horizon = not terminated and self._k >= self.horizon
+        if at_horizon and self.terminate_at_horizon:
+            terminated, at_horizon = True, False
         ret = 1.0 if info["returned"] else 0.0
         phi1 = 0.0 if terminated else self.potential(z1)
         shaping = self.gamma * phi1 - phi0 if self.shaping > 0.0 else 0.0
         info.update(reward_return=ret, reward_shaping=shaping)
-        truncated = not terminated and self._k >= self.horizon
-        return self._obs(), ret + shaping, terminated, truncated, info
+        return self._obs(), ret + shaping, terminated, at_horizon, info

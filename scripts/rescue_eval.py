@@ -38,8 +38,9 @@ SIZES = (0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45)
 N_DIRS = 32
 
 
-# env kwargs that change the starts or the reward, not the policy's env (starts are given)
-EVAL_IGNORED_KWARGS = ("r_min", "r_max", "axis_prob", "shaping", "gamma")
+# env kwargs that change the starts, the reward or the horizon, not the policy's env: every
+# policy is measured from the same starts with the same 30-stride horizon
+EVAL_IGNORED_KWARGS = ("r_min", "r_max", "axis_prob", "shaping", "gamma", "horizon")
 
 
 def model_env(path: Path, env_id: str | None = None) -> tuple[str, dict]:

@@ -126,6 +126,19 @@ def test_v1_pays_a_return_only_and_its_shaping_telescopes():
     assert {"returned", "fell"} <= outcomes
 
 
+def test_v1_horizon_is_a_truncation_or_a_termination():
+    z_ref = gym.make(RESCUE_ENV_ID_V1).unwrapped.z_ref
+    z = z_ref + 0.2 * np.abs(z_ref) * np.eye(6)[4]  # zero action: neither returns nor falls
+    for end in (False, True):
+        env = gym.make(RESCUE_ENV_ID_V1, horizon=2, shaping=1.0, terminate_at_horizon=end)
+        env.reset(options={"apex_state": z})
+        phi1 = env.unwrapped.potential(env.step(np.zeros(8, np.float32))[-1]["apex_z"])
+        _, r, term, trunc, info = env.step(np.zeros(8, np.float32))
+        assert (term, trunc) == (end, not end) and not info["returned"]
+        phi2 = 0.0 if end else env.unwrapped.potential(info["apex_z"])
+        assert r == pytest.approx(0.99 * phi2 - phi1)
+
+
 def test_v1_lqr_residual_plays_the_lqr_plus_the_scaled_action():
     env = gym.make(RESCUE_ENV_ID_V1, action_mode="lqr_residual", residual_scale=0.5).unwrapped
     env.reset(seed=2)
@@ -240,6 +253,7 @@ BAD_V1_ARGUMENTS = [
     ({"gamma": 1.5}, "gamma"),
     ({"action_mode": "residual"}, "action_mode must be one of direct, lqr_residual"),
     ({"residual_scale": 0}, "residual_scale"),
+    ({"terminate_at_horizon": "yes"}, "terminate_at_horizon"),
 ]
 
 
