@@ -92,9 +92,7 @@ def _register() -> None:
     if RESCUE_ENV_ID not in registry:
         register(id=RESCUE_ENV_ID, entry_point="bound_env.rescue_env:PassiveBoundRescueEnv")
     if RESCUE_ENV_ID_V1 not in registry:
-        register(
-            id=RESCUE_ENV_ID_V1, entry_point="bound_env.rescue_env:PassiveBoundRescueV1Env"
-        )
+        register(id=RESCUE_ENV_ID_V1, entry_point="bound_env.rescue_env:PassiveBoundRescueV1Env")
     # v0 is not out of date: it is the same env at 40 N m, which code, configs and published
     # commands name with their kwargs; Gymnasium's "consider upgrading to v1" would be noise.
     # PassiveBoundRescue-v0 stays the task of `bound-env finetune` (v1 is the one for RL)

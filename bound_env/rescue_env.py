@@ -113,6 +113,7 @@ def rescue_lqr(controller=DEFAULT_CONTROLLER, gait="default", basis=None, K=None
         raise ValueError(f"gain {tail}") from None
     return lqr, spec
 
+
 def check_start_radius(r_min, r_max, safe: float, z_ref, scales) -> tuple[float, float]:
     """(r_min, r_max) checked: 0 <= r_min < r_max (finite), and some start out to ``r_max``
     lies past the safe radius ``safe`` (the largest normalized error of a start is
@@ -563,8 +564,8 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
       left on a return); optional potential-based shaping (`shaping`, `gamma`); the
       observation scaled per component to O(1) by the spread of the starts (v0: by the apex
       scales, up to 12.7); `r_min` and `set_start_radius` for a curriculum; `action_mode`
-      and `residual_scale` for a residual on the LQR's plan; `terminate_at_horizon`. Same plant, starts (with
-      `r_min` = 0), safe radius and episode ends as v0.
+      and `residual_scale` for a residual on the LQR's plan; `terminate_at_horizon`. Same
+      plant, starts (with `r_min` = 0), safe radius and episode ends as v0.
     * v0: Initial version: `PassiveBoundRescue-v0`, still registered and unchanged.
     """
 

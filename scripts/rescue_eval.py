@@ -122,8 +122,11 @@ def main(argv=None) -> int:
     p.add_argument("--sizes", type=float, nargs="+", default=list(SIZES))
     p.add_argument("--dirs", type=int, default=N_DIRS, help="validation directions per size")
     p.add_argument("--seed", type=int, default=VALIDATION_SEED, help="directions' seed")
-    p.add_argument("--env-id", default=None,
-                   help="env of the models without a config.yaml (default: PassiveBoundRescue-v0)")
+    p.add_argument(
+        "--env-id",
+        default=None,
+        help="env of the models without a config.yaml (default: PassiveBoundRescue-v0)",
+    )
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     if args.seed == 12345:
