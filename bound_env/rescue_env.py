@@ -432,7 +432,7 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
 
     - `action_mode="direct"` (default): u = a, the coefficients themselves (as v0);
     - `action_mode="lqr_residual"`: u = clip(u_lqr(z) + `residual_scale` * a, -1, 1), a
-      residual on the LQR's plan u_lqr(z) = clip(-G (z - z*), -1, 1) at the current apex
+      residual on the LQR's plan u_lqr(z) = clip(-G (z - `z*`), -1, 1) at the current apex
       state z (a = 0 plays the LQR).
 
     | Num | Action | Min | Max | Unit |
@@ -442,10 +442,10 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
     ## Observation Space
 
     `Box(low, high, (6,), float32)`: the apex error scaled per component to O(1),
-    o_i = (z_i - z*_i) / sigma_i, with sigma_i = max(0.45 |z*_i|, s_i): the spread of the
-    default starts (0.45 |z*_i|, the largest start along axis i), floored at the apex scale
+    o_i = (z_i - `z*_i`) / sigma_i, with sigma_i = max(0.45 |`z*_i`|, s_i): the spread of the
+    default starts (0.45 |`z*_i`|, the largest start along axis i), floored at the apex scale
     s_i of the tasks (`bound_env.task.APEX_SCALES`; the floor matters for the two angles,
-    whose z*_i is near 0). sigma does not change with `r_min`/`r_max`, so a curriculum keeps
+    whose `z*_i` is near 0). sigma does not change with `r_min`/`r_max`, so a curriculum keeps
     the observation. For the default gait:
 
     | Num | Observation | sigma_i |
@@ -469,7 +469,7 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
       inside the safe radius (the episode terminates), 0 otherwise (a fall too);
     - *shaping* (`info["reward_shaping"]`, 0 unless `shaping` > 0): F = `gamma` Phi(z') -
       Phi(z) for the stride from apex z to z', with the potential
-      Phi(z) = -`shaping` * log(e(z) / `safe`), e(z) = max_i |z_i - z*_i| / s_i the
+      Phi(z) = -`shaping` * log(e(z) / `safe`), e(z) = max_i |z_i - `z*_i`| / s_i the
       normalized apex error (the norm that defines the safe radius; Phi = 0 on it), and
       Phi = 0 after a termination (a return or a fall: the absorbing state's potential).
       Potential-based shaping (Ng, Harada and Russell, 1999) adds -Phi(z_0) to every
@@ -484,7 +484,7 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
 
     ## Starting State
 
-    z* + r |z*| xi with r ~ U(`r_min`, `r_max`) and xi one axis (either sign) with
+    `z*` + r |`z*`| xi with r ~ U(`r_min`, `r_max`) and xi one axis (either sign) with
     probability `axis_prob`, else uniform on the 6-sphere scaled to max |xi_i| = 1
     (`bound_env.rescue_env.sample_starts`), redrawn until it lies past the safe radius (at
     most 10,000 draws; radii that give no start past it are refused). With `r_min` = 0
@@ -544,8 +544,8 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
     | `dt` | **float** | the spec's (0.01) | control grid of the plant [s], in [1e-4, 0.1] |
     | `gain` | **K x 6 floats** | the spec's | the LQR gain G (SI) (1) |
     | `safe` | **float** | the spec's (0.05) | safe radius: normalized error of a return |
-    | `r_min` | **float** | `0.0` | smallest start, relative to abs(z*) |
-    | `r_max` | **float** | `0.45` | largest start, relative to abs(z*) |
+    | `r_min` | **float** | `0.0` | smallest start, relative to abs(`z*`) |
+    | `r_max` | **float** | `0.45` | largest start, relative to abs(`z*`) |
     | `axis_prob` | **float** | `0.25` | probability of a start along one axis |
     | `horizon` | **int** | `30` | strides of an episode (truncation) |
     | `shaping` | **float** | `0.0` | c of the shaping potential (0: return-only reward) |
