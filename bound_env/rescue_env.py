@@ -107,10 +107,10 @@ def rescue_lqr(controller=DEFAULT_CONTROLLER, gait="default", basis=None, K=None
     try:
         lqr = load_controller(lqr_spec, str(gait))
     except ValueError as e:  # the spec loader names the spec file; a given gain is ours
-        head, _, tail = str(e).partition(": gain ")
-        if gain is None or not tail:
+        msg = str(e)
+        if gain is None or "gain" not in msg:
             raise
-        raise ValueError(f"gain {tail}") from None
+        raise ValueError(msg[msg.index("gain") :]) from None
     return lqr, spec
 
 
