@@ -222,7 +222,7 @@ class _RescueBase(gym.Env):
             info["returned"] = True
             self._ended = "the robot returned inside the safe radius"
         elif self._k >= self.horizon:
-            self._ended = f"the episode was truncated at horizon={self.horizon}"
+            self._ended = f"the episode reached its horizon={self.horizon}"
         return z1, info
 
 

@@ -309,7 +309,7 @@ def test_a_step_after_a_fall_or_past_truncation_is_refused(env_id):
         _, _, term, trunc, info = env.step(np.zeros(8, dtype=np.float32))
         done = term or trunc
     assert done and trunc and not term, info
-    with pytest.raises(ValueError, match="truncated at horizon=2"):
+    with pytest.raises(ValueError, match="reached its horizon=2"):
         env.step(np.zeros(8, dtype=np.float32))
     env.reset(seed=0)  # a reset starts a new episode
     env.step(np.zeros(8, dtype=np.float32))
