@@ -20,7 +20,11 @@ Importing the package registers these Gymnasium environments:
 - ``PassiveBoundRescue-v0``: `bound_env.rescue_env.PassiveBoundRescueEnv`, the rescue task
   (starts past the LQR's safe radius, a stride per step, a return ends the episode), with
   continuous profile actions; `bound_env.wrappers.LibraryActions` gives the profile
-  library's discrete actions.
+  library's discrete actions;
+- ``PassiveBoundRescue-v1``: `bound_env.rescue_env.PassiveBoundRescueV1Env`, the same task
+  paying for a return only (optional potential-based shaping), with an O(1) observation, a
+  start-radius curriculum and an optional residual on the LQR's plan: the one standard RL
+  learns.
 
 ```python
 import gymnasium as gym
@@ -46,6 +50,7 @@ STRIDE_ENV_ID = "PassiveBoundStride-v1"
 STRIDE_ENV_IDS = (STRIDE_ENV_ID, "PassiveBoundStride-v0")
 MAX_STRIDE_EPISODE_STEPS = 100  # time limit of the stride env: 100 strides
 RESCUE_ENV_ID = "PassiveBoundRescue-v0"  # no max_episode_steps: its `horizon` kwarg truncates
+RESCUE_ENV_ID_V1 = "PassiveBoundRescue-v1"  # the same task paying for returns only
 # kwargs of the two control-interval envs (PassiveBoundEnv) registered under their own ids.
 # The published task: v1's defaults (the settings of every shipped policy and controller
 # that differ from v0's); the kwargs of every control-interval env id (PassiveBoundEnv).
@@ -86,13 +91,16 @@ def _register() -> None:
         )
     if RESCUE_ENV_ID not in registry:
         register(id=RESCUE_ENV_ID, entry_point="bound_env.rescue_env:PassiveBoundRescueEnv")
+    if RESCUE_ENV_ID_V1 not in registry:
+        register(id=RESCUE_ENV_ID_V1, entry_point="bound_env.rescue_env:PassiveBoundRescueV1Env")
     # v0 is not out of date: it is the same env at 40 N m, which code, configs and published
-    # commands name with their kwargs; Gymnasium's "consider upgrading to v1" would be noise
+    # commands name with their kwargs; Gymnasium's "consider upgrading to v1" would be noise.
+    # PassiveBoundRescue-v0 stays the task of `bound-env finetune` (v1 is the one for RL)
     import warnings
 
     warnings.filterwarnings(
         "ignore",
-        message=r".*The environment PassiveBound(Literal)?-v0 is out of date",
+        message=r".*The environment PassiveBound(Literal|Rescue)?-v0 is out of date",
         category=DeprecationWarning,
     )
 

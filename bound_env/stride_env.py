@@ -47,6 +47,13 @@ def check_coefficients(action, K: int) -> np.ndarray:
     return u
 
 
+def refuse_step_after_end(why: str | None) -> None:
+    """The step-after-termination guard of the stride-level envs: ValueError (one line) when
+    ``why`` (what ended the episode) is set; `reset` clears it."""
+    if why:
+        raise ValueError(f"step() after the episode ended ({why}): call reset() first")
+
+
 class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
     r"""Stride-to-stride spine control of the passively bounding quadruped.
 
@@ -271,10 +278,7 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         return self._obs(self._z), {"start_z": self._z.copy(), "failure": self._failure}
 
     def step(self, action):
-        if self._ended:
-            raise ValueError(
-                "step() after the episode terminated (the robot fell): call reset() first"
-            )
+        refuse_step_after_end("the robot fell" if self._ended else None)
         u = np.clip(check_coefficients(action, self.task.K), -1.0, 1.0)
         taus = self.task.basis.torques(u, self.task.max_torque)
         slope = None

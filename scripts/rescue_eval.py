@@ -1,11 +1,14 @@
-"""Return rate on the rescue task (PassiveBoundRescue-v0) from validation starts.
+"""Return rate on the rescue task (PassiveBoundRescue-v0/-v1) from validation starts.
 
     PYTHONPATH=. .venv/bin/python scripts/rescue_eval.py runs/rescue-ppo-s0/model.zip lqr mpc
 
-Each argument is a PPO model trained on PassiveBoundRescue-v0's continuous actions (a
-``model.zip``, or a run folder holding one; its ``vecnormalize.pkl`` beside it is applied when it
-normalizes observations), or a stride controller by name or path (``lqr``, ``mpc``, ``default``,
-a policy folder: `agents.policy.load_controller`), which plays its plan at each apex state.
+Each argument is a PPO model trained on the rescue env's continuous actions (a ``model.zip``,
+or a run folder holding one; its ``vecnormalize.pkl`` beside it is applied when it normalizes
+observations; the env id and ``env_kwargs`` of the run's ``config.yaml`` beside it make the
+env, so a PassiveBoundRescue-v1 model sees its own observation and action mode; without one,
+``--env-id``), or a stride controller by name or path (``lqr``, ``mpc``, ``default``, a policy
+folder: `agents.policy.load_controller`), which plays its plan at each apex state of
+PassiveBoundRescue-v0 (the same plant, starts and returns as v1).
 
 The starts are z* + r |z*| xi for ``--dirs`` validation directions xi (seed 777,
 `agents.distill.VALIDATION_SEED`; `bound_env.analysis.margins.random_directions`, never the
@@ -33,6 +36,28 @@ from bound_env.analysis.margins import random_directions
 VALIDATION_SEED = 777  # agents.distill.VALIDATION_SEED
 SIZES = (0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45)
 N_DIRS = 32
+
+
+# env kwargs that change the starts, the reward or the horizon, not the policy's env: every
+# policy is measured from the same starts with the same 30-stride horizon
+EVAL_IGNORED_KWARGS = ("r_min", "r_max", "axis_prob", "shaping", "gamma", "horizon")
+
+
+def model_env(path: Path, env_id: str | None = None) -> tuple[str, dict]:
+    """The env id and kwargs a model was trained on: its run's ``config.yaml`` (rl-zoo3
+    format with a ``run:`` entry), else ``env_id`` (default PassiveBoundRescue-v0)."""
+    import yaml
+
+    path = Path(path)
+    cfg = (path if path.is_dir() else path.parent) / "config.yaml"
+    if env_id is None and cfg.is_file():
+        data = yaml.safe_load(cfg.read_text())
+        env_id = data["run"]["env_id"]
+        kwargs = dict(data[env_id].get("env_kwargs") or {})
+    else:
+        kwargs = {}
+    kwargs = {k: v for k, v in kwargs.items() if k not in EVAL_IGNORED_KWARGS}
+    return env_id or RESCUE_ENV_ID, kwargs
 
 
 def model_actor(path: Path):
@@ -97,6 +122,11 @@ def main(argv=None) -> int:
     p.add_argument("--sizes", type=float, nargs="+", default=list(SIZES))
     p.add_argument("--dirs", type=int, default=N_DIRS, help="validation directions per size")
     p.add_argument("--seed", type=int, default=VALIDATION_SEED, help="directions' seed")
+    p.add_argument(
+        "--env-id",
+        default=None,
+        help="env of the models without a config.yaml (default: PassiveBoundRescue-v0)",
+    )
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     if args.seed == 12345:
@@ -109,10 +139,11 @@ def main(argv=None) -> int:
         is_model = path.suffix == ".zip" or (path / "model.zip").is_file()
         try:
             act = model_actor(path) if is_model else controller_actor(spec)
-        except (OSError, ValueError) as e:
+            env_id, kwargs = model_env(path, args.env_id) if is_model else (RESCUE_ENV_ID, {})
+            env = gym.make(env_id, **kwargs)
+        except (OSError, ValueError, KeyError, gym.error.Error) as e:
             print(f"{spec}: {e}", file=sys.stderr)
             return 2
-        env = gym.make(RESCUE_ENV_ID)
         out[spec] = evaluate(act, env, args.sizes, args.dirs, args.seed)
         env.close()
         if not args.json:

@@ -55,6 +55,7 @@ def test_mkdocs_build_strict(tmp_path):
         "envs/passive-bound-literal-v1",
         "envs/passive-bound-stride-v1",
         "envs/passive-bound-rescue-v0",
+        "envs/passive-bound-rescue-v1",
         "cli",
         "MARGINS",
     )
