@@ -80,10 +80,14 @@ def read_config_file(path: str | Path) -> dict:
 
 def default_env_id(path: str | Path) -> str:
     """The env id ``train`` uses when none is given: the file's only section (``ppo-stride``:
-    ``PassiveBoundStride-v1``), else `DEFAULT_ENV_ID` (``ppo``)."""
+    ``PassiveBoundStride-v1``), the newest version when every section is one env's
+    (``ppo-rescue``: ``PassiveBoundRescue-v1``), else `DEFAULT_ENV_ID` (``ppo``)."""
     data = read_config_file(path)
     sections = [k for k, v in data.items() if isinstance(v, dict)]
-    return sections[0] if len(sections) == 1 else DEFAULT_ENV_ID
+    families = {s.rsplit("-v", 1)[0] for s in sections}
+    if len(families) == 1 and all(s.rsplit("-v", 1)[-1].isdigit() for s in sections):
+        return max(sections, key=lambda s: int(s.rsplit("-v", 1)[1]))
+    return DEFAULT_ENV_ID
 
 
 def load_hyperparams(path: str | Path, env_id: str) -> dict:
