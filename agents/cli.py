@@ -278,6 +278,12 @@ def register(sub) -> None:
         "it); without it, --entry keeps only passive",
     )
     p.add_argument(
+        "--mismatch",
+        metavar="SPEC",
+        help="also measure every column under model error and add a Model error section "
+        "(the specs of margins --mismatch, e.g. pm5,pm10)",
+    )
+    p.add_argument(
         "--budget",
         choices=("test", "quick", "standard", "full"),
         default="quick",  # what a first-time user should run; docs/MARGINS.md is --budget full
@@ -543,6 +549,11 @@ def cmd_compare(args) -> int:
     from .compare import chosen_entries, compare, parse_entry
 
     parsed = [parse_entry(t) for t in args.entry or ()]
+    mismatch = None
+    if args.mismatch is not None:
+        from bound_env.mismatch import as_spec
+
+        mismatch = [as_spec(t) for t in args.mismatch.split(",")]  # a bad spec: before any work
     entries = chosen_entries(parsed, keep_defaults=args.keep_defaults)
     path = compare(
         entries,
@@ -555,6 +566,7 @@ def cmd_compare(args) -> int:
         scheduler=args.scheduler,
         seed=args.seed,
         render_only=args.render_only,
+        mismatch=mismatch,
     )
     say(args, f"wrote {path}")
     if args.json:

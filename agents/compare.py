@@ -189,6 +189,7 @@ def compare(
     scheduler: str | None = None,
     seed: int = DEFAULT_SEED,
     render_only: bool = False,
+    mismatch=None,
 ) -> Path:
     """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path.
 
@@ -207,6 +208,10 @@ def compare(
     and a 95 % Student-t interval over them, and every seed's value in a collapsible detail.
     One executor (``executor``, else `bound_env.parallel.open_pool` of ``scheduler`` and
     ``workers``) serves every entry.
+
+    ``mismatch`` (specs of `bound_env.mismatch`, e.g. ``["pm5", "pm10"]``) measures every
+    column under model error too, and the page gets a "Model error" section
+    (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`, paired against lqr).
     """
     entries = [
         (lab, [pol] if isinstance(pol, str) else list(pol), gait)
@@ -242,6 +247,7 @@ def compare(
                         out=sub,
                         progress=progress,
                         seed=seed,
+                        mismatch=mismatch,
                     )
                 r["label"] = label
                 r["source"] = policy
@@ -270,12 +276,26 @@ def compare(
     page = render_markdown(groups, plots, curves, budget, note, pairs, basin_maps(docs), head)
     page += decisions_text(times, groups)
     page += real_time_text(groups)  # each column's own decisions (empty before they were timed)
+    page += model_error_text(groups)
     body = {"budget": budget, "seed": seed, "pairs": pairs, "decision_times": times}
     atomic_write(path.with_name("paired.json"), json.dumps(body, indent=2) + "\n")
     # strict JSON: a measure that could not be made is null (and listed under "nonfinite")
     atomic_write(path.with_name(HEADLINE_FILE), strict_json(head, indent=2) + "\n")
     atomic_write(path, page)
     return path
+
+
+def model_error_text(groups) -> str:
+    """The page's "Model error" section from the columns measured under model error (their
+    first seed), paired against the lqr column where it is one of them; empty without any."""
+    measured = {g["label"]: g["runs"][0] for g in groups if g["runs"][0].get("mismatch")}
+    if not measured:
+        return ""
+    from bound_env.analysis.margins.mismatch_report import mismatch_markdown
+
+    specs = list(dict.fromkeys(k for r in measured.values() for k in r["mismatch"]))
+    ref = "lqr" if "lqr" in measured else None
+    return "\n## Model error\n\n" + mismatch_markdown(measured, specs=specs, reference=ref)
 
 
 def load_result(path: Path, budget: str, seed: int) -> dict:
