@@ -90,6 +90,18 @@ def _render(out, docs):
     )
 
 
+def _render_here(out, docs, capsys):
+    """`_render` in this process (the malformed-input cases: no interpreter start each)."""
+    from types import SimpleNamespace
+
+    from bound_env.cli import main
+
+    argv = ["compare", "--budget", "test", "--render-only", "--no-progress", "--entry", "lqr"]
+    code = main([*argv, "--out", str(out), "--docs", str(docs)])
+    cap = capsys.readouterr()
+    return SimpleNamespace(returncode=code, stdout=cap.out, stderr=cap.err)
+
+
 def test_render_only_reproduces_the_page_byte_for_byte(tmp_path):
     """The renderer split into agents/page.py & co. writes what the old compare.py wrote."""
     out, docs = _fixture(tmp_path)
@@ -127,10 +139,12 @@ def _edit(path: Path, change):
         ("docs/paired.json", lambda d: d.update(decision_times=[]), "decision_times"),
     ],
 )
-def test_render_only_names_the_file_and_key_of_a_malformed_input(tmp_path, file, change, key):
+def test_render_only_names_the_file_and_key_of_a_malformed_input(
+    tmp_path, capsys, file, change, key
+):
     out, docs = _fixture(tmp_path)
     _edit(tmp_path / file, change)
-    r = _render(out, docs)
+    r = _render_here(out, docs, capsys)
     assert r.returncode == 2, r.stdout + r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
@@ -138,10 +152,10 @@ def test_render_only_names_the_file_and_key_of_a_malformed_input(tmp_path, file,
 
 
 @pytest.mark.parametrize("text", ["[", "[1, 2]", '"x"'])
-def test_render_only_refuses_a_paired_json_that_is_not_an_object(tmp_path, text):
+def test_render_only_refuses_a_paired_json_that_is_not_an_object(tmp_path, capsys, text):
     out, docs = _fixture(tmp_path)
     (docs / "paired.json").write_text(text)
-    r = _render(out, docs)
+    r = _render_here(out, docs, capsys)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert "paired.json" in r.stderr and "Traceback" not in r.stderr
 
