@@ -311,11 +311,14 @@ class VideoWriter:
     go, so a video's memory does not depend on its length. A GIF (Pillow, at most 50 frames
     per second are honoured by players) or an MP4 (needs imageio with ffmpeg: ``pip install
     imageio-ffmpeg``). Written atomically (`bound_env.cache.atomic_path`): the file appears
-    when the ``with`` block ends without error, and nothing is left behind otherwise::
+    when the ``with`` block ends without error, and nothing is left behind otherwise. For
+    example:
 
-        with VideoWriter("run.gif", fps=25) as video:
-            for frame in frames:
-                video.append(frame)
+    ```python
+    with VideoWriter("run.gif", fps=25) as video:
+        for frame in frames:
+            video.append(frame)
+    ```
     """
 
     def __init__(self, path, fps):

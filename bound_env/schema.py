@@ -185,9 +185,11 @@ def load_json_strict(path, required: dict | None = None, max_bytes: int = MAX_JS
     with every key of ``required``, checked by type: ``{key: type, a tuple of types, or a dict
     (a mapping checked the same way)}``; ``float`` accepts an int (not a bool) and must be
     finite, ``None`` in a tuple allows null. A one-line ValueError naming the file and the key
-    (``rows``, ``r50.value``) otherwise::
+    (``rows``, ``r50.value``) otherwise. For example:
 
-        head = load_json_strict("docs/headline.json", {"budget": str, "seed": int, "rows": list})
+    ```python
+    head = load_json_strict("docs/headline.json", {"budget": str, "seed": int, "rows": list})
+    ```
     """
     data = read_json(path, max_bytes=max_bytes, strict=True)
     return check_keys(data, required or {}, str(path))
