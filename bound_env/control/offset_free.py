@@ -10,7 +10,8 @@ with a constant disturbance observer):
 
 - the nominal model, linearized at (z*, a = 0) in the step env's **interval actions** a (so
   that it takes any controller's profile, whatever its basis):
-  `z_{k+1} - z* ~ A (z_k - z*) + B a_k + d`, with d a constant offset, zero on the nominal plant (`interval_model`);
+  `z_{k+1} - z* ~ A (z_k - z*) + B a_k + d`, with d a constant offset, zero on the nominal
+  plant (`interval_model`);
 - the target is the cycle on which the plant needs no steady torque,
   z_ss = z* + (I - A)^-1 d^ (its normalized shift max |z_ss - z*|_i / s_i limited to
   ``max_shift``; s: the apex scales), and the inner controller is fed z - z_ss + z*: it acts
