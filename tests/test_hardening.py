@@ -386,19 +386,14 @@ def _drop(path):
         (_set(("rows",), []), "rows: empty"),
     ],
 )
-def test_headline_refuses_a_malformed_headline_json_in_one_line(tmp_path, change, key):
+def test_headline_refuses_a_malformed_headline_json_in_one_line(tmp_path, capsys, change, key):
+    from agents.headline import main as headline_main  # `python -m agents.headline`, in-process
+
     p, readme = _headline_case(tmp_path, change)
     before = readme.read_text()
-    r = subprocess.run(
-        [sys.executable, "-m", "agents.headline", "--json", p, "--readme", readme],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        env={**os.environ, "PYTHONPATH": str(ROOT)},
-    )
-    assert r.returncode == 2, r
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and str(p) in lines[0] and key in lines[0], r.stderr
+    assert headline_main(["--json", str(p), "--readme", str(readme)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and str(p) in lines[0] and key in lines[0], lines
     assert readme.read_text() == before  # a NaN never reaches the README
 
 
