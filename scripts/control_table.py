@@ -20,7 +20,7 @@ import io
 import sys
 from pathlib import Path
 
-from agents.experts.distill import VALIDATION_SEED
+from agents.common.seeds import VALIDATION_SEED
 from agents.results.margins import compute_margins
 from bound_env.analysis.margins import DEFAULT_SEED, check_seed
 from bound_env.cache import atomic_write

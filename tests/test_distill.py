@@ -9,12 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from agents.experts.distill import (
-    DistillConfig,
-    distill,
-    good_rows,
-    load_choice_policy,
-)
+from agents.experts.distill import DistillConfig, distill, good_rows
+from agents.runtime.choice_policy import load_choice_policy
 from bound_env.control.mpc import FELL, RETURNED, SURVIVED
 
 SMALL = {"rounds": 2, "starts_first": 40, "starts_round": 20, "epochs": 5, "n_random": 8}
@@ -119,7 +115,7 @@ def test_the_shipped_default_is_a_fingerprinted_choice_policy(tmp_path, capsys):
     one-line error unless --force (then a warning)."""
     import shutil
 
-    from agents.experts.distill import ChoicePolicyController
+    from agents.runtime.choice_policy import ChoicePolicyController
     from agents.runtime.policy import load_controller, shipped_policies
     from bound_env.cli import main
 
@@ -146,7 +142,7 @@ def test_the_shipped_default_is_a_fingerprinted_choice_policy(tmp_path, capsys):
 
 
 def test_a_saved_policy_carries_its_fingerprint(run):
-    from agents.experts.distill import check_choice_fingerprint
+    from agents.runtime.choice_policy import check_choice_fingerprint
 
     out, _ = run
     fp = json.loads((out / "policy" / "fingerprint.json").read_text())

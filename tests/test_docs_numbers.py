@@ -155,7 +155,7 @@ def test_a_malformed_json_is_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(
         prose,
         "load_numbers",
-        lambda: prose.Numbers(prose.load_headline(), prose.read_json_object(bad), paired_path=bad),
+        lambda: prose.Numbers(prose.load_headline(), prose.read_json(bad), paired_path=bad),
     )
     assert main(["--check"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

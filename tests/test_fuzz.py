@@ -62,7 +62,7 @@ def files(tmp_path):
     # the shipped default with dt 1e-7 (ran until killed) and its fingerprint rewritten
     import json
 
-    from agents.experts.distill import write_choice_fingerprint
+    from agents.runtime.choice_policy import write_choice_fingerprint
 
     slow = tmp_path / "dt-choice"
     shutil.copytree(shipped_policies()["default"], slow)
@@ -551,7 +551,7 @@ CHOICE_CASES = {  # name: (change to a copy of the shipped default, words the er
 
 @pytest.mark.parametrize("case", list(CHOICE_CASES))
 def test_bad_choice_policy_files_are_refused_by_file_and_field(case, tmp_path):
-    from agents.experts.distill import write_choice_fingerprint
+    from agents.runtime.choice_policy import write_choice_fingerprint
     from agents.runtime.policy import load_controller, shipped_policies
 
     change, words = CHOICE_CASES[case]

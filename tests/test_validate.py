@@ -173,7 +173,7 @@ def _copy(src, tmp_path, name="p"):
 def test_choice_npz_fields_are_checked(choice_src, tmp_path, key, value):
     """Any one array of choice.npz replaced: refused with the file and the array named (a
     fingerprint rewritten, so only the schema can catch it), or the policy still loads."""
-    from agents.experts.distill import load_choice_policy, write_choice_fingerprint
+    from agents.runtime.choice_policy import load_choice_policy, write_choice_fingerprint
 
     d = _copy(choice_src, tmp_path)
     with np.load(d / "choice.npz") as f:
@@ -196,7 +196,7 @@ MPC = ["safe", "horizon", "rtol", "n_random", "cem_elites", "noise"]
 @FAST
 @given(where=st.sampled_from(SETTINGS + MPC), value=JSON_VALUE)
 def test_choice_config_fields_are_checked(choice_src, tmp_path, where, value):
-    from agents.experts.distill import load_choice_policy, write_choice_fingerprint
+    from agents.runtime.choice_policy import load_choice_policy, write_choice_fingerprint
 
     d = _copy(choice_src, tmp_path)
     cfg = json.loads((d / "config.json").read_text())

@@ -4,7 +4,7 @@ reading of an SB3 actor into NumPy layers.
 The layers are ``[(W, b), ...]``: hidden layers ``act(W h + b)``, then a linear output layer
 ``W h + b`` (float64). `mlp_forward` is the one forward pass of
 `agents.runtime.controllers.MLPController` (a PPO actor),
-`agents.experts.distill.ChoicePolicyController` (the student's logits) and
+`agents.runtime.choice_policy.ChoicePolicyController` (the student's logits) and
 `agents.runtime.stride_policy.StridePolicyController` (the stride residual); no torch is needed to
 run it.
 """

@@ -37,7 +37,7 @@ from bound_env.wrappers import LibraryActions
 
 from ..common.learn_config import FinetuneConfig
 from ..common.policy_files import source_name
-from .distill import ChoicePolicyController, load_choice_policy, save_policy
+from ..runtime.choice_policy import ChoicePolicyController, load_choice_policy, save_policy
 
 gym.register_envs(bound_env)
 

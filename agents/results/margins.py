@@ -34,7 +34,7 @@ from ..runtime.policy import load_controller
 
 # The agents modules whose code a controller loaded here may run: the loaders (policy.py,
 # policy_files.py), a trained PPO policy (controllers.py, mlp.py), a stride-level policy
-# (stride.py), a distilled student (distill.py). bound_env/ (the classical controllers
+# (stride.py), a distilled student (choice_policy.py). bound_env/ (the classical controllers
 # included) is hashed by the core itself.
 POLICY_SOURCES = (
     "runtime/policy.py",
@@ -42,7 +42,7 @@ POLICY_SOURCES = (
     "runtime/controllers.py",
     "common/mlp.py",
     "runtime/stride.py",
-    "experts/distill.py",
+    "runtime/choice_policy.py",
     "runtime/residual.py",
     "common/wrappers.py",
 )

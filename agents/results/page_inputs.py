@@ -19,6 +19,7 @@ import json
 from pathlib import Path
 
 from bound_env.analysis.margins import Z_LABELS
+from bound_env.schema import check_keys, read_json
 
 
 def _is_num(v) -> bool:
@@ -186,20 +187,9 @@ def check_margins_result(r, where) -> dict:
     return r
 
 
-def read_json_object(path: Path) -> dict:
-    """A JSON object from ``path``; ValueError naming the file otherwise."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise ValueError(f"{path}: cannot read it as JSON ({e})") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: not a JSON object (got {type(data).__name__})")
-    return data
-
-
 def read_decision_times(path: Path):
     """The ``decision_times`` of an earlier ``paired.json`` (None if it has none), checked."""
-    data = read_json_object(path)
+    data = check_keys(read_json(path), {}, str(path))  # a JSON mapping, or one line naming it
     if data.get("decision_times") is None:
         return None
     check_fields(data, [(("decision_times",), "map"), *TIMES_FIELDS], path)

@@ -17,10 +17,10 @@ import sys
 from pathlib import Path
 
 from bound_env.cache import atomic_write
+from bound_env.schema import check_keys, read_json
 
 from .formatting import ROOT, num3
 from .headline import HEADLINE_JSON, load_headline
-from .page_inputs import read_json_object
 
 PAIRED_JSON = ROOT / "docs" / "paired.json"
 BLOCK = re.compile(r"<!-- numbers:([a-z0-9-]+) -->(.*?)<!-- /numbers:\1 -->", re.S)
@@ -133,7 +133,8 @@ BLOCKS = {
 
 
 def load_numbers(head_path: Path = HEADLINE_JSON, paired_path: Path = PAIRED_JSON) -> Numbers:
-    return Numbers(load_headline(head_path), read_json_object(paired_path), head_path, paired_path)
+    paired = check_keys(read_json(paired_path), {}, str(paired_path))  # a JSON mapping
+    return Numbers(load_headline(head_path), paired, head_path, paired_path)
 
 
 def update_text(text: str, numbers: Numbers, where: str = "") -> str:

@@ -122,9 +122,7 @@ def load_apex_controller(path: str | Path, gait: str | Path | None = None, force
     if isinstance(path, str):
         return CONTROLLERS[path][0](gait=gait)
     if Path(path).is_dir() and policy_kind(path) == "choice":  # a PPO + choice.npz: refused
-        from ..experts.distill import (
-            load_choice_policy,  # a distilled student (agents/experts/distill.py)
-        )
+        from .choice_policy import load_choice_policy  # a distilled student
 
         return load_choice_policy(path, gait=gait, force=force)
     files = find_policy_files(path)

@@ -59,7 +59,7 @@ def _policy_wrappers(path) -> list:
     import gymnasium as gym
 
     from ..common.config import class_entries, get_class_by_name
-    from ..experts.distill import POLICY_FILE
+    from .choice_policy import POLICY_FILE
 
     if Path(path).is_dir() and (Path(path) / POLICY_FILE).is_file():
         return []
