@@ -8,8 +8,9 @@ imports control:
   observation (`OBS_Z`, `OBS_TIME`, `OBS_TH2DOT`), and the times it reads on each control
   interval (`observed_times`, `grid_times`);
 - a profile's interval actions (`interval_averages`, `interval_actions_of`: bit for bit what a
-  stride controller's ``__call__`` outputs), the plans of n robots under one controller
-  (`StridePlans`) and the loop side of ``on_apex`` (`notify_apex`);
+  stride controller's ``__call__`` outputs; `ProfileActions`: the stride map's a = W u), the
+  plans of n robots under one controller (`StridePlans`) and the loop side of ``on_apex``
+  (`notify_apex`);
 - who made an apex decision (`DECISION_KINDS`; a gated planner's ``decision_kinds``).
 
 The controller side of the protocol is described in `bound_env.control.controllers`.
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .stride_map import max_intervals
+from .stride_map import interval_weights, max_intervals
 from .stride_task import TorqueBasis
 from .task import OBS_NAMES
 
@@ -68,6 +69,19 @@ def interval_actions_of(basis: TorqueBasis, max_torque: float, U, times, dt: flo
     taus = np.array([basis.torques(u, max_torque) for u in np.atleast_2d(U)])
     avg = interval_averages(basis, taus, np.asarray(times, dtype=float)[None, :], dt)
     return np.clip(avg / max_torque, -1.0, 1.0)
+
+
+class ProfileActions:
+    """A profile's coefficients -> its interval actions a = W u on the step env's control grid
+    from the apex (`bound_env.stride_map.interval_weights` of the ``basis`` at ``dt``): the
+    stride map's input for a planned profile (the MPC's planning model, the rescue env's
+    plant). Rows of U in, rows of actions out."""
+
+    def __init__(self, basis: TorqueBasis, dt: float):
+        self.W = interval_weights(basis.edges, basis.phi, dt)
+
+    def __call__(self, U) -> np.ndarray:
+        return np.atleast_2d(U) @ self.W.T
 
 
 class StridePlans:

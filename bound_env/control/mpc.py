@@ -43,8 +43,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..events import APEX
-from ..stride_map import StrideMap, interval_weights
-from ..stride_protocol import DECISION_KINDS  # noqa: F401 - who decides (the protocol's)
+from ..stride_map import StrideMap
+from ..stride_protocol import (
+    DECISION_KINDS,  # noqa: F401 - who decides (the protocol's)
+    ProfileActions,
+)
 from .controllers import (
     OBS_TIME,
     OBS_Z,
@@ -175,8 +178,9 @@ class MPCController:
     _t0: float = field(default=0.0, repr=False)  # time since the apex of the first interval
 
     def __post_init__(self):
-        b = self.lqr.basis
-        self._W = interval_weights(b.edges, b.phi, self.lqr.dt)
+        # rows of coefficients -> their interval averages W u (the planning model's actions;
+        # `interval_actions` is the step env's view of a stride, bit for bit)
+        self.profile_actions = ProfileActions(self.lqr.basis, self.lqr.dt)
         # the planning model: the one stride map at the planning tolerance
         self.model = StrideMap(
             self.gait, None, self.dt, self.max_torque, self.rtol, segments=self.segments
@@ -195,11 +199,6 @@ class MPCController:
     z_ref = property(lambda self: self.lqr.z_ref)
     env_kwargs = property(lambda self: self.lqr.env_kwargs)
     stride_env_kwargs = property(lambda self: self.lqr.stride_env_kwargs)
-
-    def profile_actions(self, U) -> np.ndarray:
-        """Rows of coefficients -> their interval averages W u (the planning model's actions;
-        `interval_actions` is the step env's view of a stride, bit for bit)."""
-        return np.atleast_2d(U) @ self._W.T
 
     def evaluate(self, z, U, prune: int = 0, floor: float = -np.inf):
         """`rollouts` of the coefficient rows U from the apex z: (scores, outcome, strides)

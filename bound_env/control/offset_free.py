@@ -42,7 +42,8 @@ passive robot (the inner controller stabilizes it), as long as the target stays 
 State. The wrapper remembers, per robot, d^ and the last stride's apex state and actions. The
 step protocol (``on_apex`` / ``__call__``, `PlainPolicy`, `ClosedLoop` in its env loop) keeps
 one robot's state; ``reset()`` forgets it (`PlainPolicy.restart`, `ClosedLoop.run` and
-``episode`` call it at each start). Batched loops keep one `OffsetFreeState` per batch
+``episode`` call it at each start, the batched loop `bound_env.analysis.apex_loop.interval_loop`
+on each robot's copy). Batched loops keep one `OffsetFreeState` per batch
 (``start(n)``) and call ``plan_actions(state, Z, rows)``. The wrapper has no stateless
 ``interval_actions``: the margins' batched stride path assumes a memoryless controller, so a
 `ClosedLoop` steps it through the env instead.

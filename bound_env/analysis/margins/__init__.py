@@ -134,6 +134,9 @@ Modules
 - `budget`: `Budget`, `BUDGETS`, the seeds and `sample_seeds`, `random_directions`;
 - `closed_loop`: `ClosedLoop` (the apex map, kicks, episodes, open-loop profiles),
   `rough_episodes` (batched), `Setup` and `loop_for` (one loop per worker and setting);
+  every batch of robots (``run_many``, `rough_episodes`, `mismatch_tasks.plant_runs`) runs
+  through the one batched loop `bound_env.analysis.apex_loop.interval_loop`, each robot with
+  a fresh controller state;
 - the measures, one task each (run in worker processes): `cycle` (fixed point, multipliers,
   effort), `basin` (per axis), `ceiling`, `curve` (basin stability), `terrain` (survival and
   MFPT), `windows` (slope and k_c), `push`;
