@@ -158,6 +158,9 @@ class _RescueBase(gym.Env):
         self.plant = StrideMap(self.lqr.gait, None, self.lqr.dt, self.lqr.max_torque, EVAL_RTOL)
         self.action_space = spaces.Box(-1.0, 1.0, (self.K,), dtype=np.float32)
         self._z = self.z_ref.copy()
+        # the apex state as the controller side sees it (the LQR of LibraryActions' row 0 and
+        # of v1's "lqr_residual"): z, or z with sensor noise under RandomizedPlant
+        self.z_observed = self._z.copy()
         self._k = 0
         self._ended: str | None = "before the first reset()"  # step() needs a reset() first
 
@@ -169,6 +172,27 @@ class _RescueBase(gym.Env):
     @property
     def basis(self):
         return self.lqr.basis
+
+    @property
+    def plant_task(self) -> PassiveBoundTask:
+        """The one holder of the robot's plant: the task of the stride map every stride runs
+        on (``set_params`` changes the next stride; model error,
+        `bound_env.randomized.RandomizedPlant`)."""
+        return self.plant.task
+
+    def apex_observation(self, z) -> np.ndarray:
+        """The observation of the apex state z (SI): (z - z*) / ``obs_scale``, float32,
+        clipped to the bounds (sensor noise, `bound_env.randomized.RandomizedPlant`, adds to
+        z first, so it is in the observation's units)."""
+        x = ((np.asarray(z, dtype=float) - self.z_ref) / self.obs_scale).astype(np.float32)
+        return np.clip(x, self.observation_space.low, self.observation_space.high)
+
+    def _obs(self) -> np.ndarray:
+        return self.apex_observation(self._z)
+
+    def _begin(self, z) -> None:
+        self._z, self._k, self._ended = z, 0, None
+        self.z_observed = z.copy()
 
     def error(self, z) -> float:
         """The normalized apex error max_i |(z_i - z*_i) / s_i|."""
@@ -217,6 +241,7 @@ class _RescueBase(gym.Env):
             self._ended = "the robot fell"
             return None, info
         self._z = z1.copy()
+        self.z_observed = z1.copy()
         info.update(apex_z=z1.copy(), error=self.error(z1))
         if not self.past_safe(z1):
             info["returned"] = True
@@ -378,18 +403,15 @@ class PassiveBoundRescueEnv(_RescueBase, utils.EzPickle):
         self._setup(gait, controller, basis, K, max_torque, dt, gain, safe, 0.0, r_max,
                     axis_prob, horizon)  # fmt: skip
         # the stride env's apex-state bounds, far outside anything a running robot reaches
-        low = ((Z_LOW - self.z_ref) / self.scales).astype(np.float32)
-        high = ((Z_HIGH - self.z_ref) / self.scales).astype(np.float32)
+        self.obs_scale = self.scales  # v0 observes (z - z*) / the apex scales
+        low = ((Z_LOW - self.z_ref) / self.obs_scale).astype(np.float32)
+        high = ((Z_HIGH - self.z_ref) / self.obs_scale).astype(np.float32)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
-
-    def _obs(self) -> np.ndarray:
-        x = ((self._z - self.z_ref) / self.scales).astype(np.float32)
-        return np.clip(x, self.observation_space.low, self.observation_space.high)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         z = self._start(options)
-        self._z, self._k, self._ended = z, 0, None
+        self._begin(z)
         return self._obs(), {"start_z": z.copy(), "error": self.error(z)}
 
     def step(self, action):
@@ -625,21 +647,20 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
             return 0.0
         return -self.shaping * math.log(max(self.error(z), 1e-12) / self.safe)
 
-    def _obs(self) -> np.ndarray:
-        x = ((self._z - self.z_ref) / self.obs_scale).astype(np.float32)
-        return np.clip(x, self.observation_space.low, self.observation_space.high)
-
     def coefficients(self, action) -> np.ndarray:
-        """The profile coefficients u that ``action`` plays at the current apex state."""
+        """The profile coefficients u that ``action`` plays at the current apex state (with
+        ``"lqr_residual"``: on the LQR's plan at the apex state as observed, ``z_observed``:
+        with sensor noise under `bound_env.randomized.RandomizedPlant`)."""
         a = np.clip(check_coefficients(action, self.K), -1.0, 1.0)
         if self.action_mode == "direct":
             return a
-        return np.clip(self.lqr.coefficients(self._z) + self.residual_scale * a, -1.0, 1.0)
+        plan = self.lqr.coefficients(self.z_observed)
+        return np.clip(plan + self.residual_scale * a, -1.0, 1.0)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         z = self._start(options)
-        self._z, self._k, self._ended = z, 0, None
+        self._begin(z)
         return self._obs(), {"start_z": z.copy(), "error": self.error(z)}
 
     def step(self, action):

@@ -613,13 +613,21 @@ class PassiveBoundTask:
         self._aux0 = make_aux(self.params.to_array())
 
     def set_params(self, params) -> None:
-        """Run the robots started from now on (`reset_robot`) on ``params`` (a
+        """Run the robots started from now on (`reset_robot`, and every stride of a
+        `bound_env.stride_map.StrideMap` on this task) on ``params`` (a
         `bound_env.params.Params`): another plant under the same task (model error,
-        `bound_env.mismatch`). z_ref, the observation bounds and the other settings stay the
-        gait's; rough terrain's mean slope becomes ``params.alpha``."""
+        `bound_env.mismatch`). The task is the one holder of its plant: nothing keeps a copy
+        of it. z_ref, the observation bounds and the other settings stay the gait's; rough
+        terrain's mean slope becomes ``params.alpha``."""
         self.params = params
         self.cfg[C.ALPHA_NOMINAL] = params.alpha
         self._aux0 = make_aux(params.to_array())
+
+    @property
+    def aux0(self) -> np.ndarray:
+        """The parameter vector a robot starts with (`bound_env.dynamics.make_aux` of
+        ``params``): read it at each start, never keep it (`set_params` replaces it)."""
+        return self._aux0
 
     # -- spaces --------------------------------------------------------------------------------
     @property

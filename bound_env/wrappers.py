@@ -65,8 +65,10 @@ class LibraryActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         a = integer(a, "LibraryActions action")
         if not 0 <= a < len(self.rows):
             raise ValueError(f"LibraryActions action must be in [0, {len(self.rows)}), got {a}")
-        base = self.env.unwrapped
-        return base.lqr.coefficients(base.z) if a == 0 else self.rows[a].copy()
+        if a:
+            return self.rows[a].copy()
+        base = self.env.unwrapped  # the LQR plans on the apex state as observed (sensor noise)
+        return base.lqr.coefficients(getattr(base, "z_observed", base.z))
 
 
 def __getattr__(name: str):
