@@ -151,9 +151,7 @@ class RandomizedPlant(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.nominal = task.params
         # noise standard deviations [SI]: of the observation (step envs, which observe SI) and
         # of the apex state z (every env: the info's apex, the apex envs' observation)
-        self._sigma_obs = (
-            self.spec_error.obs_sigma(base.task.obs_names) if self.step_env else None
-        )
+        self._sigma_obs = self.spec_error.obs_sigma(base.task.obs_names) if self.step_env else None
         self._sigma_z = self.spec_error.obs_sigma(Z_NAMES)
         self._noisy_env = bool(np.any(self._sigma_z > 0)) or (
             self._sigma_obs is not None and bool(np.any(self._sigma_obs > 0))

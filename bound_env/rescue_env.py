@@ -20,6 +20,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces, utils
 
+from .params import Z_NAMES
 from .schema import dt_value, real_array
 from .stride_env import Z_HIGH, Z_LOW, check_coefficients, refuse_step_after_end
 from .stride_map import EVAL_RTOL, StrideMap, interval_weights
@@ -33,6 +34,8 @@ MAX_START_DRAWS = 10_000  # redraws of a start before `reset` gives up (bounded 
 ACTION_MODES = ("direct", "lqr_residual")
 DEFAULT_GAMMA = 0.99  # v1's shaping discount: the learner's gamma (configs/ppo-rescue.yaml)
 DEFAULT_RESIDUAL_SCALE = 0.25  # v1 "lqr_residual": coefficients added per unit of action
+MAX_R = 1.0  # largest start radius: at r = 1 a component of the start reaches 0 or 2 z*_i
+MAX_SHAPING = 100.0  # v1's shaping c at most (the return pays 1; c = 1e308 made rewards inf)
 
 
 def sample_direction(rng: np.random.Generator, axis_prob: float) -> np.ndarray:
@@ -84,18 +87,25 @@ def rescue_lqr(controller=DEFAULT_CONTROLLER, gait="default", basis=None, K=None
     A bad argument is a one-line ValueError naming it (``dt``: the range of the spec files,
     `bound_env.schema.dt_value`)."""
     from .control import load_controller, load_spec
+    from .control.spec import MAX_TORQUE_LIMIT
 
     _check_spec_name(controller)
     spec = load_spec(controller)
     if spec.controller not in ("lqr", "mpc"):
         raise ValueError(f"controller {controller!r} is a {spec.controller} spec, not lqr or mpc")
+    if spec.offset_free is not None:
+        raise ValueError(
+            f"controller {controller!r} is held offset-free (it keeps an estimate across "
+            "strides); the rescue task's LQR is a memoryless plan: give its base spec "
+            "(e.g. 'lqr')"
+        )
     changes = {
         k: v
         for k, v in (("basis", basis), ("K", K), ("max_torque", max_torque), ("dt", dt))
         if v is not None
     }
     if changes.get("max_torque") is not None:
-        changes["max_torque"] = _number("max_torque", changes["max_torque"], 0.0)
+        changes["max_torque"] = _number("max_torque", changes["max_torque"], 0.0, MAX_TORQUE_LIMIT)
     if changes.get("dt") is not None:
         changes["dt"] = dt_value(changes["dt"], "dt")  # a stride holds >= 4 intervals
     same = all(getattr(spec, k) == v for k, v in changes.items())
@@ -118,7 +128,7 @@ def check_start_radius(r_min, r_max, safe: float, z_ref, scales) -> tuple[float,
     """(r_min, r_max) checked: 0 <= r_min < r_max (finite), and some start out to ``r_max``
     lies past the safe radius ``safe`` (the largest normalized error of a start is
     r_max max_i |z*_i| / s_i); ValueError naming the argument otherwise."""
-    r_max = _number("r_max", r_max, 0.0)
+    r_max = _number("r_max", r_max, 0.0, MAX_R)
     r_min = _number("r_min", r_min, 0.0, strict_low=False)
     if r_min >= r_max:
         raise ValueError(f"r_min must be below r_max={r_max!r}, got {r_min!r}")
@@ -211,6 +221,13 @@ class _RescueBase(gym.Env):
         options = check_reset_options(options)
         if options.get("apex_state") is not None:
             z = PassiveBoundTask.check_apex_state(options["apex_state"]).copy()
+            out = np.flatnonzero((z < Z_LOW) | (z > Z_HIGH))
+            if out.size:
+                j = int(out[0])
+                raise ValueError(
+                    f"options['apex_state']: {Z_NAMES[j]}={float(z[j])!r} lies outside "
+                    f"[{Z_LOW[j]:g}, {Z_HIGH[j]:g}] (SI), the bounds of the apex state"
+                )
             if not self.past_safe(z):
                 raise ValueError(
                     f"options['apex_state'] lies inside the safe radius (error "
@@ -360,18 +377,19 @@ class PassiveBoundRescueEnv(_RescueBase, utils.EzPickle):
     | `controller` | **str, Path** | `"mpc"` | lqr or mpc spec of the LQR (row 0) and defaults |
     | `basis` | **str** | the spec's (`"windows"`) | torque basis of the action |
     | `K` | **int** | the spec's (8) | number of basis functions |
-    | `max_torque` | **float** | the spec's (80.0) | torque at coefficient 1 [N m] |
+    | `max_torque` | **float** | the spec's (80.0) | torque at coefficient 1 [N m], in (0, 1e4] |
     | `dt` | **float** | the spec's (0.01) | control grid of the plant [s] |
     | `gain` | **K x 6 floats** | the spec's | the LQR gain G (SI) (1) |
     | `safe` | **float** | the spec's (0.05) | safe radius: normalized error of a return |
-    | `r_max` | **float** | `0.45` | largest start, relative to abs(z*) |
+    | `r_max` | **float** | `0.45` | largest start, relative to abs(z*), in (0, 1] |
     | `axis_prob` | **float** | `0.25` | probability of a start along one axis |
     | `horizon` | **int** | `30` | strides of an episode (truncation and bonus) |
 
     (1) The spec's stored gain is used when `basis`, `K`, `max_torque` and `dt` are the
     spec's; otherwise the LQR is designed with the spec's Q and R (`bound_env.control`).
     The LQR only matters to the `LibraryActions` wrapper (row 0) and to `env.unwrapped.lqr`.
-    An lqr spec has no `safe`: 0.05 then.
+    An lqr spec has no `safe`: 0.05 then; an offset-free spec (`lqr-of`) is refused (the
+    task's LQR is a memoryless plan).
 
     ## Version History
 
@@ -562,15 +580,15 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
     | `controller` | **str, Path** | `"mpc"` | lqr or mpc spec of the LQR, its basis and `safe` |
     | `basis` | **str** | the spec's (`"windows"`) | torque basis of the action |
     | `K` | **int** | the spec's (8) | number of basis functions |
-    | `max_torque` | **float** | the spec's (80.0) | torque at coefficient 1 [N m] |
+    | `max_torque` | **float** | the spec's (80.0) | torque at coefficient 1 [N m], in (0, 1e4] |
     | `dt` | **float** | the spec's (0.01) | control grid of the plant [s], in [1e-4, 0.1] |
     | `gain` | **K x 6 floats** | the spec's | the LQR gain G (SI) (1) |
     | `safe` | **float** | the spec's (0.05) | safe radius: normalized error of a return |
     | `r_min` | **float** | `0.0` | smallest start, relative to abs(`z*`) |
-    | `r_max` | **float** | `0.45` | largest start, relative to abs(`z*`) |
+    | `r_max` | **float** | `0.45` | largest start, relative to abs(`z*`), in (0, 1] |
     | `axis_prob` | **float** | `0.25` | probability of a start along one axis |
     | `horizon` | **int** | `30` | strides of an episode (truncation) |
-    | `shaping` | **float** | `0.0` | c of the shaping potential (0: return-only reward) |
+    | `shaping` | **float** | `0.0` | c of the shaping potential, in [0, 100] (0: return only) |
     | `gamma` | **float** | `0.99` | discount of the shaping, the learner's gamma, in (0, 1] |
     | `action_mode` | **str** | `"direct"` | `"direct"` or `"lqr_residual"` |
     | `residual_scale` | **float** | `0.25` | coefficients per unit of action (`"lqr_residual"`) |
@@ -578,7 +596,8 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
 
     (1) As v0: the spec's stored gain is used when `basis`, `K`, `max_torque` and `dt` are
     the spec's; otherwise the LQR is designed with the spec's Q and R (`bound_env.control`).
-    An lqr spec has no `safe`: 0.05 then. A bad argument is a one-line `ValueError` naming it.
+    An lqr spec has no `safe`: 0.05 then; an offset-free spec (`lqr-of`) is refused (the
+    task's LQR is a memoryless plan). A bad argument is a one-line `ValueError` naming it.
 
     ## Version History
 
@@ -626,7 +645,7 @@ class PassiveBoundRescueV1Env(_RescueBase, utils.EzPickle):
                              f"got {action_mode!r}")  # fmt: skip
         self.action_mode = action_mode
         self.residual_scale = _number("residual_scale", residual_scale, 0.0, 2.0)
-        self.shaping = _number("shaping", shaping, 0.0, strict_low=False)
+        self.shaping = _number("shaping", shaping, 0.0, MAX_SHAPING, strict_low=False)
         self.gamma = _number("gamma", gamma, 0.0, 1.0)
         self._setup(gait, controller, basis, K, max_torque, dt, gain, safe, r_min, r_max,
                     axis_prob, horizon)  # fmt: skip

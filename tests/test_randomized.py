@@ -212,3 +212,45 @@ def test_library_row_0_plans_on_the_observed_state(order):
     _, _, _, _, step = env.step(0)
     assert np.array_equal(step["u"], lqr.coefficients(info["start_z"]))
     assert not np.array_equal(step["u"], lqr.coefficients(info["true_start_z"]))
+
+
+# -- compositions (issue 40) --------------------------------------------------------------------
+
+
+def test_a_randomized_plant_over_a_randomized_plant_is_refused():
+    with pytest.raises(ValueError, match="already a RandomizedPlant") as e:
+        RandomizedPlant(RandomizedPlant(gym.make("PassiveBound-v1"), "pm10"), "pm20")
+    assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize(
+    "kind",
+    [float, np.float64, np.float32, lambda x: [x], lambda x: np.array([x]), np.array],
+    ids=["float", "float64", "float32", "list", "array", "0-d array"],
+)
+def test_the_delay_line_takes_every_action_the_plain_env_takes(kind):
+    plain = gym.make("PassiveBound-v1")
+    late = RandomizedPlant(gym.make("PassiveBound-v1"), mismatch="delay1")
+    acts = [kind(a) for a in np.linspace(-0.5, 0.5, 12)]
+    plain.reset(seed=2)
+    late.reset(seed=2)
+    for k, a in enumerate(acts):
+        o_late, *_ = late.step(a)
+        o_plain, *_ = plain.step(np.float32(0.0) if k == 0 else acts[k - 1])
+        assert np.array_equal(o_late, o_plain)
+
+
+@pytest.mark.parametrize("bad", [np.array([np.nan]), float("inf"), [0.1, 0.2], "a"])
+def test_the_delay_line_refuses_what_the_plain_env_refuses_when_given(bad):
+    late = RandomizedPlant(gym.make("PassiveBound-v1"), mismatch="delay1")
+    late.reset(seed=0)
+    with pytest.raises(ValueError, match="action") as e:
+        late.step(bad)  # at once, not one interval later
+    assert "\n" not in str(e.value)
+
+
+def test_library_actions_over_the_lqr_residual_mode_is_refused():
+    env = gym.make("PassiveBoundRescue-v1", action_mode="lqr_residual")
+    with pytest.raises(ValueError, match="action_mode='lqr_residual'") as e:
+        LibraryActions(env)
+    assert "\n" not in str(e.value)

@@ -237,6 +237,10 @@ BAD_ARGUMENTS = [
     ({"gain": "abc"}, "^gain must hold real numbers"),
     ({"gain": [1.0] * 6}, "^gain must have shape"),
     ({"max_torque": -1}, "max_torque"),
+    # issue 40: an error about the linearization, an AttributeError, a start at 1e300 |z*|
+    ({"max_torque": 1e12}, "^max_torque must be in"),
+    ({"controller": "lqr-of"}, "^controller 'lqr-of' is held offset-free"),
+    ({"r_max": 1e300}, "^r_max must be in"),
     # no start out to r_max can pass the safe radius: refused, not an endless redraw
     ({"safe": 13}, "r_max=0.45 gives no start past the safe radius safe=13"),
     ({"r_max": 1e-9}, "r_max=1e-09 gives no start past the safe radius"),
@@ -249,6 +253,7 @@ BAD_V1_ARGUMENTS = [
     ({"r_min": 0.5}, "r_min must be below r_max"),
     ({"r_min": -0.1}, "r_min"),
     ({"shaping": -1}, "shaping"),
+    ({"shaping": 1e308}, "^shaping must be in"),  # issue 40: the first reward was inf
     ({"gamma": 0}, "gamma"),
     ({"gamma": 1.5}, "gamma"),
     ({"action_mode": "residual"}, "action_mode must be one of direct, lqr_residual"),
@@ -284,6 +289,7 @@ def test_bad_reset_options_and_starts_inside_the_safe_radius_are_refused(env_id)
         ({"apex_stat": far}, "unknown reset option 'apex_stat'"),  # a typo: not a random start
         ([1, 2], "options must be a dict"),
         ({"apex_state": z_ref}, "options\\['apex_state'\\] lies inside the safe radius"),
+        ({"apex_state": z_ref + 1e6 * np.eye(6)[0]}, "apex_state'\\]: y_g=1000000.2.* outside"),
     ]:
         with pytest.raises(ValueError, match=message) as e:
             env.reset(options=options)
