@@ -60,6 +60,17 @@ given at step k acts at step k + delay, zero torque before. An action is checked
 given, as the plain env checks it (any type the plain env accepts; NaN, inf or a wrong
 shape: ValueError at once).
 
+Privileged observation
+----------------------
+``privileged_obs=True`` appends the drawn plant's factors (one per parameter the spec varies,
+in the order of `bound_env.mismatch.PLANT_KEYS`; ``env.privileged_names``) to the
+observation, float32, within [1 - delta, 1 + delta]: what an asymmetric critic reads (as
+legged_gym's privileged observations). A robot shows no such thing, so a policy trained on it
+is **privileged**, an upper reference and never a policy to score or deploy: the policy
+loader refuses to evaluate a run whose ``env_wrapper`` has ``privileged_obs: true``
+(`RandomizedPlant.reads_privileged`, which reads the saved ``config.yaml``). The factors are
+never noised; a spec that varies no parameter is refused with it. Off by default.
+
 Compositions
 ------------
 - `RandomizedPlant` over `RandomizedPlant`: refused (one line). The robot would run the inner
@@ -127,10 +138,16 @@ def _inner_randomized(env) -> bool:
 class RandomizedPlant(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """An env on a plant drawn at every reset, with sensor noise and actuation delay (module
     docstring). ``mismatch``: a `bound_env.mismatch.MismatchSpec`, a preset name (``pm10``,
-    ``pm5+noise+delay1``) or a YAML file."""
+    ``pm5+noise+delay1``) or a YAML file. ``privileged_obs``: append the plant's factors to
+    the observation (an asymmetric critic's input; a policy that reads it is privileged and
+    not scored)."""
 
-    def __init__(self, env: gym.Env, mismatch="pm5"):
-        gym.utils.RecordConstructorArgs.__init__(self, mismatch=mismatch)
+    def __init__(self, env: gym.Env, mismatch="pm5", privileged_obs: bool = False):
+        gym.utils.RecordConstructorArgs.__init__(
+            self, mismatch=mismatch, privileged_obs=privileged_obs
+        )
+        if not isinstance(privileged_obs, (bool, np.bool_)):
+            raise ValueError(f"privileged_obs must be true or false, got {privileged_obs!r}")
         if _inner_randomized(env):
             raise ValueError(
                 "RandomizedPlant: env is already a RandomizedPlant (the robot would run the "
@@ -159,6 +176,38 @@ class RandomizedPlant(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._queue: deque = deque()
         self._plant: dict = {}
         self._factors: dict = {}
+        self.privileged_obs = bool(privileged_obs)
+        self.privileged_names: tuple = ()
+        if self.privileged_obs:
+            self._privileged_space()
+
+    @staticmethod
+    def reads_privileged(kwargs) -> bool:
+        """Whether a wrapper made with ``kwargs`` (a saved run's ``env_wrapper`` entry) hands
+        the policy the privileged observation: such a policy is never scored."""
+        return bool((kwargs or {}).get("privileged_obs", False))
+
+    def _privileged_space(self) -> None:
+        space = self.env.observation_space
+        ranges = [(k, d) for k, d in self.spec_error.ranges if d > 0]
+        if not ranges:
+            raise ValueError(
+                f"privileged_obs: mismatch {self.spec_error.name!r} varies no plant parameter, "
+                "so there is no factor to observe"
+            )
+        if not (isinstance(space, gym.spaces.Box) and len(space.shape) == 1):
+            raise ValueError(f"privileged_obs needs a 1-D Box observation, got {space}")
+        self.privileged_names = tuple(k for k, _ in ranges)
+        d = np.array([d for _, d in ranges], dtype=np.float32)
+        low = np.concatenate([space.low, 1.0 - d]).astype(np.float32)
+        high = np.concatenate([space.high, 1.0 + d]).astype(np.float32)
+        self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
+
+    def _with_factors(self, obs):
+        if not self.privileged_obs:
+            return obs
+        f = np.array([self._factors[k] for k in self.privileged_names], dtype=np.float32)
+        return np.concatenate([np.asarray(obs, dtype=np.float32), f])
 
     @property
     def plant(self) -> dict:
@@ -183,7 +232,7 @@ class RandomizedPlant(gym.Wrapper, gym.utils.RecordConstructorArgs):
             sigma = self._sigma_obs
             if np.any(sigma > 0):
                 noisy = obs + (sigma * rng.standard_normal(sigma.shape)).astype(obs.dtype)
-                space = self.observation_space
+                space = self.env.observation_space  # (without privileged factors)
                 obs = np.clip(noisy, space.low, space.high).astype(obs.dtype)
             if np.any(self._sigma_z > 0):  # the apex: another instant, a draw of its own
                 for k, z in true.items():
@@ -221,7 +270,7 @@ class RandomizedPlant(gym.Wrapper, gym.utils.RecordConstructorArgs):
         obs, info = self.env.reset(seed=None, options=options)
         self._queue = deque([None] * self.spec_error.delay)
         obs = self._observe(obs, info)
-        return obs, self._info(info)
+        return self._with_factors(obs), self._info(info)
 
     def step(self, action):
         if self.spec_error.delay:
@@ -232,4 +281,4 @@ class RandomizedPlant(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 action = np.zeros(self.action_space.shape, dtype=self.action_space.dtype)
         obs, reward, terminated, truncated, info = self.env.step(action)
         obs = self._observe(obs, info)
-        return obs, reward, terminated, truncated, self._info(info)
+        return self._with_factors(obs), reward, terminated, truncated, self._info(info)

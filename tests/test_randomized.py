@@ -254,3 +254,53 @@ def test_library_actions_over_the_lqr_residual_mode_is_refused():
     with pytest.raises(ValueError, match="action_mode='lqr_residual'") as e:
         LibraryActions(env)
     assert "\n" not in str(e.value)
+
+
+# -- the privileged observation -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "env_id", ["PassiveBound-v1", "PassiveBoundStride-v1", "PassiveBoundRescue-v1"]
+)
+def test_the_privileged_observation_is_the_plants_factors(env_id):
+    env = RandomizedPlant(gym.make(env_id), "pm10+noise", privileged_obs=True)
+    n = gym.make(env_id).observation_space.shape[0]
+    assert env.observation_space.shape == (n + 8,) and len(env.privileged_names) == 8
+    for seed in (1, 2):
+        obs, info = env.reset(seed=seed)
+        want = np.array([info["plant_factors"][k] for k in env.privileged_names], np.float32)
+        assert np.array_equal(obs[n:], want) and env.observation_space.contains(obs)
+        obs, *_ = env.step(env.action_space.sample() * 0)
+        assert np.array_equal(obs[n:], want)  # the same plant all episode, never noised
+    plain = RandomizedPlant(gym.make(env_id), "pm10")
+    assert plain.observation_space == gym.make(env_id).observation_space  # opt-in only
+    for bad, words in (("noise", "varies no plant parameter"), ("pm10", "true or false")):
+        with pytest.raises(ValueError, match=words) as e:
+            RandomizedPlant(gym.make(env_id), bad, privileged_obs=1 if bad == "pm10" else True)
+        assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("policy", ["ppo-v1-final/s0", "archive/stride-residual/s0"])
+def test_the_loader_refuses_a_policy_trained_on_the_privileged_observation(policy, tmp_path):
+    import shutil
+
+    import yaml
+
+    from agents.runtime.policy import load_controller
+
+    folder = tmp_path / "privileged"
+    shutil.copytree(bound_env_root() / "agents" / "policies" / policy, folder)
+    data = yaml.safe_load((folder / "config.yaml").read_text())
+    section = data[data["run"]["env_id"]]
+    entry = {"bound_env.randomized.RandomizedPlant": {"mismatch": "pm10", "privileged_obs": True}}
+    section["env_wrapper"] = [entry, *section["env_wrapper"]]
+    (folder / "config.yaml").write_text(yaml.safe_dump(data))
+    with pytest.raises(ValueError, match="trained with a privileged observation") as e:
+        load_controller(str(folder))
+    assert "\n" not in str(e.value)
+
+
+def bound_env_root():
+    from pathlib import Path
+
+    return Path(__file__).resolve().parent.parent
