@@ -163,14 +163,17 @@ def read_policy_section(files: PolicyFiles) -> tuple[dict, str, int | None]:
 
 def refuse_privileged(section: dict, where) -> None:
     """ValueError (one line) when the run's ``env_wrapper`` handed the policy a privileged
-    observation (a wrapper whose ``reads_privileged(kwargs)`` is true:
-    `bound_env.randomized.RandomizedPlant` with ``privileged_obs: true``, the true plant's
-    factors): such a policy reads what no robot shows, so it is never scored or deployed."""
-    from .config import class_entries, get_class_by_name
+    observation (`bound_env.randomized.RandomizedPlant` with ``privileged_obs: true``, the true
+    plant's factors; `RandomizedPlant.reads_privileged`): such a policy reads what no robot
+    shows, so it is never scored or deployed."""
+    from bound_env.randomized import RandomizedPlant
+
+    from .config import class_entries
 
     for name, kwargs in class_entries(section.get("env_wrapper")):
-        reads = getattr(get_class_by_name(name), "reads_privileged", None)
-        if callable(reads) and reads(kwargs):
+        if name.rsplit(".", 1)[-1] == "RandomizedPlant" and RandomizedPlant.reads_privileged(
+            kwargs
+        ):
             raise ValueError(
                 f"{where}: trained with a privileged observation ({name.rsplit('.', 1)[-1]} "
                 "privileged_obs: true, the true plant's factors), which no robot shows: it is "
