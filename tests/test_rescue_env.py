@@ -1,4 +1,4 @@
-"""Tests of the rescue task PassiveBoundRescue-v0/-v1 (bound_env/rescue_env.py) and its discrete
+"""Tests of the rescue task PassiveBoundRescue-v0/-v1 (bound_env/rescue_*.py) and its discrete
 wrapper (bound_env.wrappers.LibraryActions): the env checkers, the task's rules, the same
 strides as the stride env, bad input, and plain SB3 PPO learning on it."""
 
@@ -160,12 +160,26 @@ def test_gymnasium_and_sb3_env_checkers_pass_without_warnings(discrete):
     if discrete:
         env = LibraryActions(env)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
+        warnings.simplefilter("error")  # but v0's own deprecation (the checkers remake it)
+        warnings.filterwarnings("ignore", "PassiveBoundRescue-v0 is deprecated", DeprecationWarning)
         if not discrete:
             check_env(env.unwrapped)
             sb3_check_env(env.unwrapped)
         sb3_check_env(env)
     env.close()
+
+
+def test_v0_is_deprecated_on_make_and_points_to_v1():
+    with pytest.warns(DeprecationWarning, match="PassiveBoundRescue-v0 is deprecated.*use Pas"):
+        gym.make(RESCUE_ENV_ID)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gym.make(RESCUE_ENV_ID_V1)  # v1: no warning
+    from bound_env.rescue_env import PassiveBoundRescueEnv, PassiveBoundRescueV1Env, sample_starts
+    from bound_env.rescue_v0 import PassiveBoundRescueEnv as V0
+    from bound_env.rescue_v1 import PassiveBoundRescueV1Env as V1
+
+    assert (PassiveBoundRescueEnv, PassiveBoundRescueV1Env) == (V0, V1) and callable(sample_starts)
 
 
 def test_defaults_are_the_shipped_mpc_spec_and_the_students_library(student):
