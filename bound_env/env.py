@@ -295,6 +295,12 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
 
     # -- the simulator's state, for analysis --------------------------------------------------
     @property
+    def plant_task(self) -> PassiveBoundTask:
+        """The one holder of the robot's plant (`PassiveBoundTask.set_params` changes the
+        robot of the next reset: model error, `bound_env.randomized.RandomizedPlant`)."""
+        return self.task
+
+    @property
     def params(self) -> Params:
         """Physical parameters in use (the gait's, with ``gait_overrides``)."""
         return self.task.params

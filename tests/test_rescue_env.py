@@ -1,4 +1,4 @@
-"""Tests of the rescue task PassiveBoundRescue-v0/-v1 (bound_env/rescue_env.py) and its discrete
+"""Tests of the rescue task PassiveBoundRescue-v0/-v1 (bound_env/rescue_*.py) and its discrete
 wrapper (bound_env.wrappers.LibraryActions): the env checkers, the task's rules, the same
 strides as the stride env, bad input, and plain SB3 PPO learning on it."""
 
@@ -160,12 +160,26 @@ def test_gymnasium_and_sb3_env_checkers_pass_without_warnings(discrete):
     if discrete:
         env = LibraryActions(env)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
+        warnings.simplefilter("error")  # but v0's own deprecation (the checkers remake it)
+        warnings.filterwarnings("ignore", "PassiveBoundRescue-v0 is deprecated", DeprecationWarning)
         if not discrete:
             check_env(env.unwrapped)
             sb3_check_env(env.unwrapped)
         sb3_check_env(env)
     env.close()
+
+
+def test_v0_is_deprecated_on_make_and_points_to_v1():
+    with pytest.warns(DeprecationWarning, match="PassiveBoundRescue-v0 is deprecated.*use Pas"):
+        gym.make(RESCUE_ENV_ID)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gym.make(RESCUE_ENV_ID_V1)  # v1: no warning
+    from bound_env.rescue_env import PassiveBoundRescueEnv, PassiveBoundRescueV1Env, sample_starts
+    from bound_env.rescue_v0 import PassiveBoundRescueEnv as V0
+    from bound_env.rescue_v1 import PassiveBoundRescueV1Env as V1
+
+    assert (PassiveBoundRescueEnv, PassiveBoundRescueV1Env) == (V0, V1) and callable(sample_starts)
 
 
 def test_defaults_are_the_shipped_mpc_spec_and_the_students_library(student):
@@ -237,6 +251,10 @@ BAD_ARGUMENTS = [
     ({"gain": "abc"}, "^gain must hold real numbers"),
     ({"gain": [1.0] * 6}, "^gain must have shape"),
     ({"max_torque": -1}, "max_torque"),
+    # issue 40: an error about the linearization, an AttributeError, a start at 1e300 |z*|
+    ({"max_torque": 1e12}, "^max_torque must be in"),
+    ({"controller": "lqr-of"}, "^controller 'lqr-of' is held offset-free"),
+    ({"r_max": 1e300}, "^r_max must be in"),
     # no start out to r_max can pass the safe radius: refused, not an endless redraw
     ({"safe": 13}, "r_max=0.45 gives no start past the safe radius safe=13"),
     ({"r_max": 1e-9}, "r_max=1e-09 gives no start past the safe radius"),
@@ -249,6 +267,7 @@ BAD_V1_ARGUMENTS = [
     ({"r_min": 0.5}, "r_min must be below r_max"),
     ({"r_min": -0.1}, "r_min"),
     ({"shaping": -1}, "shaping"),
+    ({"shaping": 1e308}, "^shaping must be in"),  # issue 40: the first reward was inf
     ({"gamma": 0}, "gamma"),
     ({"gamma": 1.5}, "gamma"),
     ({"action_mode": "residual"}, "action_mode must be one of direct, lqr_residual"),
@@ -284,6 +303,7 @@ def test_bad_reset_options_and_starts_inside_the_safe_radius_are_refused(env_id)
         ({"apex_stat": far}, "unknown reset option 'apex_stat'"),  # a typo: not a random start
         ([1, 2], "options must be a dict"),
         ({"apex_state": z_ref}, "options\\['apex_state'\\] lies inside the safe radius"),
+        ({"apex_state": z_ref + 1e6 * np.eye(6)[0]}, "apex_state'\\]: y_g=1000000.2.* outside"),
     ]:
         with pytest.raises(ValueError, match=message) as e:
             env.reset(options=options)

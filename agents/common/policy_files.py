@@ -161,6 +161,26 @@ def read_policy_section(files: PolicyFiles) -> tuple[dict, str, int | None]:
     return section, env_id or "PassiveBound-v0", run.get("seed")
 
 
+def refuse_privileged(section: dict, where) -> None:
+    """ValueError (one line) when the run's ``env_wrapper`` handed the policy a privileged
+    observation (`bound_env.randomized.RandomizedPlant` with ``privileged_obs: true``, the true
+    plant's factors; `RandomizedPlant.reads_privileged`): such a policy reads what no robot
+    shows, so it is never scored or deployed."""
+    from bound_env.randomized import RandomizedPlant
+
+    from .config import class_entries
+
+    for name, kwargs in class_entries(section.get("env_wrapper")):
+        if name.rsplit(".", 1)[-1] == "RandomizedPlant" and RandomizedPlant.reads_privileged(
+            kwargs
+        ):
+            raise ValueError(
+                f"{where}: trained with a privileged observation ({name.rsplit('.', 1)[-1]} "
+                "privileged_obs: true, the true plant's factors), which no robot shows: it is "
+                "not scored or deployed"
+            )
+
+
 def section_env_kwargs(section: dict, env_id: str) -> dict:
     """The environment kwargs that matter for evaluation (`DYNAMICS_KWARGS`): those of the
     registered env id, then the section's ``env_kwargs``."""

@@ -63,8 +63,12 @@ def rescue_env(policy: ChoicePolicyController, r_max=0.45, horizon=30, axis_prob
     """The env fine-tuning trains on: PassiveBoundRescue-v0 (`gymnasium.make`) on the
     student's LQR and safe radius, with the student's library as its discrete actions
     (`bound_env.wrappers.LibraryActions`, row 0 the LQR's plan)."""
+    import warnings
+
     kwargs = rescue_env_kwargs(policy, r_max, horizon)
-    env = gym.make(RESCUE_ENV_ID, **kwargs, axis_prob=axis_prob)
+    with warnings.catch_warnings():  # v0, deprecated, stays fine-tuning's task for a release
+        warnings.filterwarnings("ignore", "PassiveBoundRescue-v0 is deprecated", DeprecationWarning)
+        env = gym.make(RESCUE_ENV_ID, **kwargs, axis_prob=axis_prob)
     return LibraryActions(env, policy.rows)
 
 

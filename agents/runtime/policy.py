@@ -37,6 +37,7 @@ from ..common.policy_files import (  # noqa: F401 - the policy-file API, importa
     policy_content_sha256,
     read_policy_section,
     read_run_config,
+    refuse_privileged,
     resolve_policy_files,
     section_env_kwargs,
     source_name,
@@ -112,6 +113,8 @@ def load_controller(
         return ctrl
     path = resolve_policy(path)  # a step-level PPO policy's folder or zip
     files = find_policy_files(path)
+    if files.config is not None:
+        refuse_privileged(read_policy_section(files)[0], files.config)
     trained_on = read_policy_section(files)[1] if files.config is not None else None
     if trained_on is not None and trained_on.startswith("PassiveBoundRescue"):
         raise ValueError(

@@ -29,6 +29,7 @@ from ..common.policy_files import (
     find_policy_files,
     load_vecnormalize,
     read_policy_section,
+    refuse_privileged,
 )
 from ..common.schema import (
     check_base,
@@ -190,6 +191,7 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
     files = find_policy_files(path)
     model_path, vecnorm_path = files.model, files.vecnormalize
     section, env_id, seed = read_policy_section(files)
+    refuse_privileged(section, files.config)
     if env_id not in STRIDE_ENV_IDS:
         raise ValueError(f"policy {path} was trained on {env_id}, not {STRIDE_ENV_ID}")
     for w in check_policy_files(files, section, force):
