@@ -4,13 +4,13 @@
     python benchmarks/mpc_decisions.py --base ../wt-base   # against a checkout
     python benchmarks/mpc_decisions.py --spec my-mpc.yaml --rounds 5
 
-The states are the results page's (`agents.decisions.timing_states`: the test directions'
+The states are the results page's (`agents.results.decisions.timing_states`: the test directions'
 starts z* + r |z*| d past the safe radius, the states every planner of the page is timed on).
 Each version runs in its own worker process (its own checkout on ``PYTHONPATH``, its own
 ``mpc`` spec, warmed up on one decision), and the two decide the same state one after the
 other, state by state, so that a change of the machine's load hits both alike; the order of
 the two alternates from round to round. Each decision is timed around ``coefficients(z)``
-as the page times it (`agents.decisions.time_decisions`).
+as the page times it (`agents.results.decisions.time_decisions`).
 
 Printed: per round, each version's p50 and p99 over the states and the ratios base / this
 (larger: this code is faster), and the same over each state's fastest of the rounds (the
@@ -117,7 +117,7 @@ def main(argv=None) -> None:
     if args.rounds < 1:
         raise SystemExit("--rounds must be at least 1")
 
-    from agents.decisions import timing_states
+    from agents.results.decisions import timing_states
     from bound_env.params import load_gait
 
     Z = timing_states(load_gait("default").z0, args.seed)

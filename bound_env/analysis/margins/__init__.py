@@ -156,6 +156,7 @@ from .basin import (
     physical_cap,
     start_geometry,
     task_basin,
+    task_basins,
 )
 from .budget import (
     BUDGETS,
@@ -268,6 +269,7 @@ __all__ = [
     "start_geometry",
     "summary_text",
     "task_basin",
+    "task_basins",
     "task_ceiling",
     "task_curve",
     "task_cycle",
