@@ -43,8 +43,12 @@ MPC_DEFAULTS = {
     "plan_rtol": 1e-8,
     "seed": 0,
     "library_seed": -1,
+    "early_exit": False,  # the search's shortcuts (bound_env.control.mpc): off, the full search
+    "screen": 0,
 }
+MPC_BOOLS = ("early_exit",)
 MPC_INTS = ("horizon", "n_random", "n_noise", "cem_iters", "cem_samples", "cem_elites", "seed")
+MPC_INTS += ("library_seed", "screen")
 # the range of each search setting (bounded work per decision): (lo, hi), reals in (lo, hi]
 MPC_LIMITS = {
     "safe": (0.0, 100.0),  # normalized apex error
@@ -58,6 +62,7 @@ MPC_LIMITS = {
     "plan_rtol": (0.0, 1e-2),
     "seed": (0, 2**32 - 1),
     "library_seed": (-1, 2**32 - 1),
+    "screen": (0, 10_000),
 }
 MAX_TORQUE_LIMIT = 1e4  # [N m]: a saturation above this is certainly a mistake
 SPEC_KEYS = {
@@ -136,6 +141,9 @@ def check_mpc_settings(values: dict, where, yaml_numbers: bool = True) -> dict:
     checked: integers are integers, reals finite, each in its range. ``yaml_numbers``: a
     string that spells a real is read as it (see `_positive`)."""
     out = dict(values)
+    for key in MPC_BOOLS:
+        if key in values and not isinstance(values[key], (bool, np.bool_)):
+            raise ValueError(f"{where}: {key} must be true or false, got {values[key]!r}")
     for key, (lo, hi) in MPC_LIMITS.items():
         name = "rtol" if key == "plan_rtol" and "rtol" in values else key
         if name not in values:

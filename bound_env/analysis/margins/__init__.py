@@ -159,6 +159,7 @@ from .basin import (
     physical_cap,
     start_geometry,
     task_basin,
+    task_basins,
 )
 from .budget import (
     BUDGETS,
@@ -271,6 +272,7 @@ __all__ = [
     "start_geometry",
     "summary_text",
     "task_basin",
+    "task_basins",
     "task_ceiling",
     "task_curve",
     "task_cycle",

@@ -18,7 +18,7 @@ from bound_env.parallel import TasksFailed, open_pool, run_tasks
 
 from ..apex_loop import CLOCK
 from .assemble import assemble, controller_name
-from .basin import BASIN_CAP, BASIN_HI, BASIN_LO, task_basin
+from .basin import BASIN_CAP, BASIN_GROUPS, BASIN_HI, BASIN_LO, task_basin, task_basins
 from .budget import (
     CURVE_SEED,
     DEFAULT_SEED,
@@ -58,6 +58,7 @@ CYCLE_RECORD_DT = 1e-3  # sampling of the passive stride for the cycle scale [s]
 TASKS = {
     "cycle": task_cycle,
     "basin": task_basin,
+    "basins": task_basins,
     "curve": task_curve,
     "window": task_window,
     "push": task_push,
@@ -86,6 +87,18 @@ def run_task(setup: Setup, name: str, args: tuple) -> dict:
         CLOCK.seconds.clear()
     result["seconds"] = time.perf_counter() - t0
     return result
+
+
+def basin_results(res: dict) -> dict:
+    """{("basin", (i, sign)): result} of every direction of the ``basins`` tasks in ``res``
+    (a task's error for each of its directions)."""
+    out = {}
+    for (name, args), r in res.items():
+        if name == "basins":
+            each = r["basins"] if "basins" in r else [r] * len(args)
+            for (i, sign), b in zip(args, each, strict=True):
+                out[("basin", (int(i), int(sign)))] = b
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -329,7 +342,7 @@ def compute_margins(
             cycle_steps=int(cyc["cycle_steps"]),
             period=float(cyc["period"]),
         )
-        jobs = [("basin", (i, s)) for i in range(6) for s in (1, -1)]
+        jobs = [("basins", group) for group in BASIN_GROUPS]  # bisections in lockstep
         jobs += [("ceiling", (i, s)) for i in range(6) for s in (1, -1)]
         jobs += [("curve", (r,)) for r in budget.curve_sizes]
         jobs += [("terrain", (v,)) for v in budget.terrain_sigmas]
@@ -341,6 +354,7 @@ def compute_margins(
         res = _run_all(
             executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}"
         )
+        res.update(basin_results(res))
         mm = {}
         for spec in specs:
             mb = MISMATCH_BUDGETS[budget.name]
