@@ -17,7 +17,7 @@ Presets (`PRESETS`; join several with ``+``, e.g. ``pm5+noise+delay1``):
 
 | name | what |
 | --- | --- |
-| ``pm5``, ``pm10``, ``pm20`` | m1, m2, I1, I2, kb, kf, kc, zeta (issue 31), +-5/10/20 % |
+| ``pm5``, ``pm10``, ``pm20`` | m1, m2, I1, I2, kb, kf, kc, zeta, +-5/10/20 % |
 | ``all5``, ``all10``, ``all20`` | every key of `PLANT_KEYS` (legs' rest lengths, slope too) |
 | ``noise`` | sensor noise of 1 % of the scale on every noised component |
 | ``noise5`` | the same at 5 % |

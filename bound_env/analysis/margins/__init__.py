@@ -101,6 +101,9 @@ Measures (JSON keys)
   delay (`bound_env.mismatch`): ``hold``, ``curve`` and ``r50`` (settled, not returned),
   ``mfpt``; the reference is `mismatch_tasks`' docstring, the text and the results page's
   section `mismatch_report`.
+- ``fingerprint``: what decided these numbers (`fingerprint.column_fingerprint`): the
+  controller's ``fingerprint()`` and ``config``, hashes of its planning constants and of its
+  code, and the git ``commit`` (``dirty`` if a tracked .py file differed from it).
 
 Controllers
 -----------
@@ -142,6 +145,7 @@ Modules
 - `assemble`: the JSON result from the tasks' results;
 - `report`: margins.json, the CSV tables, the plots and `summary_text`;
 - `stats`: Wilson and Student-t intervals, crossings on a grid, the MFPT estimate.
+- `fingerprint`: what decided a column's numbers (`column_fingerprint`, `stale_parts`).
 - `mismatch_tasks`: the model-error measures (``mm_hold``, ``mm_curve``, ``mm_mfpt``) and
   `mismatch_tasks.plant_runs`; `mismatch_report`: `mismatch_text`, `mismatch_markdown`.
 """

@@ -37,6 +37,7 @@ from .closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TO
 from .curve import task_curve
 from .cycle import FD_FLOOR, FD_REL, task_cycle
 from .decision_times import histogram
+from .fingerprint import column_fingerprint
 from .mismatch_tasks import (
     MISMATCH_BUDGETS,
     MISMATCH_SEED,
@@ -313,6 +314,7 @@ def compute_margins(
         key=setup_key(controller, gait, budget, seed, extra_sources),
         seed=seed,
     )
+    fingerprint = column_fingerprint(controller)
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
         if executor is None:
@@ -357,6 +359,7 @@ def compute_margins(
             )
             mm[spec.name] = assemble_mismatch(mm_setup, mm_res)
     result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
+    result["fingerprint"] = fingerprint  # what decided these numbers, before they were made
     if mm:
         result["mismatch"] = mm
     result["seconds"] = time.perf_counter() - t0
