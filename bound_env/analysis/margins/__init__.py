@@ -101,6 +101,8 @@ Measures (JSON keys)
   delay (`bound_env.mismatch`): ``hold``, ``curve`` and ``r50`` (settled, not returned),
   ``mfpt``; the reference is `mismatch_tasks`' docstring, the text and the results page's
   section `mismatch_report`.
+- ``seconds``, ``tasks``: the run's wall time and how many of its tasks it took from the cache
+  (``cached``) and ``computed`` (a run that computed nothing timed only the assembly).
 - ``fingerprint``: what decided these numbers (`fingerprint.column_fingerprint`): the
   controller's ``fingerprint()`` and ``config``, hashes of its planning constants and of its
   code, and the git ``commit`` (``dirty`` if a tracked .py file differed from it).
