@@ -115,7 +115,7 @@ def main() -> None:
         row(f"passive {g}, 1 process", spec.n_starts, su, serial, None)
         su, pool = timed(spec, None, 2)
         row(f"passive {g}, process pool 2", spec.n_starts, su, pool, serial)
-        times["passive, 1 process"] = min(serial, times.get("passive, 1 process", serial))
+        times["passive-serial"] = min(serial, times.get("passive-serial", serial))
         times["passive"] = min(pool, times.get("passive", pool))
         if not args.no_dask:
             su, dask = timed(spec, "local:2", 2)

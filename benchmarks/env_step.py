@@ -91,19 +91,19 @@ def main():
 
     vec = {}
     print(f"vector environments, {args.vector_steps} calls each (env-steps/s):")
-    cases = [
-        ("sync, N=8", dict(num_envs=8, vectorization_mode="sync")),
-        ("async, N=8", dict(num_envs=8, vectorization_mode="async")),
-        ("native (vector_entry_point), N=8", dict(num_envs=8)),
-        ("native, N=64, serial", dict(num_envs=64, parallel=False)),
-        ("native, N=64, threads", dict(num_envs=64, parallel=True)),
+    cases = [  # (label, key in --json, make_vec arguments)
+        ("sync, N=8", "sync_8", dict(num_envs=8, vectorization_mode="sync")),
+        ("async, N=8", "async_8", dict(num_envs=8, vectorization_mode="async")),
+        ("native (vector_entry_point), N=8", "native_8", dict(num_envs=8)),
+        ("native, N=64, serial", "native_64", dict(num_envs=64, parallel=False)),
+        ("native, N=64, threads", "native_64_threads", dict(num_envs=64, parallel=True)),
     ]
-    for label, kw in cases:
+    for label, key, kw in cases:
         envs = gym.make_vec("PassiveBound-v0", **kw)
         n = envs.num_envs
         acts = rng.uniform(-1, 1, (args.vector_steps, n, 1)).astype(np.float32)
         r = vector_rate(envs, acts)
-        vec[label] = r
+        vec[key] = r
         envs.close()
         print(
             f"  PassiveBound-v0 {label:<26s} {r:>11,.0f} env-steps/s   x{r / ref:6.2f} Pendulum-v1"
@@ -117,14 +117,12 @@ def main():
             args.json,
             "env_step",
             {
-                "single_steps_per_s": med["PassiveBound-v0"],
-                "pendulum_steps_per_s": ref,
-                "vector_env_steps_per_s": vec,
+                "steps_per_s": {**med, **vec},
                 "rounds": args.rounds,
                 "steps": args.steps,
                 "load_average_before": load0,
-                "what": "gym.make('PassiveBound-v0'), random actions, resets included; the "
-                "median of the rounds",
+                "what": "steps per second: gym.make(id), random actions, resets included, the "
+                "median of the rounds; vector envs of PassiveBound-v0 in env-steps per second",
             },
             "python benchmarks/env_step.py " + " ".join(sys.argv[1:]),
         )
