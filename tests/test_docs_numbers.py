@@ -3,7 +3,7 @@
 A number in docs/*.md or README.md that quotes the results page (r50, Δr50, an interval, a
 decision time, a speed ratio, a hold count, a torque) or another committed measurement (the
 page's run time, a basin map's time, an env step's time) sits in a generated block: an inline
-``<!-- n:KEY -->TEXT<!-- /n -->`` (`agents.numbers`), a ``<!-- numbers:NAME -->`` sentence
+``<!-- n:KEY -->TEXT<!-- /n -->`` (`agents.results.numbers`), a ``<!-- numbers:NAME -->`` sentence
 (`agents.prose`) or the README's headline table (`agents.headline`). The blocks must be up to
 date, and a mutation of any of them (a number changed by one in its last digit, or the block
 attributed to another controller) must make the check fail. Outside the blocks, a sentence
@@ -19,9 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from agents.numbers import INLINE, QUANTITIES, Sources, parse_key, stale_blocks, value
-from agents.prose import BLOCK, doc_files, load_numbers
-from agents.prose import update_text as update_sentences
+from agents.results.numbers import INLINE, QUANTITIES, Sources, parse_key, stale_blocks, value
+from agents.results.prose import BLOCK, doc_files, load_numbers
+from agents.results.prose import update_text as update_sentences
 
 ROOT = Path(__file__).resolve().parent.parent
 HEADLINE_BLOCK = re.compile(r"<!-- headline:start -->.*?<!-- headline:end -->", re.S)
