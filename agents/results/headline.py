@@ -82,14 +82,28 @@ def _headline_measure(runs, fn, single_interval, single_method) -> dict:
     return {"value": vals[0], "low": lo, "high": hi, "interval": single_method}
 
 
-def headline_numbers(groups, budget: str, seed: int) -> dict:
+def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
     """The headline (`HEADLINE`): per row present among the default-gait columns, r50 and the
     sigma at which the MFPT falls to 100 strides, each with its 95 % interval (Student-t over
-    seeds; one run: Wilson-based for r50, Poisson-based for the sigma). What docs/headline.json
-    holds and `headline_table` renders."""
+    seeds; one run: Wilson-based for r50, Poisson-based for the sigma). ``yours``: the labels
+    of a user's own columns (``compare --entry``), each a row after them. What
+    docs/headline.json holds and `headline_table` renders."""
     rows = []
-    for role, label, what in HEADLINE:
-        g = next((g for g in groups if g["label"] == label and g["gait"] == "default"), None)
+    known = {label for _, label, _ in HEADLINE}
+    mine = []
+    for label in yours:
+        g = next((g for g in groups if g["label"] == label), None)
+        if label not in known and g is not None:
+            what = "your column: " + ", ".join(f"`{rel(p)}`" for p in g["policies"])
+            if g["gait"] != "default":
+                what += f" (gait `{g['gait']}`)"
+            mine.append((label, label, what))
+    for role, label, what in (*HEADLINE, *mine):
+        gaits = ("default",) if label in known else (None,)  # a user's column: any gait
+        g = next(
+            (g for g in groups if g["label"] == label and (g["gait"] in gaits or not gaits[0])),
+            None,
+        )
         if g is None:
             continue
         runs = g["runs"]

@@ -10,7 +10,7 @@ an HTML comment naming it and its end::
 The key is a quantity and its arguments, a column label first (`QUANTITIES`: e.g.
 ``r50(mpc)``, ``dr50ci(fine-tuned,lqr)``, ``p50ms(mpc)``, ``hold(lqr,pm5)``,
 ``basinmap(mpc)``). The text between the comments is what `value` makes of the JSON (the
-comments do not render), so it is regenerated, never edited: ``python -m agents.prose``
+comments do not render), so it is regenerated, never edited: ``python -m agents.results.prose``
 rewrites every such block with the generated sentences, ``--check`` says whether they are up
 to date. A number quoted for the wrong controller, or changed in its last digit, is a stale
 block; tests/test_docs_numbers.py checks every block and finds page-like numbers outside them.
