@@ -16,7 +16,7 @@ Cluster start-up is timed separately. The machine's load average is printed besi
 jobs on the machine slow every row, and the ratios between rows are what to compare.
 ``--json PATH`` records each case's grid time in the ``basin_map`` section of PATH
 (`bound_env.cache.record_section`: with the load, the commit and the command); the docs quote
-``docs/timings.json``'s (`agents.numbers`, ``basinmap(NAME)``).
+``docs/timings.json``'s (`agents.results.numbers`, ``basinmap(NAME)``).
 """
 
 from __future__ import annotations

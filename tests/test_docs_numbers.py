@@ -4,7 +4,7 @@ A number in docs/*.md or README.md that quotes the results page (r50, Δr50, an 
 decision time, a speed ratio, a hold count, a torque) or another committed measurement (the
 page's run time, a basin map's time, an env step's time) sits in a generated block: an inline
 ``<!-- n:KEY -->TEXT<!-- /n -->`` (`agents.results.numbers`), a ``<!-- numbers:NAME -->`` sentence
-(`agents.prose`) or the README's headline table (`agents.headline`). The blocks must be up to
+(`agents.results.prose`) or the README's headline table (`agents.results.headline`). The blocks must be up to
 date, and a mutation of any of them (a number changed by one in its last digit, or the block
 attributed to another controller) must make the check fail. Outside the blocks, a sentence
 (or a clause between semicolons, or a table under its caption) that quotes such a number must
@@ -143,9 +143,9 @@ def test_the_blocks_are_up_to_date(path):
     """Every inline block is its JSON value (the command that rewrites them is named)."""
     text = path.read_text()
     stale = stale_blocks(text, Sources())
-    assert stale == [], f"{path.name}: run `python -m agents.prose`: {stale}"
+    assert stale == [], f"{path.name}: run `python -m agents.results.prose`: {stale}"
     assert update_sentences(text, load_numbers(), str(path)) == text, (
-        f"{path.name}: run `python -m agents.prose`"
+        f"{path.name}: run `python -m agents.results.prose`"
     )
 
 

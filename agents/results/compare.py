@@ -290,11 +290,12 @@ def compare(
     else:
         times = fair_decision_times(groups, load_controller, seed)  # the workers are done
     cols_path = path.with_name(COLUMNS_FILE)
-    run = None
-    if render_only and cols_path.is_file():  # the run that computed the columns, not this one
-        run = load_json_strict(cols_path, {"run": dict})["run"]
-    if run is None:
+    if not render_only:
         run = run_record(t0, workers, scheduler, load0, groups, command)
+    elif cols_path.is_file():  # the run that computed the columns, not this rewrite
+        run = load_json_strict(cols_path, {"run": (dict, None)})["run"]
+    else:
+        run = None  # not known: the columns were computed by a run that left no record
     page = render_markdown(
         groups, plots, curves, budget, note, pairs, basin_maps(docs), head, run, not yours
     )

@@ -25,7 +25,6 @@ measured speed of the env's step and of the basin maps, `benchmarks/`).
 from __future__ import annotations
 
 import json
-import math
 import re
 from pathlib import Path
 
@@ -113,20 +112,20 @@ class Sources:
         return r
 
     def model_error(self, label: str, spec: str) -> dict:
-        me = self._load("model_error")
-        for col in me.get("columns") or []:
-            if col.get("label") == label:
-                block = (col.get("specs") or {}).get(spec)
-                if isinstance(block, dict):
-                    return block
-        self._fail("model_error", f"columns[label={label!r}].specs.{spec}")
+        """A column's row of the model-error section under ``spec`` (``model_error.json``:
+        hold, torque, r50 and, paired with the reference, delta_r50)."""
+        for e in self._load("model_error").get("specs") or []:
+            if e.get("name") == spec:
+                for row in e.get("rows") or []:
+                    if row.get("column") == label:
+                        return row
+        self._fail("model_error", f"specs[name={spec!r}].rows[column={label!r}]")
 
     def model_error_pair(self, label: str, spec: str) -> dict:
-        me = self._load("model_error")
-        for e in me.get("pairs") or []:
-            if e.get("column") == label and e.get("spec") == spec:
-                return e
-        self._fail("model_error", f"pairs[{label} vs {me.get('reference')}, {spec}]")
+        d = self.model_error(label, spec).get("delta_r50")
+        if not isinstance(d, dict):
+            self._fail("model_error", f"specs[name={spec!r}].rows[column={label!r}].delta_r50")
+        return d
 
     def timing(self, section: str, *keys: str) -> float:
         t = self._load("timings").get(section)
@@ -178,7 +177,7 @@ def _hold_ci(b: dict) -> str:
 def _torque(b: dict) -> str:
     t = b.get("torque") or {}
     if t.get("median") is None:
-        raise ValueError("no held plant: no torque")
+        raise KeyError("torque.median (no held plant)")
     return f"{t['median']:.3g}"
 
 
@@ -255,15 +254,15 @@ QUANTITIES = {
     "r50mm": (
         2,
         "r50 under model error",
-        lambda s, c, m: num3(s.model_error(c, m)["r50"]["value"]),
+        lambda s, c, m: num3(s.model_error(c, m)["r50"]["value"] or 0.0),
     ),
     "dr50mm": (
         2,
         "Δr50 under model error against the section's reference [95 % interval]",
         lambda s, c, m: (
-            f"{_signed(s.model_error_pair(c, m)['delta_r50']['delta'])} "
-            f"[{_signed(s.model_error_pair(c, m)['delta_r50']['low'])}, "
-            f"{_signed(s.model_error_pair(c, m)['delta_r50']['high'])}]"
+            f"{_signed(s.model_error_pair(c, m)['delta'])} "
+            f"[{_signed(s.model_error_pair(c, m)['low'])}, "
+            f"{_signed(s.model_error_pair(c, m)['high'])}]"
         ),
     ),
     "pagemin": (0, "the page's wall time [min]", lambda s: f"{s.run()['wall_seconds'] / 60:.1f}"),
@@ -294,6 +293,68 @@ QUANTITIES = {
 }
 
 
+TABLE = re.compile(
+    r"<!-- table:(?P<name>[a-z0-9-]+) -->(?P<text>.*?)<!-- /table:(?P=name) -->", re.S
+)
+
+
+def _model_error_run(s: Sources) -> str:
+    me = s._load("model_error")
+    run = me.get("run") or {}
+    cols = ", ".join(f"`{c['label']}`" for c in me.get("columns") or [])
+    specs = ",".join(e["name"] for e in me.get("specs") or [])
+    wall = run.get("wall_seconds")
+    load = (run.get("load_average_before") or ["?"])[0]
+    seed = me.get("seed")
+    role = "the test set: nothing was chosen on it" if seed == 12345 else "a held-out seed"
+    return (
+        f"\n\n**How these numbers were made.** One run of `compare --mismatch {specs}` on the "
+        f"**{me.get('budget')}** budget with the seed {seed} ({role}), columns {cols}, "
+        f"paired against `{me.get('reference')}`"
+        + (
+            f"; {wall / 60:.1f} min of wall time with {run.get('workers')} worker(s), load "
+            f"average {load} before, at commit {(run.get('commit') or '?')[:12]}"
+            if isinstance(wall, (int, float))
+            else ""
+        )
+        + f" (`docs/{FILES['model_error']}`; the command: `{run.get('command') or '?'}`).\n\n"
+    )
+
+
+def _model_error_tables(s: Sources) -> str:
+    from bound_env.analysis.margins.mismatch_report import mismatch_tables
+
+    me = s._load("model_error")
+    try:
+        return "\n\n" + mismatch_tables(me, level=3) + "\n"
+    except (KeyError, TypeError, IndexError) as e:
+        raise ValueError(f"{s.docs / FILES['model_error']}: malformed ({e!r})") from None
+
+
+def _presets(_s: Sources) -> str:
+    from bound_env.mismatch import presets_markdown
+
+    return "\n\n" + presets_markdown() + "\n\n"
+
+
+def _default_columns(_s: Sources) -> str:
+    from .compare import default_entries
+
+    return ", ".join(
+        f"`{label}`" + (f" ({len(p)} seeds)" if len(p) > 1 else "")
+        for label, p, _gait in default_entries()
+    )
+
+
+# generated tables and text between <!-- table:NAME --> and <!-- /table:NAME -->
+TABLES = {
+    "compare-default-columns": _default_columns,  # compare's default columns, from the code
+    "mismatch-presets": _presets,  # bound_env.mismatch.PRESETS, from the code
+    "model-error-run": _model_error_run,  # how model_error.json was made
+    "model-error": _model_error_tables,  # the page's model-error section, from its JSON
+}
+
+
 def parse_key(key: str) -> tuple[str, list[str]]:
     """(quantity, arguments) of a block's key; a ValueError naming the key otherwise."""
     m = KEY.match(key.strip())
@@ -319,23 +380,57 @@ def value(key: str, sources: Sources) -> str:
     return text
 
 
-def update_text(text: str, sources: Sources, where: str = "") -> str:
-    """``text`` with every inline block rewritten from ``sources``."""
+def table(name: str, sources: Sources) -> str:
+    """The text of the table block ``name`` (`TABLES`)."""
+    if name not in TABLES:
+        raise ValueError(f"<!-- table:{name} -->: no such table ({', '.join(TABLES)})")
+    return TABLES[name](sources)
 
-    def fill(m: re.Match) -> str:
+
+def update_text(text: str, sources: Sources, where: str = "", errors: list | None = None) -> str:
+    """``text`` with every inline block and every table block rewritten from ``sources``. A
+    block without a value is a ValueError naming it, or, with ``errors`` (a list), is left as
+    it is and its error appended there."""
+
+    def fill(m: re.Match, make, head: str, tail: str) -> str:
         try:
-            v = value(m.group("key"), sources)
+            v = make()
         except ValueError as e:
-            raise ValueError(f"{where}: {e}") from None
-        return f"<!-- n:{m.group('key')} -->{v}<!-- /n -->"
+            if errors is None:
+                raise ValueError(f"{where}: {e}") from None
+            errors.append(f"{where}: {e}")
+            return m.group(0)
+        return f"{head}{v}{tail}"
 
-    return INLINE.sub(fill, text)
+    text = INLINE.sub(
+        lambda m: fill(
+            m, lambda: value(m.group("key"), sources), f"<!-- n:{m.group('key')} -->", "<!-- /n -->"
+        ),
+        text,
+    )
+    return TABLE.sub(
+        lambda m: fill(
+            m,
+            lambda: table(m.group("name"), sources),
+            f"<!-- table:{m.group('name')} -->",
+            f"<!-- /table:{m.group('name')} -->",
+        ),
+        text,
+    )
 
 
 def stale_blocks(text: str, sources: Sources) -> list[str]:
     """Each block whose text is not its value: ``KEY: 'TEXT', the JSON says 'VALUE'`` (or
     why it has no value)."""
     out = []
+    for m in TABLE.finditer(text):
+        try:
+            v = table(m.group("name"), sources)
+        except ValueError as e:
+            out.append(str(e))
+            continue
+        if v != m.group("text"):
+            out.append(f"table:{m.group('name')}: not the table its source gives")
     for m in INLINE.finditer(text):
         try:
             v = value(m.group("key"), sources)
@@ -345,10 +440,3 @@ def stale_blocks(text: str, sources: Sources) -> list[str]:
         if v != m.group("text"):
             out.append(f"n:{m.group('key')}: {m.group('text')!r}, the JSON says {v!r}")
     return out
-
-
-def is_finite(text: str) -> bool:
-    try:
-        return math.isfinite(float(text.replace("−", "-")))
-    except ValueError:
-        return False
