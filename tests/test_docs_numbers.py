@@ -1,15 +1,16 @@
 """Every number the docs quote of a measurement comes from the one JSON value it names.
 
-A number in docs/*.md or README.md that quotes the results page (r50, Δr50, an interval, a
+A number in docs/**/*.md or README.md that quotes the results page (r50, Δr50, an interval, a
 decision time, a speed ratio, a hold count, a torque) or another committed measurement (the
 page's run time, a basin map's time, an env step's time) sits in a generated block: an inline
-``<!-- n:KEY -->TEXT<!-- /n -->`` (`agents.results.numbers`), a ``<!-- numbers:NAME -->`` sentence
-(`agents.results.prose`) or the README's headline table (`agents.results.headline`). The blocks must be up to
-date, and a mutation of any of them (a number changed by one in its last digit, or the block
-attributed to another controller) must make the check fail. Outside the blocks, a sentence
-(or a clause between semicolons, or a table under its caption) that quotes such a number must
-say that it is another measurement (the validation seed, a quick budget, a history, a
-dated run, a script's own output); otherwise it is an offender.
+``<!-- n:KEY -->TEXT<!-- /n -->`` or a ``<!-- table:NAME -->`` (`agents.results.numbers`), a
+``<!-- numbers:NAME -->`` sentence (`agents.results.prose`) or the README's headline table
+(`agents.results.headline`). The blocks must be up to date, and a mutation of any of them (a
+number changed by one in its last digit, or the block attributed to another controller) must
+make the check fail. Outside the blocks, a sentence (or a clause between semicolons, or a
+table under its caption) that quotes such a number must say that it is another measurement
+(the validation seed, a quick budget, a history, a dated run, a script's own output);
+otherwise it is an offender.
 """
 
 from __future__ import annotations
