@@ -4,10 +4,11 @@ The page is rewritten from a fixture (tests/data/render_only: a test-budget ``ma
 of passive and of lqr, as `compute_margins` wrote them, and a ``paired.json`` with decision
 times) and must equal, byte for byte, what the code before the split of agents/results/compare.py
 made from the same files (``MARGINS.md``, ``headline.json`` and ``paired.expected.json`` beside
-them; three later, deliberate changes of the page applied to ``MARGINS.md``: the
+them; four later, deliberate changes of the page applied to ``MARGINS.md``: the
 reproducibility paragraph quotes differences, not an older page's numbers, the full table
-is split with the headline columns first, `agents.results.table_split`, and a table inside
-``<details markdown="1">`` so that it renders). A malformed
+is split with the headline columns first, `agents.results.table_split`, a table inside
+``<details markdown="1">`` so that it renders, and a provenance that names the test set, not
+"this page", which a user's page of another budget is not). A malformed
 ``margins.json``, ``paired.json`` or ``headline.json`` is one line naming the file and the key,
 exit 2, never a traceback.
 """

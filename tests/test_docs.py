@@ -35,7 +35,8 @@ DOCS = ROOT / "docs"
 def test_mkdocs_build_strict(tmp_path):
     """`mkdocs build --strict`: a broken link, a page missing from the nav's files or a bad
     API reference fails, and so does a page whose HTML shows a table as raw text, an italic
-    that ran away or a list run into a paragraph (`rendered_problems`). Skipped only where MkDocs is absent outside CI (CI=1 in .ci/run)."""
+    that ran away or a list run into a paragraph (`rendered_problems`). Skipped only where
+    MkDocs is absent outside CI (CI=1 in .ci/run)."""
     if importlib.util.find_spec("mkdocs") is None:
         if os.environ.get("CI"):
             pytest.fail("mkdocs is not installed but CI is set: install the [docs] extra")

@@ -10,10 +10,13 @@ an HTML comment naming it and its end::
 The key is a quantity and its arguments, a column label first (`QUANTITIES`: e.g.
 ``r50(mpc)``, ``dr50ci(fine-tuned,lqr)``, ``p50ms(mpc)``, ``hold(lqr,pm5)``,
 ``basinmap(mpc)``). The text between the comments is what `value` makes of the JSON (the
-comments do not render), so it is regenerated, never edited: ``python -m agents.results.prose``
-rewrites every such block with the generated sentences, ``--check`` says whether they are up
-to date. A number quoted for the wrong controller, or changed in its last digit, is a stale
-block; tests/test_docs_numbers.py checks every block and finds page-like numbers outside them.
+comments do not render), so it is regenerated, never edited. A whole table or paragraph is a
+block ``<!-- table:NAME -->...<!-- /table:NAME -->`` (`TABLES`: the page's model-error tables
+from ``model_error.json``, the model-error presets printed from `bound_env.mismatch`,
+compare's default columns). ``python -m agents.results.prose`` rewrites every block with the
+generated sentences, ``--check`` says whether they are up to date. A number quoted for the
+wrong controller, or changed in its last digit, is a stale block; tests/test_docs_numbers.py
+checks every block and finds measured numbers quoted outside them.
 
 The sources (`Sources`, each in ``docs/``): ``headline.json`` (the headline's rows),
 ``columns.json`` (every column of the page: its r50 and MFPT σ with their intervals, its
