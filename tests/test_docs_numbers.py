@@ -44,7 +44,11 @@ OTHER = re.compile(
 NUM = r"[+−-]?\d+(?:\.\d+)?"
 NOT_A_COUNT = r"(?!\s?(?:%|strides|directions|plants|seeds|robots|runs|windows))"
 DETECTORS = {
-    "r50": re.compile(rf"\b(?:Δ\s?)?r50\b(?:[^\d\n.;|]{{0,30}}?)({NUM})(?![\d.]){NOT_A_COUNT}"),
+    "r50": re.compile(
+        rf"\b(?:Δ\s?)?r50\b(?:[^\d\n.;|]{{0,30}}?)(?<![\wσ])({NUM})(?![\d.]){NOT_A_COUNT}"
+    ),
+    "σ50": re.compile(rf"σ50\b(?:[^\d\n.;|]{{0,30}}?)(?<![\wσ])({NUM})(?![\d.]){NOT_A_COUNT}"),
+    "paired difference": re.compile(r"\bpaired\b[^\d\n.;|]{0,25}?([+−-]\d+\.\d+)"),
     "interval": re.compile(rf"({NUM})°?\s*\[{NUM}°?,\s*{NUM}°?\]"),
     "decision time": re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)\s?(?:ms|µs)\b"),
     "ratio": re.compile(r"(\d+(?:\.\d+)?)\s?×\s*faster"),
