@@ -288,3 +288,11 @@ def test_a_block_of_an_unknown_quantity_or_column_is_one_line(tmp_path):
 def test_every_quantity_is_documented():
     for q, (nargs, what, fn) in QUANTITIES.items():
         assert what and callable(fn) and nargs in (0, 1, 2), q
+
+
+@pytest.mark.parametrize("path", doc_files(), ids=lambda p: p.name)
+def test_no_line_starts_with_an_inline_block(path):
+    """A line that starts with an HTML comment ends the paragraph or the list item before it
+    in Markdown (the number then renders on its own); blocks sit inside their sentence."""
+    for i, line in enumerate(path.read_text().splitlines(), start=1):
+        assert not re.match(r"\s*<!-- (n:|numbers:)", line), f"{path.name}:{i}: {line[:60]}"
