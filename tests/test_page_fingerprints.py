@@ -117,3 +117,16 @@ def test_nothing_recorded_is_stale_and_the_passive_gait_is_itself():
     assert stale_parts(column_fingerprint(None), None) == []
     fp = column_fingerprint("passive", commit=False)
     assert fp["controller"] == "passive" and "commit" not in fp
+
+
+def test_the_config_ignores_the_last_bits_of_a_design_but_not_a_change():
+    """A gain designed on another machine (or with a cold compiler cache) differs in its last
+    bits: the same config; a gain changed in its 6th digit is another config."""
+    from bound_env.control import load_controller
+
+    ctrl = load_controller("lqr")
+    before = column_fingerprint(ctrl, commit=False)
+    ctrl.gain = ctrl.gain * (1 + 1e-15)
+    assert column_fingerprint(ctrl, commit=False)["config"] == before["config"]
+    ctrl.gain = ctrl.gain * (1 + 1e-6)
+    assert column_fingerprint(ctrl, commit=False)["config"] != before["config"]
