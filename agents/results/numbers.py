@@ -133,7 +133,10 @@ class Sources:
     def timing(self, section: str, *keys: str) -> float:
         t = self._load("timings").get(section)
         for k in keys:
-            t = t.get(k) if isinstance(t, dict) else None
+            if isinstance(t, list) and k.isdigit() and int(k) < len(t):
+                t = t[int(k)]
+            else:
+                t = t.get(k) if isinstance(t, dict) else None
         if not isinstance(t, (int, float)) or isinstance(t, bool):
             self._fail("timings", ".".join((section, *keys)))
         return float(t)
@@ -274,6 +277,11 @@ QUANTITIES = {
         1,
         "a 64 × 64 basin map's wall time [s], pool of 2",
         lambda s, c: _seconds(s.timing("basin_map", "seconds", c)),
+    ),
+    "load": (
+        1,
+        "the machine's load average (1 min) when a timing of docs/timings.json began",
+        lambda s, sec: f"{s.timing(sec, 'load_average_before', '0'):.1f}",
     ),
     "stepus": (
         0,
