@@ -37,8 +37,16 @@ from ..runtime.policy import SHIPPED_DIR
 
 # `X as X`: re-exported, the names the page's modules define stay importable from here
 from .formatting import ROOT, rel
+from .headline import (
+    COLUMNS_FILE,
+    HEADLINE_FILE,
+    MODEL_ERROR_FILE,
+    columns_json,
+    headline_numbers,
+    model_error_json,
+    run_record,
+)
 from .headline import HEADLINE as HEADLINE
-from .headline import HEADLINE_FILE, headline_numbers
 from .headline import headline_table as headline_table
 from .headline import mfpt_sigma_100_interval as mfpt_sigma_100_interval
 from .margins import compute_margins
@@ -46,7 +54,6 @@ from .page import BASIN_MAPS as BASIN_MAPS
 from .page import BASIN_SLICES as BASIN_SLICES
 from .page import COLUMN_STYLES, basin_maps, render_markdown
 from .page_inputs import check_margins_result, read_decision_times
-from .page_json import COLUMNS_FILE, MODEL_ERROR_FILE, columns_json, model_error_json, run_record
 from .page_tables import MEASURES as MEASURES
 from .provenance import CLASSICAL_SELECTION as CLASSICAL_SELECTION
 from .provenance import LEARNED_SELECTION as LEARNED_SELECTION
@@ -222,7 +229,7 @@ def compare(
     (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`, paired against lqr).
 
     Beside the page go ``columns.json`` (every column's fingerprint and headline measures,
-    and the run: `agents.results.page_json`, ``command`` recorded there) and, with
+    and the run: `agents.results.headline`, ``command`` recorded there) and, with
     ``mismatch``, ``model_error.json``. The entries that are not default columns
     (`default_entries`) are the user's: they get headline rows, and the page then says
     nothing of the project's own measurements. Each trained column's training curve is

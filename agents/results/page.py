@@ -103,7 +103,7 @@ def budget_note(budget: str) -> str:
 
 
 def run_text(run: dict | None) -> str:
-    """How long the run that made the page took (`agents.results.page_json.run_record`)."""
+    """How long the run that made the page took (`agents.results.headline.run_record`)."""
     if not run:
         return ""
     t = run.get("tasks") or {}
