@@ -48,8 +48,8 @@ REGENERATE = {
     "columns": "bound-env compare --budget full --workers 2 --docs docs",
     "paired": "bound-env compare --budget full --workers 2 --docs docs",
     "model_error": "bound-env compare --budget full --workers 2 --docs docs --mismatch pm5,pm10",
-    "timings": "python benchmarks/env_step.py --json docs/timings.json; "
-    "python benchmarks/basin_map.py --json docs/timings.json",
+    "timings": "python benchmarks/env_step.py --json docs/timings.json; python "
+    "benchmarks/basin_map.py --no-dask --also lqr,default,mpc --json docs/timings.json",
 }
 
 
@@ -67,9 +67,12 @@ class Sources:
             if not path.is_file():
                 raise ValueError(f"{path}: missing (written by `{REGENERATE[name]}`)")
             try:
-                self._cache[name] = json.loads(path.read_text())
+                data = json.loads(path.read_text())
             except (OSError, json.JSONDecodeError) as e:
                 raise ValueError(f"{path}: not JSON ({e})") from None
+            if not isinstance(data, dict):
+                raise ValueError(f"{path}: not a JSON object")
+            self._cache[name] = data
         return self._cache[name]
 
     def _fail(self, name: str, key: str):
@@ -85,7 +88,7 @@ class Sources:
     def measure(self, label: str, key: str) -> dict:
         """A column's measure (value, low, high): the headline's row's when the headline has
         it (``headline.json``, the README's table), else the page's column's
-        (``columns.json``); both are written by one run of `agents.compare`."""
+        (``columns.json``); both are written by one run of `agents.results.compare`."""
         for row in self._load("headline").get("rows") or []:
             if row.get("label") == label and isinstance(row.get(key), dict):
                 m = row[key]
