@@ -387,7 +387,7 @@ def value(key: str, sources: Sources) -> str:
     q, args = parse_key(key)
     try:
         text = QUANTITIES[q][2](sources, *args)
-    except (KeyError, TypeError, ZeroDivisionError) as e:
+    except (KeyError, TypeError, ZeroDivisionError, AttributeError, IndexError) as e:
         raise ValueError(f"<!-- n:{key} -->: a malformed value in the JSON ({e!r})") from None
     if "nan" in text or "inf" in text:
         raise ValueError(f"<!-- n:{key} -->: not a finite number ({text})")
