@@ -3,9 +3,11 @@
 A number in ``docs/*.md`` or ``README.md`` that quotes the results page (an r50, a Δr50, an
 interval, a decision time, a speed ratio, a hold count, a torque) or another committed
 measurement (the page's run time, a basin map's time, an env step's time) is written between
-an HTML comment naming it and its end::
+an HTML comment naming it and its end:
 
-    `mpc` reaches r50 <!-- n:r50ci(mpc) -->0.289 [0.254, 0.334]<!-- /n --> ...
+```markdown
+`mpc` reaches r50 <!-- n:r50ci(mpc) -->0.289 [0.254, 0.334]<!-- /n --> ...
+```
 
 The key is a quantity and its arguments, a column label first (`QUANTITIES`: e.g.
 ``r50(mpc)``, ``dr50ci(fine-tuned,lqr)``, ``p50ms(mpc)``, ``hold(lqr,pm5)``,
