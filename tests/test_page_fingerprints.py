@@ -51,7 +51,7 @@ def stale_columns(rows) -> list[str]:
 
     found = []
     for name, label, gait, policy, fp in rows:
-        ctrl = None if policy == "passive" else load_controller(policy, gait=gait)
+        ctrl = load_controller(policy, gait=gait)  # passive: the zero controller
         parts = stale_parts(fp, ctrl)
         if parts:
             why = "no fingerprint recorded" if fp is None else f"its {', '.join(parts)} changed"
