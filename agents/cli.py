@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import sys
 import time
@@ -25,14 +26,12 @@ BUDGET_HELP = (
     "directions), standard or full (256 directions, the finest curves); the time of one "
     "policy's margins is not measured per budget (a whole compare page: see compare --help)"
 )
-# compare's budgets with their measured times (a whole page of the default columns)
+# compare's budgets (the page's own run time is in docs/columns.json, quoted by the docs)
 COMPARE_BUDGET_HELP = (
-    "margins budget of every column (bound_env.analysis.margins.BUDGETS): test (a smoke test; "
-    "time not measured), quick (32 random directions; the default page took about 20 min in "
-    "the one timing reported, machine load not stated), standard (time not "
-    "measured) or full (256 directions, the finest curves: 12.2 min of wall time for the "
-    "default page from an empty cache on 2 idle cores, docs/MARGINS.md); with a warm cache "
-    "only the page is rewritten"
+    "margins budget of every column (bound_env.analysis.margins.BUDGETS): test (a smoke test), "
+    "quick (32 random directions), standard or full (256 directions, the finest curves: the "
+    "results page's; the run that made it records its wall time in docs/columns.json, "
+    "docs/yardsticks.md quotes it); with a warm cache only the page is rewritten"
 )
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv", "eval.png")
@@ -567,6 +566,7 @@ def cmd_compare(args) -> int:
         seed=args.seed,
         render_only=args.render_only,
         mismatch=mismatch,
+        command=shlex.join(["bound-env", *getattr(args, "argv", ["compare"])]),
     )
     say(args, f"wrote {path}")
     if args.json:

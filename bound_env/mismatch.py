@@ -17,7 +17,7 @@ Presets (`PRESETS`; join several with ``+``, e.g. ``pm5+noise+delay1``):
 
 | name | what |
 | --- | --- |
-| ``pm5``, ``pm10``, ``pm20`` | m1, m2, I1, I2, kb, kf, kc, zeta (issue 31), +-5/10/20 % |
+| ``pm5``, ``pm10``, ``pm20`` | m1, m2, I1, I2, kb, kf, kc, zeta, +-5/10/20 % |
 | ``all5``, ``all10``, ``all20`` | every key of `PLANT_KEYS` (legs' rest lengths, slope too) |
 | ``noise`` | sensor noise of 1 % of the scale on every noised component |
 | ``noise5`` | the same at 5 % |
@@ -180,6 +180,37 @@ PRESETS = {
     "delay2": {"delay": 2},
 }
 _KEYS = ("params", "noise", "delay", "name")
+
+
+def presets_markdown() -> str:
+    """`PRESETS` as a Markdown table: each preset's varied parameters with their relative
+    range, its sensor noise (in units of each component's `NOISE_SCALES`) and its delay, as
+    the code defines them (docs/yardsticks.md and docs/model-error.md print it)."""
+    rows = [
+        "| preset | parameters × U(1 − δ, 1 + δ) | sensor noise σ | delay |",
+        "| --- | --- | --- | --- |",
+    ]
+    for name, p in PRESETS.items():
+        params = p.get("params", {})
+        deltas = sorted(set(params.values()))
+        if not params:
+            ptext = "none"
+        elif len(deltas) == 1:
+            ptext = f"{', '.join(params)}: δ = {deltas[0]:g}"
+        else:
+            ptext = ", ".join(f"{k}: δ = {v:g}" for k, v in params.items())
+        noise = p.get("noise", {})
+        sig = sorted(set(noise.values()))
+        ntext = (
+            "none"
+            if not noise
+            else f"{sig[0]:g} of the scale on {len(noise)} components"
+            if len(sig) == 1
+            else ", ".join(f"{k}: {v:g}" for k, v in noise.items())
+        )
+        dtext = f"{p['delay']} interval(s)" if p.get("delay") else "none"
+        rows.append(f"| `{name}` | {ptext} | {ntext} | {dtext} |")
+    return "\n".join(rows)
 
 
 def from_dict(data, where: str = "mismatch") -> MismatchSpec:

@@ -31,13 +31,22 @@ from bound_env.analysis.paired_text import paired_text as paired_text
 from bound_env.cache import atomic_write
 from bound_env.cli_args import strict_json
 from bound_env.parallel import open_pool
+from bound_env.schema import load_json_strict
 
 from ..runtime.policy import SHIPPED_DIR
 
 # `X as X`: re-exported, the names the page's modules define stay importable from here
-from .formatting import ROOT
+from .formatting import ROOT, rel
+from .headline import (
+    COLUMNS_FILE,
+    HEADLINE_FILE,
+    MODEL_ERROR_FILE,
+    columns_json,
+    headline_numbers,
+    model_error_json,
+    run_record,
+)
 from .headline import HEADLINE as HEADLINE
-from .headline import HEADLINE_FILE, headline_numbers
 from .headline import headline_table as headline_table
 from .headline import mfpt_sigma_100_interval as mfpt_sigma_100_interval
 from .margins import compute_margins
@@ -195,6 +204,7 @@ def compare(
     seed: int = DEFAULT_SEED,
     render_only: bool = False,
     mismatch=None,
+    command: str = "",
 ) -> Path:
     """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path.
 
@@ -217,7 +227,19 @@ def compare(
     ``mismatch`` (specs of `bound_env.mismatch`, e.g. ``["pm5", "pm10"]``) measures every
     column under model error too, and the page gets a "Model error" section
     (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`, paired against lqr).
+
+    Beside the page go ``columns.json`` (every column's fingerprint and headline measures,
+    and the run: `agents.results.headline`, ``command`` recorded there) and, with
+    ``mismatch``, ``model_error.json``. The entries that are not default columns
+    (`default_entries`) are the user's: they get headline rows, and the page then says
+    nothing of the project's own measurements. Each trained column's training curve is
+    plotted from its ``eval.csv``; a ``training_*.png`` of the folder that no column drew is
+    removed.
     """
+    import os
+    import time
+
+    t0, load0 = time.perf_counter(), [round(v, 2) for v in os.getloadavg()]
     entries = [
         (lab, [pol] if isinstance(pol, str) else list(pol), gait)
         for lab, pol, gait in (entries or default_entries())
@@ -228,6 +250,8 @@ def compare(
     if seed != DEFAULT_SEED:
         out = out / f"seed-{seed}"
     docs.mkdir(parents=True, exist_ok=True)
+    defaults = {(lab, tuple(pols), gait) for lab, pols, gait in default_entries()}
+    yours = [lab for lab, pols, gait in entries if (lab, tuple(pols), gait) not in defaults]
     groups = []
     with contextlib.ExitStack() as stack:
         if executor is None and not render_only:
@@ -260,15 +284,9 @@ def compare(
             groups.append({"label": label, "gait": gait, "policies": policies, "runs": runs})
     firsts = [g["runs"][0] for g in groups]
     plots = plot_margins(firsts, docs, prefix="margins_", styles=COLUMN_STYLES)
-    curves = []
-    for g in groups:
-        src = Path(g["policies"][0]) / "eval.png"
-        if src.is_file():
-            dst = docs / f"training_{g['label'].replace(' ', '_')}.png"
-            shutil.copyfile(src, dst)
-            curves.append((g["label"], g["policies"][0], dst))
+    curves = training_curves(groups, docs)
     pairs = paired_comparisons(groups)
-    head = headline_numbers(groups, budget, seed)
+    head = headline_numbers(groups, budget, seed, yours)
     path = docs / "MARGINS.md"
     from ..runtime.policy import load_controller
     from .decisions import decisions_text, fair_decision_times, real_time_text
@@ -278,7 +296,16 @@ def compare(
         times = read_decision_times(old)  # checked: one line naming the file and the key
     else:
         times = fair_decision_times(groups, load_controller, seed)  # the workers are done
-    page = render_markdown(groups, plots, curves, budget, note, pairs, basin_maps(docs), head)
+    cols_path = path.with_name(COLUMNS_FILE)
+    if not render_only:
+        run = run_record(t0, workers, scheduler, load0, groups, command)
+    elif cols_path.is_file():  # the run that computed the columns, not this rewrite
+        run = load_json_strict(cols_path, {"run": (dict, None)})["run"]
+    else:
+        run = None  # not known: the columns were computed by a run that left no record
+    page = render_markdown(
+        groups, plots, curves, budget, note, pairs, basin_maps(docs), head, run, not yours
+    )
     page += decisions_text(times, groups)
     page += real_time_text(groups)  # each column's own decisions (empty before they were timed)
     page += model_error_text(groups)
@@ -286,8 +313,46 @@ def compare(
     atomic_write(path.with_name("paired.json"), json.dumps(body, indent=2) + "\n")
     # strict JSON: a measure that could not be made is null (and listed under "nonfinite")
     atomic_write(path.with_name(HEADLINE_FILE), strict_json(head, indent=2) + "\n")
+    cols = columns_json(groups, budget, seed, run)
+    atomic_write(cols_path, strict_json(cols, indent=2) + "\n")
+    me = model_error_json(groups, budget, seed, run)
+    if me is not None:
+        atomic_write(path.with_name(MODEL_ERROR_FILE), strict_json(me, indent=2) + "\n")
     atomic_write(path, page)
     return path
+
+
+def training_curves(groups, docs: Path) -> list:
+    """Each trained column's training curve in ``docs`` (``training_<label>.png``), plotted
+    from its first policy's ``eval.csv`` (`agents.common.run_files.plot_eval`: the selected
+    checkpoint marked where one was selected, else the final model), or its ``eval.png`` when
+    it has no CSV; a ``training_*.png`` in ``docs`` that no column drew is removed (it would
+    be a figure of a column the page no longer has). [(label, policy, png)]."""
+    from ..common.run_files import plot_eval
+
+    curves = []
+    for g in groups:
+        folder = Path(g["policies"][0])
+        dst = docs / f"training_{g['label'].replace(' ', '_')}.png"
+        if (folder / "eval.csv").is_file():
+            exp = folder / "exported.json"
+            selected = exp.is_file() and "timesteps" in json.loads(exp.read_text())
+            plot_eval(
+                folder / "eval.csv",
+                dst,
+                title=f"training of {g['label']} ({rel(str(folder))})",
+                kept="best" if selected else "final",
+            )
+        elif (folder / "eval.png").is_file():
+            shutil.copyfile(folder / "eval.png", dst)
+        else:
+            continue
+        curves.append((g["label"], g["policies"][0], dst))
+    drawn = {c[2].name for c in curves}
+    for old in docs.glob("training_*.png"):
+        if old.name not in drawn:
+            old.unlink()
+    return curves
 
 
 def model_error_text(groups) -> str:

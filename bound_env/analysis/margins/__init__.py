@@ -101,6 +101,11 @@ Measures (JSON keys)
   delay (`bound_env.mismatch`): ``hold``, ``curve`` and ``r50`` (settled, not returned),
   ``mfpt``; the reference is `mismatch_tasks`' docstring, the text and the results page's
   section `mismatch_report`.
+- ``seconds``, ``tasks``: the run's wall time and how many of its tasks it took from the cache
+  (``cached``) and ``computed`` (a run that computed nothing timed only the assembly).
+- ``fingerprint``: what decided these numbers (`fingerprint.column_fingerprint`): the
+  controller's ``fingerprint()`` and ``config``, hashes of its planning constants and of its
+  code, and the git ``commit`` (``dirty`` if a tracked .py file differed from it).
 
 Controllers
 -----------
@@ -145,6 +150,7 @@ Modules
 - `assemble`: the JSON result from the tasks' results;
 - `report`: margins.json, the CSV tables, the plots and `summary_text`;
 - `stats`: Wilson and Student-t intervals, crossings on a grid, the MFPT estimate.
+- `fingerprint`: what decided a column's numbers (`column_fingerprint`, `stale_parts`).
 - `mismatch_tasks`: the model-error measures (``mm_hold``, ``mm_curve``, ``mm_mfpt``) and
   `mismatch_tasks.plant_runs`; `mismatch_report`: `mismatch_text`, `mismatch_markdown`.
 """

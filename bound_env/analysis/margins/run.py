@@ -37,6 +37,7 @@ from .closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TO
 from .curve import task_curve
 from .cycle import FD_FLOOR, FD_REL, task_cycle
 from .decision_times import histogram
+from .fingerprint import column_fingerprint
 from .mismatch_tasks import (
     MISMATCH_BUDGETS,
     MISMATCH_SEED,
@@ -112,10 +113,11 @@ def task_key(setup_key: str, name: str, args: tuple) -> str:
 
 
 def _run_all(
-    executor, setup: Setup, jobs: list, cache: TaskCache, progress: bool, desc: str
+    executor, setup: Setup, jobs: list, cache: TaskCache, progress: bool, desc: str, counts=None
 ) -> dict:
     """Run (name, args) jobs through the executor, using and filling the cache. A task that
-    raises is reported (key and arguments) without stopping the others; then `TasksFailed`."""
+    raises is reported (key and arguments) without stopping the others; then `TasksFailed`.
+    ``counts`` (a dict) adds up the tasks taken from the cache and those computed."""
     results, tasks = {}, {}
     for name, args in jobs:
         key = task_key(setup.key, name, args)
@@ -124,6 +126,9 @@ def _run_all(
             results[(name, args)] = hit
         else:
             tasks[key] = (run_task, (setup, name, args), (name, args))
+    if counts is not None:
+        counts["cached"] = counts.get("cached", 0) + len(results)
+        counts["computed"] = counts.get("computed", 0) + len(tasks)
 
     def keep(key, res):
         if "error" not in res:
@@ -326,6 +331,7 @@ def compute_margins(
         key=setup_key(controller, gait, budget, seed, extra_sources),
         seed=seed,
     )
+    fingerprint = column_fingerprint(controller)
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
         if executor is None:
@@ -333,7 +339,9 @@ def compute_margins(
         if out_dir is not None:  # once the pool is up: a refused --scheduler leaves nothing
             out_dir.mkdir(parents=True, exist_ok=True)
         cache = TaskCache(out_dir / "cache.jsonl" if (out_dir is not None and use_cache) else None)
-        cyc = _run_all(executor, setup, [("cycle", ())], cache, False, "cycle")[("cycle", ())]
+        counts: dict = {}
+        cyc = _run_all(executor, setup, [("cycle", ())], cache, False, "cycle", counts)
+        cyc = cyc[("cycle", ())]
         if "error" in cyc:
             raise RuntimeError(f"no closed-loop cycle: {cyc['error']}")
         setup = replace(
@@ -352,7 +360,7 @@ def compute_margins(
         jobs += [("push", ("xdot", v, j)) for j, v in enumerate(budget.push_xdot)]
         jobs += [("push", ("th1dot", v, j)) for j, v in enumerate(budget.push_th1dot)]
         res = _run_all(
-            executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}"
+            executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}", counts
         )
         res.update(basin_results(res))
         mm = {}
@@ -368,12 +376,15 @@ def compute_margins(
                 cache,
                 progress,
                 f"mismatch {spec.name} {controller_name(controller)}",
+                counts,
             )
             mm[spec.name] = assemble_mismatch(mm_setup, mm_res)
     result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
+    result["fingerprint"] = fingerprint  # what decided these numbers, before they were made
     if mm:
         result["mismatch"] = mm
     result["seconds"] = time.perf_counter() - t0
+    result["tasks"] = counts  # taken from the cache, computed: the seconds' meaning
     if out_dir is not None:
         write_outputs(result, out_dir)
     return result
