@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 
 from .layout import Layout
-from .resources import gaits_dir
+from .resources import gaits_dir, parse_yaml
 
 GAIT_KEYS = (
     "g",
@@ -343,7 +343,7 @@ def read_gait_file(path: Path) -> dict:
     except IsADirectoryError:
         raise ValueError(f"gait file {path} is a folder, not a file") from None
     try:
-        data = yaml.safe_load(text)
+        data = parse_yaml(text)
     except yaml.YAMLError as e:
         where = getattr(e, "problem_mark", None)
         at = f" at line {where.line + 1}" if where is not None else ""

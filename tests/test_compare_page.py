@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -81,19 +79,9 @@ def _fixture(tmp_path):
     return out, docs
 
 
-def _render(out, docs):
-    argv = ["compare", "--budget", "test", "--render-only", "--no-progress", "--entry", "lqr"]
-    return subprocess.run(
-        [sys.executable, "-m", "bound_env.cli", *argv, "--out", str(out), "--docs", str(docs)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-
-
 def _render_here(out, docs, capsys):
-    """`_render` in this process (the malformed-input cases: no interpreter start each)."""
+    """``bound-env compare --render-only --entry lqr`` in this process (no interpreter start
+    each)."""
     from types import SimpleNamespace
 
     from bound_env.cli import main
@@ -104,10 +92,10 @@ def _render_here(out, docs, capsys):
     return SimpleNamespace(returncode=code, stdout=cap.out, stderr=cap.err)
 
 
-def test_render_only_reproduces_the_page_byte_for_byte(tmp_path):
+def test_render_only_reproduces_the_page_byte_for_byte(tmp_path, capsys):
     """The renderer split into agents/results/page.py & co. writes what the old compare.py wrote."""
     out, docs = _fixture(tmp_path)
-    r = _render(out, docs)
+    r = _render_here(out, docs, capsys)
     assert r.returncode == 0, r.stderr
     assert (docs / "MARGINS.md").read_bytes() == (DATA / "MARGINS.md").read_bytes()
     assert (docs / "headline.json").read_bytes() == (DATA / "headline.json").read_bytes()

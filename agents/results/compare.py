@@ -282,6 +282,10 @@ def compare(
                 r["source"] = policy
                 runs.append(r)
             groups.append({"label": label, "gait": gait, "policies": policies, "runs": runs})
+    old = docs / "paired.json"
+    # render_only: the decision times measured by the run that computed the columns, checked
+    # (one line naming the file and the key) before any figure is drawn
+    times = read_decision_times(old) if render_only and old.is_file() else None
     firsts = [g["runs"][0] for g in groups]
     plots = plot_margins(firsts, docs, prefix="margins_", styles=COLUMN_STYLES)
     curves = training_curves(groups, docs)
@@ -291,10 +295,7 @@ def compare(
     from ..runtime.policy import load_controller
     from .decisions import decisions_text, fair_decision_times, real_time_text
 
-    old = path.with_name("paired.json")
-    if render_only and old.is_file():  # measured by the run that computed the columns
-        times = read_decision_times(old)  # checked: one line naming the file and the key
-    else:
+    if times is None:
         times = fair_decision_times(groups, load_controller, seed)  # the workers are done
     cols_path = path.with_name(COLUMNS_FILE)
     if not render_only:

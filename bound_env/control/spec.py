@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from .. import schema
-from ..resources import controllers_dir
+from ..resources import controllers_dir, parse_yaml
 
 # the repository's configs/controllers, or the wheel's copy (package data, bound_env.resources)
 CONTROLLERS_DIR = controllers_dir()
@@ -162,7 +162,7 @@ def load_spec(spec: str | Path) -> ControllerSpec:
     """Read and check a spec file (name or path); ValueError naming the file and the key."""
     path = resolve_spec_path(spec)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = parse_yaml(path.read_text())
     except yaml.YAMLError as e:
         raise ValueError(f"{path}: not valid YAML ({str(e).splitlines()[0]})") from None
     except UnicodeDecodeError:
