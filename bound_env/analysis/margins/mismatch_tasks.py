@@ -187,6 +187,9 @@ def plant_runs(
     }
     for i in np.flatnonzero(~live):
         out["fell"][i], out["failure"][i] = 1, FAILURE_NAMES[int(b.s[i, S_STATUS])]
+    for i in range(n if copies is not None else 0):  # only a privileged controller reads
+        if getattr(copies[i], "privileged", False) is True:  # its robot's true plant
+            copies[i].set_plant(plants[i])
     if copies is not None and on_apex is not None:
         for i in range(n):
             reset_controller(copies[i])  # a controller with memory starts each robot afresh
