@@ -53,7 +53,7 @@ ADAPTIVE_DEFAULTS = {
     "sigma": 0.01,  # assumed error of a one-stride prediction (normalized apex units)
     "identify": 20,  # strides from the start over which it re-identifies at every apex
     "trust_error": 0.05,  # an estimate is trusted after predicting a stride this well
-    "trust_strides": 2,  # ... or once it fits at least this many strides
+    "trust_strides": 1,  # ... or once it fits at least this many strides
     "trust_rms": 0.02,  # ... with an rms residual at most this (normalized)
     "deadband": 1e-5,  # innovations at most this: no update (the nominal plant)
     "settle": 0.01,  # a trusted estimate is not refitted after innovations at most this
@@ -132,7 +132,9 @@ class AdaptiveMPC:
                 f"{s.path}: an adaptive controller re-designs an mpc spec, got {s.controller!r}"
             )
         cfg = dict(s.adaptive or ADAPTIVE_DEFAULTS)
-        cfg.update(check_adaptive(settings, s.path) if settings else {})
+        if settings:
+            checked = check_adaptive(settings, "AdaptiveMPC")
+            cfg.update({k: checked[k] for k in settings})
         self.config = cfg
         s = replace(s, privileged=False, adaptive=None)
         self.base = load_controller(s, gait)
@@ -165,7 +167,7 @@ class AdaptiveMPC:
         self._A: list = []
         self._Z1: list = []
         self._z = None  # the apex the current stride started from
-        self._a = None  # its interval actions
+        self.last_actions = None  # its interval actions
 
     @property
     def factors(self) -> dict:
@@ -178,7 +180,7 @@ class AdaptiveMPC:
             return
         cfg = self.config
         self._Z.append(self._z)
-        self._A.append(self._a)
+        self._A.append(self.last_actions)
         self._Z1.append(z)
         self.strides += 1
         w = cfg["window"]
@@ -219,7 +221,7 @@ class AdaptiveMPC:
         u = self.mpc.plan(z)
         self.decision_kinds.append(self.mpc._kind)
         self._z = z.copy()
-        self._a = interval_actions_of(self.basis, self.max_torque, [u], self._times, self.dt)[0]
+        self.last_actions = interval_actions_of(self.basis, self.max_torque, [u], self._times, self.dt)[0]
         self.decision_seconds.append(time.perf_counter() - t0)
         return u
 
