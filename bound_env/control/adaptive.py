@@ -221,7 +221,8 @@ class AdaptiveMPC:
         u = self.mpc.plan(z)
         self.decision_kinds.append(self.mpc._kind)
         self._z = z.copy()
-        self.last_actions = interval_actions_of(self.basis, self.max_torque, [u], self._times, self.dt)[0]
+        b = self.base
+        self.last_actions = interval_actions_of(b.basis, b.max_torque, [u], self._times, b.dt)[0]
         self.decision_seconds.append(time.perf_counter() - t0)
         return u
 

@@ -7,17 +7,18 @@ f = (m1, m2, I1, I2, kb, kf, kc, zeta) / nominal (`bound_env.mismatch.EIGHT`), a
     z_{k+1} = P(z_k, a_k; f) + noise
 
 with P the stride map on the plant of the factors f (the step env's, `bound_env.stride_map`;
-all transitions and all probes of one Gauss-Newton step in one batch of strides, each row on
+all transitions and all probes of one fitting step in one batch of strides, each row on
 its own parameters). `PlantIdentifier.fit` is maximum a posteriori in theta = log f with a
 Gaussian prior theta ~ N(0, prior^2) toward the nominal plant and Gaussian errors of standard
 deviation ``sigma`` on the normalized apex components (z - z*) / s:
 
     min_theta  sum_k |(P(z_k, a_k; e^theta) - z_{k+1}) / (s sigma)|^2 + |theta / prior|^2,
 
-by Levenberg-Marquardt with the Jacobian of the residuals by central differences in theta. The posterior covariance (J'J + I / prior^2)^-1 in theta comes
-with the estimate. The prior is what keeps the fit well posed with few transitions: with zero
-torque, scaling every mass, inertia and stiffness by one factor leaves the dynamics unchanged
-(only the actuator's torque is not scaled), so passive strides cannot see that direction.
+by Levenberg-Marquardt with the Jacobian of the residuals by central differences in theta.
+The posterior covariance (J'J + I / prior^2)^-1 in theta comes with the estimate. The prior
+keeps the fit well posed with few transitions: with zero torque, scaling every mass, inertia
+and stiffness by one factor leaves the dynamics unchanged (only the actuator's torque is not
+scaled), so passive strides cannot see that direction.
 """
 
 from __future__ import annotations
@@ -150,8 +151,7 @@ class PlantIdentifier:
         from the ``search`` cheapest of the candidates (`candidates`: a scrambled Sobol set
         within `SEARCH_SPAN` prior standard deviations, the nominal plant and ``theta0``),
         and keeps the cheapest end."""
-        Z, Z1 = np.atleast_2d(np.asarray(Z, dtype=float)), np.atleast_2d(np.asarray(Z1, dtype=float))
-        A = np.atleast_2d(np.asarray(A, dtype=float))
+        Z, A, Z1 = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (Z, A, Z1))
         p = len(EIGHT)
         start = np.zeros(p) if theta0 is None else np.asarray(theta0, dtype=float)
         best = self._descend(Z, A, Z1, start, iters)

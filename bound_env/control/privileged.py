@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import replace
+
 import numpy as np
 
 from .plant_design import PlantDesign, PlantDesigner, plant_overrides
