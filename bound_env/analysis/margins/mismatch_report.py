@@ -5,7 +5,10 @@ page's section: every column's hold and r50 under each spec (by default ``pm5`` 
 ``pm10``), with intervals, and paired against a reference column where both met the same
 plants and directions (the same spec, seeds and budget): McNemar's exact test on the
 per-plant hold outcomes and the bootstrap of Delta r50 over the shared plant-direction pairs
-(`bound_env.analysis.paired`).
+(`bound_env.analysis.paired`). A censored r50 (the curve fails already at the smallest size,
+or never) is printed as the bound it is ("< 0.01"), and so is a difference that rests on one
+(`bound_env.analysis.paired.delta_text`). A privileged column (it reads the robot's true
+plant: `bound_env.control.privileged`) is labelled so.
 """
 
 from __future__ import annotations
@@ -14,13 +17,32 @@ import math
 
 import numpy as np
 
-from ..paired import bootstrap_delta_x50, mcnemar_exact
+from ..paired import bootstrap_delta_x50, delta_text, mcnemar_exact
+from .stats import crossing_censored, x50_text
 
 DEFAULT_SPECS = ("pm5", "pm10")
 
 
 def _num(x, fmt: str = ".3g") -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+
+
+def r50_text(block: dict) -> str:
+    """r50 under error with its interval, each censored end printed as the bound it is
+    ("< 0.01" where the curve fails already at the smallest size, "> 0.4" where it never
+    fails)."""
+    curve = block.get("curve") or []
+    sizes = [c["size"] for c in curve]
+    if not sizes or any(k not in curve[0] for k in ("success", "ci_low", "ci_high")):
+        lo, hi = block["r50_ci"]
+        return f"{_num(block['r50'])} [{_num(lo)}, {_num(hi)}]"
+    parts = [
+        x50_text(v, crossing_censored(sizes, [c[key] for c in curve]), sizes)
+        for v, key in zip(
+            (block["r50"], *block["r50_ci"]), ("success", "ci_low", "ci_high"), strict=True
+        )
+    ]
+    return f"{parts[0]} [{parts[1]}, {parts[2]}]"
 
 
 def mismatch_text(mm: dict) -> str:
@@ -42,7 +64,7 @@ def mismatch_text(mm: dict) -> str:
             else ""
         ),
         f"  r50 under error (no fall in {mm['curve_strides']} strides, apex settled): "
-        f"{_num(mm['r50'])} [{_num(mm['r50_ci'][0])}, {_num(mm['r50_ci'][1])}]",
+        f"{r50_text(mm)}",
     ]
     for m in mm["mfpt"]:
         bound = ">=" if m["lower_bound"] else ""
@@ -119,16 +141,16 @@ def mismatch_markdown(results_by_column: dict, specs=DEFAULT_SPECS, reference=No
             eff = _num(h["effort_median"])
             if h["effort_median_ci"]:
                 eff += f" [{_num(h['effort_median_ci'][0])}, {_num(h['effort_median_ci'][1])}]"
-            r50 = f"{_num(b['r50'])} [{_num(b['r50_ci'][0])}, {_num(b['r50_ci'][1])}]"
+            r50 = r50_text(b)
             hold = f"{h['k']}/{h['n']} [{h['ci'][0]:.2f}, {h['ci'][1]:.2f}]"
             pair, dr = "–", "–"
             rb = have.get(ref)
             if c != ref and rb is not None and paired_with(b, rb):
                 p = paired_mismatch(b, rb)
                 pair = f"{p['hold']['b']}/{p['hold']['c']}, p = {p['hold']['p']:.2g}"
-                d = p["delta_r50"]
-                dr = f"{d['delta']:+.3g} [{d['low']:+.3g}, {d['high']:+.3g}]"
-            rows.append(f"| {c} | {hold} | {eff} | {r50} | {pair} | {dr} |")
+                dr = delta_text(p["delta_r50"], [x["size"] for x in b["curve"]])
+            label = f"{c} (**privileged**: reads the true plant)" if b.get("privileged") else c
+            rows.append(f"| {label} | {hold} | {eff} | {r50} | {pair} | {dr} |")
         parts.append("\n".join(rows) + "\n")
     return "\n".join(parts)
 

@@ -48,6 +48,7 @@ from ...params import Z_IN_Y, Z_NAMES
 from ...stride_map import RETURN_TOL, max_intervals
 from ...stride_protocol import reset_controller
 from ...task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_T, S_T_APEX, S_TAU
+from ..apex_loop import timed_on_apex
 from .budget import DEFAULT_SEED, random_directions, sample_seeds
 from .closed_loop import STRIDES, Setup, loop_for
 
@@ -193,7 +194,7 @@ def plant_runs(
     if copies is not None and on_apex is not None:
         for i in range(n):
             reset_controller(copies[i])  # a controller with memory starts each robot afresh
-            copies[i].on_apex(seen_z(i, Z0[i].copy()), 0.0)
+            timed_on_apex(copies[i].on_apex, seen_z(i, Z0[i].copy()), 0.0)
     queue = [np.zeros(n) for _ in range(spec.delay)]
     restart = terrain_rng is None
     dt = task.dt
@@ -261,7 +262,7 @@ def plant_runs(
                 imp[i], t_start[i] = tau[i] * (t_end - t_apex), t_apex
                 t_seen = float(b.obs[i, loop.i_since_apex])
             if copies is not None and on_apex is not None:
-                copies[i].on_apex(seen_z(i, z), t_seen)
+                timed_on_apex(copies[i].on_apex, seen_z(i, z), t_seen)
     STRIDES[0] += int(sum(out["strides"]))
     return out
 
@@ -391,6 +392,7 @@ def median_interval(values, level: float = 0.95) -> list:
 
 def assemble_mismatch(setup: Setup, res: dict) -> dict:
     """The JSON ``mismatch`` block from the tasks' results (module docstring)."""
+    from .decision_times import summary as decision_summary
     from .stats import crossing_on_grid, mfpt_crossing, mfpt_estimate, wilson_interval
 
     mb, spec = setup.mismatch_budget, setup.mismatch
@@ -405,6 +407,7 @@ def assemble_mismatch(setup: Setup, res: dict) -> dict:
     ]
     out = {
         "spec": spec.to_dict(),
+        "privileged": getattr(setup.controller, "privileged", False) is True,
         "budget": asdict(mb),
         "seeds": mismatch_seeds(setup.seed),
         "plants": [
@@ -465,6 +468,8 @@ def assemble_mismatch(setup: Setup, res: dict) -> dict:
         )
     out["mfpt"] = mfpt
     out["mfpt_strides"] = mb.mfpt_strides
+    # every apex decision of the robots under error (an adaptive controller identifies here)
+    out["decision_times"] = decision_summary(res[j] for j in mismatch_jobs(mb))
     out["mfpt_sigma_100_deg"] = mfpt_crossing(
         [m["sigma_deg"] for m in mfpt],
         [m["mfpt"] for m in mfpt],
