@@ -52,17 +52,18 @@ ADAPTIVE_DEFAULTS = {
     "prior": 0.1,  # prior standard deviation of each log factor
     "sigma": 0.01,  # assumed error of a one-stride prediction (normalized apex units)
     "identify": 20,  # strides from the start over which it re-identifies at every apex
-    "trust_error": 0.05,  # an estimate is trusted after predicting a stride this well
+    "trust_error": 0.15,  # an estimate is trusted after predicting a stride this well
     "trust_strides": 1,  # ... or once it fits at least this many strides
-    "trust_rms": 0.02,  # ... with an rms residual at most this (normalized)
+    "trust_rms": 0.05,  # ... with an rms residual at most this (normalized)
     "deadband": 1e-5,  # innovations at most this: no update (the nominal plant)
     "settle": 0.01,  # a trusted estimate is not refitted after innovations at most this
     "redesign": 0.002,  # a trusted estimate this far (max |log f|) from the design: redesign
     "iters": 10,  # Levenberg-Marquardt steps per fit (at most)
     "candidates": 128,  # starting points of the search for the fit's global minimum
     "search": 4,  # descents from the cheapest of them while the estimate is not trusted
+    "delays": 2,  # actuation delays [intervals] the searching fits consider (0 ... delays)
 }
-ADAPTIVE_INTS = ("window", "identify", "iters", "trust_strides", "candidates", "search")
+ADAPTIVE_INTS = ("window", "identify", "iters", "trust_strides", "candidates", "search", "delays")
 ADAPTIVE_LIMITS = {
     "window": (1, 1000),
     "prior": (0.0, 10.0),
@@ -77,6 +78,7 @@ ADAPTIVE_LIMITS = {
     "iters": (1, 100),
     "candidates": (0, 65_536),
     "search": (0, 65_536),
+    "delays": (0, 20),
 }
 
 
@@ -162,29 +164,47 @@ class AdaptiveMPC:
         self.design = None
         self.mpc = self.base
         self.strides = 0  # strides seen (transitions)
+        self.delay = 0  # the actuation delay [intervals] the fits assume (chosen with them)
         self.innovations: list = []
-        self._Z: list = []
-        self._A: list = []
-        self._Z1: list = []
+        self._record: list = []  # per stride: (z_k, commanded actions, z_{k+1})
         self._z = None  # the apex the current stride started from
-        self.last_actions = None  # its interval actions
+        self.last_actions = None  # its planned interval actions
+        self._commanded: list = []  # the actions __call__ returned in it (the step protocol)
 
     @property
     def factors(self) -> dict:
         """The current estimate of the eight factors (1.0: nominal)."""
         return dict(zip(EIGHT, np.exp(self.theta).tolist(), strict=True))
 
+    def applied(self, delay: int, window: int | None = None):
+        """(Z, A, Z1) of the last ``window`` strides, A the interval actions the plant got if
+        the actuation lags ``delay`` intervals: the last ``delay`` actions commanded in the
+        stride before (zero torque before the first), then the stride's own, the last held
+        (the stride map's convention)."""
+        rec = self._record[-window:] if window else self._record
+        first = len(self._record) - len(rec)
+        n = len(self._times)
+        A = np.empty((len(rec), n))
+        for j, (_, c, _) in enumerate(rec):
+            k = first + j
+            prev = self._record[k - 1][1] if k > 0 else np.zeros(max(delay, 1))
+            a = np.concatenate([prev[len(prev) - delay :] if delay else [], c])[:n]
+            A[j, : len(a)] = a
+            A[j, len(a) :] = a[-1]
+        Z = np.array([r[0] for r in rec])
+        Z1 = np.array([r[2] for r in rec])
+        return Z, A, Z1
+
     def _observe(self, z) -> None:
         """A stride ended at the apex z: record it, check the estimate, re-identify."""
         if self._z is None:
             return
         cfg = self.config
-        self._Z.append(self._z)
-        self._A.append(self.last_actions)
-        self._Z1.append(z)
+        c = np.array(self._commanded) if self._commanded else self.last_actions
+        self._record.append((self._z, np.asarray(c, dtype=float), z))
         self.strides += 1
         w = cfg["window"]
-        Z, A, Z1 = (np.array(x[-w:]) for x in (self._Z, self._A, self._Z1))
+        Z, A, Z1 = self.applied(self.delay, w)
         e = float(np.max(np.abs(self.identifier.residuals(Z[-1:], A[-1:], Z1[-1:], self.theta))))
         self.innovations.append(e)
         if e <= cfg["deadband"]:
@@ -195,7 +215,15 @@ class AdaptiveMPC:
         settled = self.trusted and e <= cfg["settle"]
         if (self.strides <= cfg["identify"] and not settled) or not good:
             search = 0 if self.trusted else cfg["search"]
-            self.fit = self.identifier.fit(Z, A, Z1, self.theta, cfg["iters"], search)
+            # while searching, every delay hypothesis: the cheapest fit wins
+            delays = range(cfg["delays"] + 1) if search and self._commanded else [self.delay]
+            best = None
+            for d in delays:
+                Z, A, Z1 = self.applied(d, w)
+                f = self.identifier.fit(Z, A, Z1, self.theta, cfg["iters"], search)
+                if best is None or f.cost < best[0].cost:
+                    best = (f, d)
+            self.fit, self.delay = best
             self.theta = self.fit.theta
             if len(Z) >= cfg["trust_strides"] and self.fit.rms <= cfg["trust_rms"]:
                 self.trusted = True  # enough strides, fitted consistently
@@ -223,6 +251,7 @@ class AdaptiveMPC:
         self._z = z.copy()
         b = self.base
         self.last_actions = interval_actions_of(b.basis, b.max_torque, [u], self._times, b.dt)[0]
+        self._commanded = []
         self.decision_seconds.append(time.perf_counter() - t0)
         return u
 
@@ -251,7 +280,9 @@ class AdaptiveMPC:
             self.on_apex(np.asarray(obs, dtype=float)[list(OBS_Z)], t)
         t = self._t0 + self.dt * round((t - self._t0) / self.dt)
         taus = self.basis.torques(self._u, self.max_torque)
-        return float(np.clip(self.basis.average(taus, t, t + self.dt) / self.max_torque, -1, 1))
+        a = float(np.clip(self.basis.average(taus, t, t + self.dt) / self.max_torque, -1.0, 1.0))
+        self._commanded.append(a)
+        return a
 
     def apex_torques(self, z) -> np.ndarray:
         return self.basis.torques(self._decide(z), self.max_torque)
