@@ -51,16 +51,17 @@ ADAPTIVE_DEFAULTS = {
     "window": 10,  # strides in the fit
     "prior": 0.1,  # prior standard deviation of each log factor
     "sigma": 0.01,  # assumed error of a one-stride prediction (normalized apex units)
-    "identify": 20,  # strides from the start over which it re-identifies at every apex
+    "identify": 20,  # strides from the start over which it identifies (then: frozen)
     "trust_error": 0.15,  # an estimate is trusted after predicting a stride this well
     "trust_strides": 1,  # ... or once it fits at least this many strides
     "trust_rms": 0.05,  # ... with an rms residual at most this (normalized)
     "deadband": 1e-5,  # innovations at most this: no update (the nominal plant)
-    "settle": 0.01,  # a trusted estimate is not refitted after innovations at most this
-    "redesign": 0.002,  # a trusted estimate this far (max |log f|) from the design: redesign
+    "settle": 0.05,  # a trusted estimate is not refitted after innovations at most this
+    "redesign": 0.005,  # a trusted estimate this far (max |log f|) from the design: redesign
     "iters": 10,  # Levenberg-Marquardt steps per fit (at most)
     "candidates": 128,  # starting points of the search for the fit's global minimum
     "search": 4,  # descents from the cheapest of them while the estimate is not trusted
+    "searches": 3,  # searching fits per episode at most (the work per episode is bounded)
     "delays": 2,  # actuation delays [intervals] the searching fits consider (0 ... delays)
 }
 ADAPTIVE_INTS = ("window", "identify", "iters", "trust_strides", "candidates", "search", "delays")
@@ -78,6 +79,7 @@ ADAPTIVE_LIMITS = {
     "iters": (1, 100),
     "candidates": (0, 65_536),
     "search": (0, 65_536),
+    "searches": (0, 100_000),
     "delays": (0, 20),
 }
 
@@ -165,6 +167,7 @@ class AdaptiveMPC:
         self.mpc = self.base
         self.strides = 0  # strides seen (transitions)
         self.delay = 0  # the actuation delay [intervals] the fits assume (chosen with them)
+        self.searches = 0  # fits that searched for the global minimum
         self.innovations: list = []
         self._record: list = []  # per stride: (z_k, commanded actions, z_{k+1})
         self._z = None  # the apex the current stride started from
@@ -213,8 +216,9 @@ class AdaptiveMPC:
         if self.fit is not None:  # a fitted estimate met a stride it was not fitted to
             self.trusted = good
         settled = self.trusted and e <= cfg["settle"]
-        if (self.strides <= cfg["identify"] and not settled) or not good:
-            search = 0 if self.trusted else cfg["search"]
+        if self.strides <= cfg["identify"] and not settled:
+            search = 0 if self.trusted or self.searches >= cfg["searches"] else cfg["search"]
+            self.searches += bool(search)
             # while searching, every delay hypothesis: the cheapest fit wins
             delays = range(cfg["delays"] + 1) if search and self._commanded else [self.delay]
             best = None
