@@ -18,6 +18,7 @@ Presets (`PRESETS`; join several with ``+``, e.g. ``pm5+noise+delay1``):
 | name | what |
 | --- | --- |
 | ``pm5``, ``pm10``, ``pm20`` | m1, m2, I1, I2, kb, kf, kc, zeta, +-5/10/20 % |
+| ``pm2.5``, ``pm7.5``, ``pm15`` | the same eight, +-2.5/7.5/15 % (hold against delta) |
 | ``all5``, ``all10``, ``all20`` | every key of `PLANT_KEYS` (legs' rest lengths, slope too) |
 | ``noise`` | sensor noise of 1 % of the scale on every noised component |
 | ``noise5`` | the same at 5 % |
@@ -171,6 +172,9 @@ PRESETS = {
     "pm5": {"params": _all(EIGHT, 0.05)},
     "pm10": {"params": _all(EIGHT, 0.10)},
     "pm20": {"params": _all(EIGHT, 0.20)},
+    "pm2.5": {"params": _all(EIGHT, 0.025)},
+    "pm7.5": {"params": _all(EIGHT, 0.075)},
+    "pm15": {"params": _all(EIGHT, 0.15)},
     "all5": {"params": _all(PLANT_KEYS, 0.05)},
     "all10": {"params": _all(PLANT_KEYS, 0.10)},
     "all20": {"params": _all(PLANT_KEYS, 0.20)},

@@ -71,7 +71,7 @@ SPEC_KEYS = {
     "damping": COMMON_KEYS + ("c",),
     # the MPC's terminal controller is an LQR (its keys), plus the search (bound_env.control.mpc)
     "mpc": COMMON_KEYS
-    + ("basis", "K", "Q", "R", "jacobian", "gain", "offset_free")
+    + ("basis", "K", "Q", "R", "jacobian", "gain", "offset_free", "privileged", "adaptive")
     + tuple(MPC_DEFAULTS),
 }
 DEFAULT_MAX_TORQUE = 80.0  # [N m]: the saturation of the learned policies
@@ -98,6 +98,12 @@ class ControllerSpec:
     # None, or the settings of `bound_env.control.offset_free.OffsetFree` (checked): the
     # controller held on the plant's own cycle
     offset_free: object = None
+    # an mpc re-designed on the robot's true plant (`bound_env.control.privileged`): an upper
+    # reference, never a shipped or deployable policy
+    privileged: bool = False
+    # None, or the settings of `bound_env.control.adaptive.AdaptiveMPC` (checked): an mpc that
+    # identifies its plant online and re-designs on the estimate
+    adaptive: object = None
 
     @property
     def name(self) -> str:
@@ -202,6 +208,14 @@ def load_spec(spec: str | Path) -> ControllerSpec:
         out.extra = check_mpc_settings({k: data.get(k, v) for k, v in MPC_DEFAULTS.items()}, path)
     if out.offset_free is not None:
         out.offset_free = check_offset_free(out.offset_free, path)
+    if not isinstance(out.privileged, bool):
+        raise ValueError(f"{path}: privileged must be true or false, got {out.privileged!r}")
+    if out.adaptive is not None:
+        from .adaptive import check_adaptive
+
+        out.adaptive = check_adaptive(out.adaptive, path)
+    if sum([out.privileged, bool(out.adaptive), out.offset_free is not None]) > 1:
+        raise ValueError(f"{path}: privileged, adaptive and offset_free exclude each other")
     if out.jacobian not in ("fd", "variational"):
         raise ValueError(f"{path}: jacobian must be 'fd' or 'variational', got {out.jacobian!r}")
     return out

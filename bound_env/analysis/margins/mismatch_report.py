@@ -2,10 +2,13 @@
 
 `mismatch_text` is the command line's summary of one result; `mismatch_markdown` the results
 page's section (`mismatch_summary`, its numbers as JSON, then `mismatch_tables`): every
-column's hold and r50 under each spec (by default ``pm5`` and ``pm10``), with intervals, and
-paired against a reference column where both met the same plants and directions (the same
-spec, seeds and budget): McNemar's exact test on the per-plant hold outcomes and the
-bootstrap of Delta r50 over the shared plant-direction pairs (`bound_env.analysis.paired`).
+column's hold and r50 under each spec (by default ``pm5`` and ``pm10``), with intervals,
+and paired against a reference column where both met the same plants and directions (the
+same spec, seeds and budget): McNemar's exact test on the per-plant hold outcomes and the
+bootstrap of Delta r50 over the shared plant-direction pairs (`bound_env.analysis.paired`). A censored r50 (the curve fails already at the smallest size,
+or never) is printed as the bound it is ("< 0.01"), and so is a difference that rests on one
+(`bound_env.analysis.paired.delta_text`). A privileged column (it reads the robot's true
+plant: `bound_env.control.privileged`) is labelled so.
 """
 
 from __future__ import annotations
@@ -14,13 +17,32 @@ import math
 
 import numpy as np
 
-from ..paired import bootstrap_delta_x50, mcnemar_exact
+from ..paired import bootstrap_delta_x50, delta_text, mcnemar_exact
+from .stats import crossing_censored, x50_text
 
 DEFAULT_SPECS = ("pm5", "pm10")
 
 
 def _num(x, fmt: str = ".3g") -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+
+
+def r50_text(block: dict) -> str:
+    """r50 under error with its interval, each censored end printed as the bound it is
+    ("< 0.01" where the curve fails already at the smallest size, "> 0.4" where it never
+    fails)."""
+    curve = block.get("curve") or []
+    sizes = [c["size"] for c in curve]
+    if not sizes or any(k not in curve[0] for k in ("success", "ci_low", "ci_high")):
+        lo, hi = block["r50_ci"]
+        return f"{_num(block['r50'])} [{_num(lo)}, {_num(hi)}]"
+    parts = [
+        x50_text(v, crossing_censored(sizes, [c[key] for c in curve]), sizes)
+        for v, key in zip(
+            (block["r50"], *block["r50_ci"]), ("success", "ci_low", "ci_high"), strict=True
+        )
+    ]
+    return f"{parts[0]} [{parts[1]}, {parts[2]}]"
 
 
 def mismatch_text(mm: dict) -> str:
@@ -42,7 +64,7 @@ def mismatch_text(mm: dict) -> str:
             else ""
         ),
         f"  r50 under error (no fall in {mm['curve_strides']} strides, apex settled): "
-        f"{_num(mm['r50'])} [{_num(mm['r50_ci'][0])}, {_num(mm['r50_ci'][1])}]",
+        f"{r50_text(mm)}",
     ]
     for m in mm["mfpt"]:
         bound = ">=" if m["lower_bound"] else ""
@@ -131,6 +153,8 @@ def mismatch_summary(results_by_column: dict, specs=DEFAULT_SPECS, reference=Non
                     "low": _finite(b["r50_ci"][0]),
                     "high": _finite(b["r50_ci"][1]),
                 },
+                "r50_text": r50_text(b),
+                "privileged": bool(b.get("privileged")),
                 "paired": None,
                 "delta_r50": None,
             }
@@ -139,6 +163,8 @@ def mismatch_summary(results_by_column: dict, specs=DEFAULT_SPECS, reference=Non
                 p = paired_mismatch(b, rb)
                 row["paired"] = {k: p["hold"][k] for k in ("b", "c", "p")}
                 row["delta_r50"] = {k: p["delta_r50"][k] for k in ("delta", "low", "high")}
+                sizes = [x["size"] for x in b["curve"]]
+                row["delta_r50"]["text"] = delta_text(p["delta_r50"], sizes)
             entry["rows"].append(row)
         out["specs"].append(entry)
     return out
@@ -170,14 +196,17 @@ def mismatch_tables(summary: dict, level: int = 3) -> str:
             eff = _num(t["median"])
             if t["low"] is not None or t["high"] is not None:
                 eff += f" [{_num(t['low'])}, {_num(t['high'])}]"
-            r50 = f"{_num(q['value'])} [{_num(q['low'])}, {_num(q['high'])}]"
+            r50 = r.get("r50_text") or f"{_num(q['value'])} [{_num(q['low'])}, {_num(q['high'])}]"
             hold = f"{h['k']}/{h['n']} [{h['low']:.2f}, {h['high']:.2f}]"
             pair, dr = "–", "–"
             if r["paired"] is not None:
                 p, d = r["paired"], r["delta_r50"]
                 pair = f"{p['b']}/{p['c']}, p = {p['p']:.2g}"
-                dr = f"{d['delta']:+.3g} [{d['low']:+.3g}, {d['high']:+.3g}]"
-            rows.append(f"| {r['column']} | {hold} | {eff} | {r50} | {pair} | {dr} |")
+                dr = d.get("text") or f"{d['delta']:+.3g} [{d['low']:+.3g}, {d['high']:+.3g}]"
+            label = r["column"]
+            if r.get("privileged"):
+                label += " (**privileged**: reads the true plant)"
+            rows.append(f"| {label} | {hold} | {eff} | {r50} | {pair} | {dr} |")
         parts.append("\n".join(rows) + "\n")
     return "\n".join(parts)
 
