@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from . import schema
 from .layout import Layout
 from .resources import gaits_dir
 
@@ -343,7 +344,7 @@ def read_gait_file(path: Path) -> dict:
     except IsADirectoryError:
         raise ValueError(f"gait file {path} is a folder, not a file") from None
     try:
-        data = yaml.safe_load(text)
+        data = schema.yaml_load(text)  # a key twice is refused, not silently the last
     except yaml.YAMLError as e:
         where = getattr(e, "problem_mark", None)
         at = f" at line {where.line + 1}" if where is not None else ""
