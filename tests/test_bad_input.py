@@ -1,0 +1,346 @@
+"""Issue 40: every new surface refuses bad input in one line naming the parameter, file or key.
+
+One test per case of the issue (each fails on main c8aee56): the model-error spec
+(`bound_env.mismatch`, ``--mismatch``), offset-free names and gains, a controller's gain,
+the apex state a stride controller plans from, and the scripts' arguments. The classes
+behind the cases are property-tested in tests/test_properties.py.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import bound_env
+import bound_env.mismatch as mm
+from bound_env.mismatch import (
+    NOISE_SCALES,
+    MismatchSpec,
+    as_spec,
+    from_dict,
+    sample_plant_params,
+    sample_plants,
+)
+
+gym.register_envs(bound_env)
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def one_line(e) -> str:
+    text = str(e.value if hasattr(e, "value") else e)
+    assert "\n" not in text and text, text
+    return text
+
+
+def script(name: str):
+    """scripts/<name>.py as a module (its ``main(argv)`` runs in-process)."""
+    spec = importlib.util.spec_from_file_location(f"script_{name}", ROOT / "scripts" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def usage_error(main, argv, capsys) -> str:
+    """``main(argv)`` ends in exit 2 with argparse's usage and ONE error line (returned), or
+    with one line of its own; never a traceback or exit 0."""
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as e:
+        code = e.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2, (code, err)
+    assert "Traceback" not in err, err
+    lines = err.splitlines()
+    if any(": error: " in ln for ln in lines):  # argparse: usage lines, then the error
+        lines = lines[next(i for i, ln in enumerate(lines) if ": error: " in ln) :]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+# -- the mismatch spec -------------------------------------------------------------------------
+
+
+def test_a_folder_is_not_an_unknown_preset(tmp_path):
+    with pytest.raises(ValueError) as e:
+        as_spec(tmp_path)
+    assert "is a folder" in one_line(e) and str(tmp_path) in str(e.value)
+    assert "preset" not in str(e.value)
+
+
+def test_a_file_name_with_a_comma_is_one_spec(tmp_path):
+    f = tmp_path / "soft,stiff.yaml"
+    f.write_text("name: soft-stiff\nparams: {kb: 0.1}\n")
+    specs = mm.parse_specs(f"{f},pm5")
+    assert [s.name for s in specs] == ["soft-stiff", "pm5"]
+    assert dict(specs[0].ranges) == {"kb": 0.1}
+    # without a name: key, its stem is no name (a comma); the error names the file
+    f.write_text("params: {kb: 0.1}\n")
+    with pytest.raises(ValueError) as e:
+        mm.parse_specs(str(f))
+    assert str(f) in one_line(e) and "name:" in str(e.value)
+
+
+def test_two_files_of_one_stem_are_both_named(tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    for d, k in (("a", "m1"), ("b", "m2")):
+        (tmp_path / d / "soft.yaml").write_text(f"params: {{{k}: 0.1}}\n")
+    a, b = tmp_path / "a" / "soft.yaml", tmp_path / "b" / "soft.yaml"
+    with pytest.raises(ValueError) as e:
+        mm.parse_specs(f"{a},{b}")
+    assert str(a) in one_line(e) and str(b) in str(e.value) and "'soft'" in str(e.value)
+    # the margins' own check names them too
+    with pytest.raises(ValueError, match="soft.yaml and .*soft.yaml are both named"):
+        mm.check_distinct([as_spec(a), as_spec(b)])
+    with pytest.raises(ValueError, match="names the spec 'pm5' twice"):
+        mm.parse_specs("pm5,pm5")
+
+
+@pytest.mark.parametrize(
+    "data, words",
+    [
+        ({"params": 0}, "params must be a mapping"),
+        ({"params": [0.1]}, "params must be a mapping"),
+        ({"noise": []}, "noise must be a mapping"),
+        ({"noise": "lots"}, "noise must be a mapping"),
+        ({"name": None}, "name must be a string"),
+        ({"name": 5}, "name must be a string"),
+        ({"name": "a\nb"}, "mismatch name 'a\\nb'"),
+        ({"name": "a|b"}, "mismatch name 'a|b'"),
+        ({"name": ""}, "mismatch name ''"),
+        ({"noise": 1e6}, "noise.y_g: sigma 1e+06 is beyond 1"),
+        ({"noise": {"theta1": 1.01}}, "noise.theta1: sigma 1.01 is beyond 1"),
+        ({"params": {"m1": 10**400}}, "params.m1 must be finite"),
+    ],
+)
+def test_bad_spec_values_are_one_line_naming_the_key(data, words):
+    with pytest.raises(ValueError) as e:
+        from_dict(data)
+    assert words in one_line(e)
+
+
+def test_a_yaml_key_twice_is_refused_naming_it_and_its_line(tmp_path):
+    f = tmp_path / "dup.yaml"
+    f.write_text("params: {m1: 0.1}\nparams: {m2: 0.2}\n")
+    with pytest.raises(ValueError) as e:
+        as_spec(f)
+    assert "duplicate key 'params' at line 2" in one_line(e) and str(f) in str(e.value)
+    f.write_text("params: {m1: 0.1, m1: 0.2}\n")
+    with pytest.raises(ValueError, match="duplicate key 'm1'"):
+        as_spec(f)
+    # the same reader for gait files and controller specs
+    from bound_env.control import load_controller
+    from bound_env.params import load_gait
+
+    g = tmp_path / "gait.yaml"
+    g.write_text("kc: 300\nkc: 200\n")
+    with pytest.raises(ValueError, match=r"gait file .*gait.yaml: .*duplicate key 'kc'"):
+        load_gait(g)
+    c = tmp_path / "ctrl.yaml"
+    c.write_text("controller: lqr\nR: 1.0\nR: 0.1\n")
+    with pytest.raises(ValueError, match=r"ctrl.yaml: .*duplicate key 'R'"):
+        load_controller(c)
+
+
+def test_noise_at_the_limit_is_accepted():
+    s = from_dict({"noise": mm.MAX_NOISE})
+    assert dict(s.noise) == {k: mm.MAX_NOISE for k in NOISE_SCALES}
+    assert from_dict({"params": None, "noise": None}).is_nominal  # keys with nothing after
+
+
+@pytest.mark.parametrize("n, word", [(-3, "n must be"), (2.5, "n must be"), (True, "n must be")])
+def test_a_bad_plant_count_is_refused(n, word):
+    nominal = bound_env.params.load_gait("default").params
+    for f in (
+        lambda: sample_plants("pm5", n, 0),
+        lambda: sample_plant_params("pm5", n, 0, nominal),
+    ):
+        with pytest.raises(ValueError) as e:
+            f()
+        assert word in one_line(e)
+    with pytest.raises(ValueError, match="seed must be"):
+        sample_plants("pm5", 2, -1)
+    assert sample_plants("pm5", 0, 0) == []  # no plant asked, none drawn
+
+
+@pytest.mark.parametrize("ranges", [5, "abc", [("m1",)], [(1, 0.1)], {"m1": 0.1, 3: 0.2}])
+def test_mismatch_spec_ranges_errors_name_ranges(ranges):
+    with pytest.raises(ValueError) as e:
+        MismatchSpec(ranges=ranges)
+    assert "ranges" in one_line(e)
+
+
+def test_a_name_given_twice_in_pairs_is_refused():
+    with pytest.raises(ValueError, match="'m1' is given twice"):
+        MismatchSpec(ranges=(("m1", 0.1), ("m1", 0.2)))
+    with pytest.raises(ValueError, match="noise: 'y_g' is given twice"):
+        MismatchSpec(noise=[("y_g", 0.1), ("y_g", 0.2)])
+    assert MismatchSpec(ranges={"m1": 0.1}) == MismatchSpec(ranges=(("m1", 0.1),))
+
+
+def test_spaces_around_plus_name_the_preset_join():
+    assert as_spec("pm5 + noise").name == "pm5+noise" == as_spec("pm5+noise").name
+
+
+# -- offset-free names and gains ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["lqr-of+of", "lqr+of+of"])
+def test_offset_free_twice_is_refused_saying_why(name):
+    from bound_env.control import load_controller
+
+    with pytest.raises(ValueError) as e:
+        load_controller(name)
+    assert "held offset-free already" in one_line(e) and "not a stride controller" not in str(e)
+
+
+def test_offset_free_twice_over_a_learned_policy_too():
+    from agents.policy import load_controller
+
+    with pytest.raises(ValueError) as e:
+        load_controller("default+of+of")
+    assert "'default+of' is held offset-free already" in one_line(e)
+
+
+def test_an_np_float32_gain_is_a_number():
+    from bound_env.control import load_controller
+    from bound_env.control.offset_free import OffsetFree
+
+    lqr = load_controller("lqr")
+    a = OffsetFree(lqr, gain=np.float32(0.25), deadband=np.float64(1e-7), max_shift=np.int64(1))
+    assert type(a.gain) is float and a.gain == 0.25 and a.max_shift == 1.0
+    for bad in (True, "0.1", np.float32(np.nan), 1e308):
+        with pytest.raises(ValueError, match="offset_free: gain must be a number") as e:
+            OffsetFree(lqr, gain=bad)
+        one_line(e)
+
+
+# -- a controller's gain, the apex state of a plan ----------------------------------------------
+
+
+@pytest.mark.parametrize("env_id", ["PassiveBoundRescue-v0", "PassiveBoundRescue-v1"])
+def test_a_huge_gain_is_refused_naming_gain(env_id):
+    with pytest.raises(ValueError) as e:
+        gym.make(env_id, gain=[[1e308] * 6] * 8)
+    assert one_line(e).startswith("gain has entries up to 1e+308")
+
+
+def test_a_huge_gain_in_a_spec_is_refused_naming_the_field():
+    from bound_env.control import ControllerSpec, load_controller
+
+    with pytest.raises(ValueError) as e:
+        load_controller(ControllerSpec("lqr", gain=[[1e7] * 6] * 4))
+    assert one_line(e).startswith("gain has entries up to")
+    fb = load_controller(ControllerSpec("lqr", gain=[[10.0] * 6] * 4))  # large, but a gain
+    assert np.all(np.isfinite(fb.design["rho_closed"]))
+
+
+@pytest.mark.parametrize("key, value", [("start_z", np.nan), ("start_z", np.inf)])
+def test_act_refuses_a_non_finite_start_state(key, value):
+    from agents.rollout import load_policy
+
+    make_env, act = load_policy("lqr")
+    obs, info = make_env().reset(seed=0)
+    info = {**info, key: np.where(np.arange(6) == 2, value, info[key])}
+    with pytest.raises(ValueError) as e:
+        act(obs, info)
+    assert "info['start_z'] must be the apex state" in one_line(e)
+
+
+def test_notify_apex_refuses_a_mis_shaped_apex_state():
+    from bound_env.control import load_controller
+    from bound_env.stride_protocol import notify_apex
+
+    obs = np.zeros(16, dtype=np.float32)
+    for z in ([0.25] * 5, "zzz", None):
+        with pytest.raises(ValueError, match=r"info\['apex_z'\] must be the apex state") as e:
+            notify_apex(load_controller("lqr"), obs, {"apex_z": z})
+        one_line(e)
+
+
+# -- scripts/rescue_eval.py --------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def rescue_eval():
+    return script("rescue_eval")
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["lqr", "--dirs", "0"], "--dirs: must be >= 1"),
+        (["lqr", "--dirs", "-1"], "--dirs: must be >= 1"),
+        (["lqr", "--dirs", "x"], "--dirs: not an integer"),
+        (["lqr", "--sizes", "nan"], "--sizes: must be finite"),
+        (["lqr", "--sizes", "0"], "--sizes: must be > 0"),
+        (["lqr", "--sizes", "2"], "--sizes: must be <= 1"),
+        (["lqr", "--seed", "-1"], "--seed: must be >= 0"),
+        (["lqr", "--seed", "12345"], "test set"),
+        (["lqr", "--env-id", "PassiveBound-v1"], "--env-id: invalid choice"),
+        ([""], "a policy must be a name or a path"),
+        (["nope"], "nope"),
+        (["passive"], "not a stride controller"),
+        (["ppo-v1"], "archived"),
+    ],
+)
+def test_rescue_eval_bad_arguments_are_one_line(rescue_eval, capsys, argv, words):
+    assert words in usage_error(rescue_eval.main, argv, capsys)
+
+
+def _run_folder(tmp, env_id):
+    d = tmp / env_id
+    d.mkdir()
+    (d / "model.zip").write_bytes(b"not read: refused before the model is loaded")
+    (d / "config.yaml").write_text(f"run: {{env_id: {env_id}}}\n{env_id}:\n  env_kwargs: {{}}\n")
+    return d
+
+
+def test_rescue_eval_refuses_a_model_of_another_env(rescue_eval, tmp_path, capsys):
+    v1 = _run_folder(tmp_path, "PassiveBoundRescue-v1")
+    err = usage_error(rescue_eval.main, [v1, "--env-id", "PassiveBoundRescue-v0"], capsys)
+    assert "--env-id PassiveBoundRescue-v0" in err and "trained on PassiveBoundRescue-v1" in err
+    step = _run_folder(tmp_path, "PassiveBound-v1")
+    err = usage_error(rescue_eval.main, [step], capsys)
+    assert "trained on PassiveBound-v1" in err and "not on the rescue task" in err
+    err = usage_error(rescue_eval.main, [v1], capsys)  # the same env: the zip is read, and bad
+    assert "not a readable PPO model" in err
+
+
+def test_rescue_eval_gives_a_result(rescue_eval, capsys):
+    assert rescue_eval.main(["lqr", "--dirs", "1", "--sizes", "0.001"]) == 0
+    assert "lqr: return rate - (0/0)" in capsys.readouterr().out  # no start past safe
+    assert rescue_eval.main(["lqr", "--dirs", "2", "--sizes", "0.3", "0.001", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)["lqr"]
+    assert [r["r"] for r in out["sizes"]] == [0.3, 0.001]
+    assert out["sizes"][1]["n"] == 0 and out["sizes"][1]["rate"] is None  # none past safe
+    assert out["sizes"][0]["n"] == 2 and out["seed"] == 777
+
+
+# -- scripts/control_effort.py, scripts/control_table.py ----------------------------------------
+
+
+@pytest.mark.parametrize(
+    "name, argv, words",
+    [
+        ("control_effort", ["--policy", ""], "a policy must be a name"),
+        ("control_effort", ["--policy", "nope"], "'nope' does not exist"),
+        ("control_effort", ["--policy", "ppo-v1"], "archived"),
+        ("control_effort", ["--out", "{file}/x"], "exists and is not a folder"),
+        ("control_table", ["--workers", "0"], "--workers: must be >= 1"),
+        ("control_table", ["--seed", "-1"], "--seed: must be >= 0"),
+        ("control_table", ["--seed", "1e3"], "--seed: not an integer"),
+        ("control_table", ["--out", "{file}/x"], "exists and is not a folder"),
+    ],
+)
+def test_scripts_bad_arguments_are_one_line(name, argv, words, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    argv = [a.replace("{file}", str(blocker)) for a in argv]
+    assert words in usage_error(script(name).main, argv, capsys)
+    assert not (blocker.parent / "x").exists()
