@@ -200,7 +200,7 @@ def test_offset_free_twice_is_refused_saying_why(name):
 
 
 def test_offset_free_twice_over_a_learned_policy_too():
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     with pytest.raises(ValueError) as e:
         load_controller("default+of+of")
@@ -242,7 +242,7 @@ def test_a_huge_gain_in_a_spec_is_refused_naming_the_field():
 
 @pytest.mark.parametrize("key, value", [("start_z", np.nan), ("start_z", np.inf)])
 def test_act_refuses_a_non_finite_start_state(key, value):
-    from agents.rollout import load_policy
+    from agents.runtime.rollout import load_policy
 
     make_env, act = load_policy("lqr")
     obs, info = make_env().reset(seed=0)

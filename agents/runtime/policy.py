@@ -54,6 +54,7 @@ from .names import (  # noqa: F401 - the names API, importable from here as befo
     resolve_policy,
     shipped_policies,
     unwrapped_name,
+    wrapped_policy,
 )
 
 _INFERENCE_ONLY = {
@@ -97,7 +98,8 @@ def load_controller(
     if unwrapped_name(text) != text:  # NAME+of: NAME held on the robot's own cycle
         from bound_env.control.offset_free import OffsetFree
 
-        return OffsetFree(load_controller(unwrapped_name(text), gait, force, env_id), name=text)
+        inner = wrapped_policy(text)
+        return OffsetFree(load_controller(inner, gait, force, env_id), name=text)
     if env_id is not None:
         check_env_id(env_id)
         if Path(str(path)).suffix in (".yaml", ".yml") or isinstance(resolve_policy(path), str):
