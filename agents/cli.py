@@ -554,9 +554,9 @@ def cmd_compare(args) -> int:
     parsed = [parse_entry(t) for t in args.entry or ()]
     mismatch = None
     if args.mismatch is not None:
-        from bound_env.mismatch import as_spec
+        from bound_env.mismatch import parse_specs
 
-        mismatch = [as_spec(t) for t in args.mismatch.split(",")]  # a bad spec: before any work
+        mismatch = parse_specs(args.mismatch)  # a bad spec: before any work
     entries = chosen_entries(parsed, keep_defaults=args.keep_defaults)
     path = compare(
         entries,

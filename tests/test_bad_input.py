@@ -344,3 +344,227 @@ def test_scripts_bad_arguments_are_one_line(name, argv, words, tmp_path, capsys)
     argv = [a.replace("{file}", str(blocker)) for a in argv]
     assert words in usage_error(script(name).main, argv, capsys)
     assert not (blocker.parent / "x").exists()
+
+
+# -- the command line: --mismatch, compare --render-only ----------------------------------------
+
+
+def cli_error(argv, capsys) -> str:
+    """``bound-env argv`` in-process: exit 2 and one error line (warnings aside), returned."""
+    from bound_env.cli import main
+
+    code = main([str(a) for a in argv])
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    lines = [ln for ln in err.splitlines() if not ln.startswith("warning:")]
+    lines = lines[next((i for i, ln in enumerate(lines) if ": error: " in ln), 0) :]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_margins_mismatch_names_both_files_of_one_stem(tmp_path, capsys):
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / "soft.yaml").write_text("params: {kb: 0.1}\n")
+    spec = f"{tmp_path / 'a' / 'soft.yaml'},{tmp_path / 'b' / 'soft.yaml'}"
+    for cmd in (["margins", "--policy", "lqr"], ["compare", "--entry", "lqr"]):
+        err = cli_error([*cmd, "--mismatch", spec, "--out", tmp_path / "o"], capsys)
+        assert "a/soft.yaml and " in err and "b/soft.yaml are both named 'soft'" in err
+    err = cli_error(
+        ["margins", "--policy", "lqr", "--mismatch", tmp_path, "--out", tmp_path], capsys
+    )
+    assert "is a folder" in err and "preset" not in err
+    assert not (tmp_path / "o").exists()
+
+
+RENDER_DATA = ROOT / "tests" / "data" / "render_only"
+
+
+def _render_fixture(tmp_path, blocks: dict | None = None, change=None):
+    import shutil
+
+    out, docs = tmp_path / "out", tmp_path / "docs"
+    shutil.copytree(RENDER_DATA / "out", out)
+    docs.mkdir()
+    shutil.copyfile(RENDER_DATA / "paired.input.json", docs / "paired.json")
+    for f in out.glob("*/margins.json"):
+        data = json.loads(f.read_text())
+        if blocks is not None:
+            data["mismatch"] = blocks
+        if change is not None:
+            change(data)
+        f.write_text(json.dumps(data))
+    return ["compare", "--budget", "test", "--render-only", "--no-progress", "--entry", "lqr",
+            "--out", out, "--docs", docs]  # fmt: skip
+
+
+def _block(name):
+    """A model-error block as `mismatch_tasks.assemble_mismatch` writes it (the fields the page
+    reads)."""
+    hold = [1, 1, 0, 1]
+    return {
+        "spec": as_spec(name).to_dict(),
+        "seeds": {"plants": 1, "noise": 2},
+        "budget": {"plants": 4},
+        "plants": [{}] * 4,
+        "hold": {"strides": 20, "k": 3, "n": 4, "ci": [0.3, 0.95], "outcomes": hold,
+                 "effort_strides": 5, "effort_median": 3.0, "effort_median_ci": [1.0, 5.0]},
+        "curve": [{"size": 0.01, "outcomes": hold}, {"size": 0.1, "outcomes": [0, 0, 1, 0]}],
+        "curve_strides": 20,
+        "r50": 0.05,
+        "r50_ci": [0.01, 0.1],
+        "mfpt": [],
+    }  # fmt: skip
+
+
+def test_render_only_shows_the_model_error_it_was_asked_for(tmp_path, capsys):
+    from bound_env.cli import main
+
+    argv = _render_fixture(tmp_path, {"pm5": _block("pm5"), "pm10": _block("pm10")})
+    err = cli_error([*argv, "--mismatch", "pm20"], capsys)
+    assert "margins.json: no model-error block 'pm20' (it holds: pm10, pm5)" in err
+    assert main([str(a) for a in argv] + ["--mismatch", "pm5"]) == 0, capsys.readouterr().err
+    page = (tmp_path / "docs" / "MARGINS.md").read_text()
+    assert "#### pm5" in page and "#### pm10" not in page
+    # a block of that name measured under another spec (a YAML file named pm5) is refused
+    other = tmp_path / "pm5.yaml"
+    other.write_text("params: {m1: 0.3}\n")
+    err = cli_error([*argv, "--mismatch", other], capsys)
+    assert "block 'pm5' was measured under another spec" in err
+
+
+def test_render_only_refuses_a_nan_r50(tmp_path, capsys):
+    argv = _render_fixture(tmp_path, change=lambda d: d["basin_curve"].update(r50=float("nan")))
+    err = cli_error(argv, capsys)
+    assert "margins.json: basin_curve.r50: must be a finite number, got NaN" in err
+
+
+# -- policy names ------------------------------------------------------------------------------
+
+
+def test_an_empty_policy_is_one_line(capsys):
+    err = cli_error(["rollout", "--policy", "", "--strides", "1"], capsys)
+    assert "policy '' is empty" in err
+
+
+def test_a_bare_archived_entry_says_where_it_went(tmp_path, capsys):
+    err = cli_error(["compare", "--entry", "ppo-v1", "--out", tmp_path], capsys)
+    assert "was archived" in err and "archive/ppo-v1" in err
+
+
+def test_a_policy_folder_named_plus_of_is_itself(tmp_path):
+    import shutil
+
+    from agents.runtime.policy import load_controller, shipped_policies
+    from bound_env.control.offset_free import OffsetFree
+
+    d = tmp_path / "mine+of"
+    shutil.copytree(shipped_policies()["default"], d)
+    ctrl = load_controller(d)
+    assert not isinstance(ctrl, OffsetFree)
+    assert isinstance(load_controller("default+of"), OffsetFree)  # a name: still the wrapper
+    with pytest.raises(FileNotFoundError) as e:
+        load_controller(tmp_path / "gone+of")
+    assert "nor " in one_line(e) and "would hold offset-free" in str(e.value)
+
+
+# -- train -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "hp, words",
+    [
+        ({"n_envs": "abc"}, "hyperparameter n_envs must be a whole number"),
+        ({"n_envs": [2]}, "hyperparameter n_envs must be a whole number"),
+        ({"n_envs": 0}, "hyperparameter n_envs must be a whole number in [1, 1024]"),
+        ({"n_timesteps": float("inf")}, "hyperparameter n_timesteps must be a whole number"),
+        ({"n_timesteps": True}, "hyperparameter n_timesteps"),
+        ({"n_steps": 1.5}, "hyperparameter n_steps"),
+        ({"batch_size": "64"}, "hyperparameter batch_size"),
+        ({"learning_rate": [1]}, "hyperparameter learning_rate must be a finite number > 0"),
+        ({"learning_rate": float("nan")}, "hyperparameter learning_rate"),
+        ({"learning_rate": "lin_x"}, "learning_rate: 'lin_<value>' needs a number"),
+    ],
+)
+def test_bad_hyperparameters_are_named(hp, words):
+    from agents.common.config import preprocess
+
+    with pytest.raises(ValueError) as e:
+        preprocess({"n_timesteps": 1000, "policy": "MlpPolicy", **hp})
+    assert words in one_line(e)
+    spec = preprocess({"n_timesteps": 1e5, "n_envs": 2.0, "policy": "MlpPolicy"})  # whole floats
+    assert (spec.n_timesteps, spec.n_envs) == (100_000, 2)
+
+
+def test_train_hp_errors_name_the_key_on_the_command_line(tmp_path, capsys):
+    for value in ("abc", "[2]", ".inf"):
+        err = cli_error(
+            ["train", "--name", "x", "--runs-dir", tmp_path, "--hp", f"n_envs={value}"], capsys
+        )
+        assert "hyperparameter n_envs must be" in err
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.fixture
+def old_run(tmp_path):
+    """A run folder as `train` leaves it (config.yaml, run.json), without checkpoints: a
+    resume that passes its checks stops at the missing checkpoint."""
+    from agents.common.run_files import write_config
+
+    d = tmp_path / "r"
+    d.mkdir()
+    hp = {"n_timesteps": 1000, "policy": "MlpPolicy", "learning_rate": 3e-4,
+          "env_kwargs": {"max_torque": 80.0}}  # fmt: skip
+    write_config(d / "config.yaml", "PassiveBound-v0", hp, 7)
+    (d / "run.json").write_text("{}")
+    return ["train", "--name", "r", "--runs-dir", tmp_path, "--resume"]
+
+
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--env-id", "PassiveBound-v1"], "trained on PassiveBound-v0, not --env-id"),
+        (["--hp", "learning_rate=0.5"], "--hp learning_rate=0.5 differs from the run's"),
+        (["--hp", "env_kwargs.max_torque=20"], "env_kwargs.max_torque = 80.0"),
+        (["--seed", "3"], "has seed 7, not --seed 3"),
+        (["--init-from", "lqr"], "had no warm start, not --init-from lqr"),
+    ],
+)
+def test_resume_refuses_another_setting(old_run, capsys, extra, words):
+    err = cli_error([*old_run, *extra], capsys)
+    assert "--resume: " in err and words in err
+
+
+def test_resume_with_the_runs_own_settings_is_accepted(old_run, capsys):
+    same = ["--env-id", "PassiveBound-v0", "--seed", "7", "--hp", "learning_rate=3e-4",
+            "--hp", "n_timesteps=5000"]  # fmt: skip
+    err = cli_error([*old_run, *same], capsys)
+    assert "no complete checkpoint" in err  # past the checks: the run has no checkpoint
+
+
+# -- a policy without its fingerprint ----------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "name, unchecked",
+    [
+        ("step-ppo/s0", "that base 'default' is the controller it was trained over"),
+        ("archive/stride-residual/s0", "that base.json is the one it was saved with"),
+    ],
+)
+def test_a_policy_without_its_fingerprint_needs_force(tmp_path, capsys, name, unchecked):
+    import shutil
+
+    from agents.runtime.policy import SHIPPED_DIR, load_controller
+
+    d = tmp_path / "p"
+    shutil.copytree(SHIPPED_DIR / name, d)
+    (d / "fingerprint.json").unlink()
+    with pytest.raises(ValueError) as e:
+        load_controller(d)
+    assert "no fingerprint.json, so it cannot be checked" in one_line(e)
+    assert unchecked in str(e.value) and "--force" in str(e.value)
+    capsys.readouterr()
+    load_controller(d, force=True)
+    warn = capsys.readouterr().err
+    assert "warning: " in warn and unchecked in warn

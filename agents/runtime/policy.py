@@ -145,8 +145,9 @@ def load_controller(
         obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
     else:
         obs_index = None
-    warnings = check_policy_files(files, section, force, env_given=env_id is not None)
     base = residual_base(section)
+    pinned = [f"that base {base!r} is the controller it was trained over"] if base else []
+    warnings = check_policy_files(files, section, force, env_given=env_id is not None, also=pinned)
     want = read_fingerprint(files.model.parent) if files.layout == "bound_env" else None
     if base is not None and want is not None:  # a residual's base: the one it was trained over
         sha = policy_content_sha256(resolve_policy(base))
