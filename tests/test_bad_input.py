@@ -568,3 +568,58 @@ def test_a_policy_without_its_fingerprint_needs_force(tmp_path, capsys, name, un
     load_controller(d, force=True)
     warn = capsys.readouterr().err
     assert "warning: " in warn and unchecked in warn
+
+
+# -- compositions of wrappers ------------------------------------------------------------------
+
+
+def test_library_actions_twice_is_refused():
+    from bound_env.wrappers import LibraryActions
+
+    once = LibraryActions(gym.make("PassiveBoundRescue-v0"))
+    with pytest.raises(ValueError) as e:
+        LibraryActions(once)
+    assert "got Discrete(66): wrap the env once" in one_line(e)
+
+
+def _obs_filter(env):
+    from agents.common.wrappers import ObservationFilter
+
+    return ObservationFilter(env)
+
+
+def _residual(env):
+    from agents.runtime.residual import ResidualOver
+
+    return ResidualOver(env)
+
+
+@pytest.mark.parametrize(
+    "outer, inner, words",
+    [
+        (_obs_filter, _obs_filter, "ObservationFilter needs the env's full observation (16"),
+        (_residual, _residual, "ResidualOver needs the env's full observation (16"),
+        (_residual, _obs_filter, "got shape (10,): the wrapper below it (ObservationFilter)"),
+        (_obs_filter, _residual, "got shape (18,): the wrapper below it (ResidualOver)"),
+    ],
+)
+def test_observation_wrappers_over_a_changed_observation_are_refused(outer, inner, words):
+    env = inner(gym.make("PassiveBound-v1"))
+    with pytest.raises(ValueError) as e:
+        outer(env)
+    assert words in one_line(e)
+
+
+@pytest.mark.parametrize("wrap", [_obs_filter, _residual])
+def test_step_env_wrappers_over_a_stride_env_are_refused(wrap):
+    with pytest.raises(ValueError) as e:
+        wrap(gym.make("PassiveBoundStride-v1"))
+    assert "needs a PassiveBound step env" in one_line(e) and "PassiveBoundStride-v1" in str(e)
+
+
+def test_the_shipped_order_still_composes():
+    from agents.common.wrappers import PerturbedStarts
+
+    env = PerturbedStarts(_obs_filter(gym.make("PassiveBound-v1")))  # configs/ppo.yaml's order
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (10,) and np.all(np.isfinite(obs))
