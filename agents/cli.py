@@ -74,7 +74,10 @@ def register(sub) -> None:
         help="run name: runs/<name>/ (default: <env-id>_s<seed>; letters, digits, . _ + -)",
     )
     p.add_argument(
-        "--seed", type=number(int, 0, SEED_MAX), default=0, help="training seed (default: 0)"
+        "--seed",
+        type=number(int, 0, SEED_MAX),
+        default=None,
+        help="training seed (default: 0; on --resume the run's)",
     )
     p.add_argument("--n-timesteps", type=number(float, 1, 1e10), help="override n_timesteps")
     p.add_argument(
@@ -371,10 +374,6 @@ def cmd_train(args) -> int:
 
     t0 = time.perf_counter()
     n = int(args.n_timesteps) if args.n_timesteps is not None else None
-    if args.env_id is None:
-        from .common.config import default_env_id
-
-        args.env_id = default_env_id(args.config)
     if args.seeds is not None:
         return _train_seeds(args, n, t0)
     if args.export:  # refused before training, not after it
@@ -467,6 +466,10 @@ def _train_seeds(args, n, t0) -> int:
         save_freq=_default(args.save_freq, 200_000, args.resume),
     )
     budget = None if args.compare_budget == "none" else args.compare_budget
+    if args.name is None and args.env_id is None:
+        from .common.config import default_env_id
+
+        args.name = default_env_id(args.config)  # the seeds' runs: <env id>_s<seed>
     r = train_seeds(
         seeds,
         args.name or args.env_id,
@@ -550,9 +553,9 @@ def cmd_compare(args) -> int:
     parsed = [parse_entry(t) for t in args.entry or ()]
     mismatch = None
     if args.mismatch is not None:
-        from bound_env.mismatch import as_spec
+        from bound_env.mismatch import parse_specs
 
-        mismatch = [as_spec(t) for t in args.mismatch.split(",")]  # a bad spec: before any work
+        mismatch = parse_specs(args.mismatch)  # a bad spec: before any work
     entries = chosen_entries(parsed, keep_defaults=args.keep_defaults)
     path = compare(
         entries,

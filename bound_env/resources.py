@@ -90,18 +90,19 @@ def configure_numba_cache() -> str | None:
 
 
 def parse_yaml(text: str):
-    """``yaml.safe_load(text)``, parsed once per distinct text: each call gets its own copy.
+    """``yaml.safe_load(text)`` refusing a key twice (`bound_env.schema.yaml_load`), parsed
+    once per distinct text: each call gets its own copy.
 
     Every environment, task and controller reads its gait file or spec, and pure-Python YAML
     took a tenth of the test suite's time; a changed file is new text, so it is parsed anew.
-    Raises what ``yaml.safe_load`` raises.
+    Raises what ``yaml.safe_load`` raises (a key twice: a ``yaml.YAMLError`` naming it).
     """
     return copy.deepcopy(_parsed_yaml(text))
 
 
 @functools.lru_cache(maxsize=64)
 def _parsed_yaml(text: str):
-    import yaml
+    from .schema import yaml_load
 
-    return yaml.safe_load(text)
+    return yaml_load(text)
 

@@ -109,7 +109,7 @@ def test_refuses_corrupt_statistics(policy_copy):
     (policy_copy / "fingerprint.json").unlink()
     (policy_copy / "vecnormalize.pkl").write_bytes(b"\x80\x04garbage")
     with pytest.raises(ValueError, match="cannot read"):
-        load_controller(policy_copy)
+        load_controller(policy_copy, force=True)  # no fingerprint: --force (issue 40)
 
 
 def test_refuses_missing_config(policy_copy):

@@ -121,7 +121,11 @@ def parse_entry(text: str) -> tuple[str, list[str], str]:
         label = name.strip() if not gait.strip() else f"{name.strip()} {g}"
         return label, [name.strip()], (gait.strip() or "default")
     if "=" not in text:
-        raise ValueError(f"--entry {text!r} must look like LABEL=PATH[,PATH...][@GAIT]")
+        from ..runtime.policy_table import archived_message
+
+        gone = archived_message(name.strip())  # an archived name: where it went
+        where = f" ({gone})" if gone else ""
+        raise ValueError(f"--entry {text!r} must look like LABEL=PATH[,PATH...][@GAIT]{where}")
     label, rest = text.split("=", 1)
     paths, _, gait = rest.rpartition("@") if "@" in rest else (rest, "", "")
     policies = [p.strip() for p in paths.split(",") if p.strip()]
@@ -265,7 +269,7 @@ def compare(
                     else out / _slug(label) / _slug(Path(policy).name)
                 )
                 if render_only:
-                    r = load_result(sub / "margins.json", budget, seed)
+                    r = load_result(sub / "margins.json", budget, seed, mismatch)
                 else:
                     r = compute_margins(
                         policy,
@@ -369,11 +373,13 @@ def model_error_text(groups) -> str:
     return "\n## Model error\n\n" + mismatch_markdown(measured, specs=specs, reference=ref)
 
 
-def load_result(path: Path, budget: str, seed: int) -> dict:
+def load_result(path: Path, budget: str, seed: int, mismatch=None) -> dict:
     """A column's ``margins.json`` as `compute_margins` wrote it, for ``render_only``: it must
     exist, be of ``budget`` and ``seed`` and hold every key the page reads
     (`agents.results.page_inputs.check_margins_result`), else a ValueError naming the file (and the
-    key)."""
+    key). ``mismatch`` (specs): the result must hold a model-error block of each, measured
+    under that very spec, and keeps only those (the page's section is theirs); None keeps
+    the blocks it holds."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no margins.json to render (run compare without --render-only)")
@@ -388,7 +394,32 @@ def load_result(path: Path, budget: str, seed: int) -> dict:
             f"{path}: budget {r.get('budget')!r}, seed {r.get('seed')!r}; "
             f"the page asks for budget {budget!r}, seed {seed}"
         )
-    return check_margins_result(r, path)  # every key the page reads, or one line naming it
+    r = check_margins_result(r, path)  # every key the page reads, or one line naming it
+    if mismatch is not None:
+        r["mismatch"] = _measured_blocks(r, path, mismatch)
+    return r
+
+
+def _measured_blocks(r: dict, path: Path, specs) -> dict:
+    """{name: block} of ``r``'s model-error blocks of ``specs``, each measured under that
+    spec (its ``spec`` entry); ValueError naming the file and the spec otherwise."""
+    held = r.get("mismatch") if isinstance(r.get("mismatch"), dict) else {}
+    out = {}
+    for spec in specs:
+        block = held.get(spec.name)
+        if not isinstance(block, dict):
+            have = ", ".join(sorted(held)) or "none"
+            raise ValueError(
+                f"{path}: no model-error block {spec.name!r} (it holds: {have}); run compare "
+                f"--mismatch {spec.name} without --render-only first"
+            )
+        if block.get("spec") != spec.to_dict():
+            raise ValueError(
+                f"{path}: its model-error block {spec.name!r} was measured under another spec "
+                f"({block.get('spec')}); run compare --mismatch without --render-only first"
+            )
+        out[spec.name] = block
+    return out
 
 
 def _reference(groups, name: str, gait: str):

@@ -65,6 +65,10 @@ MPC_LIMITS = {
     "screen": (0, 10_000),
 }
 MAX_TORQUE_LIMIT = 1e4  # [N m]: a saturation above this is certainly a mistake
+# |gain| entries in units of the torque limit per apex scale (u = -G_n S dz; the shipped
+# designs are ~1): beyond it an error of a millionth of a scale saturates the torque, and
+# the closed loop's matrix A - B G overflows
+MAX_GAIN = 1e6
 SPEC_KEYS = {
     "lqr": COMMON_KEYS + ("basis", "K", "Q", "R", "jacobian", "gain", "offset_free"),
     "deadbeat": COMMON_KEYS + ("basis", "K", "jacobian", "gain", "offset_free"),
@@ -291,7 +295,7 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
     matrix (for every gait), a file, or a mapping of gait names to matrices (a gait it does
     not list is designed). Errors name where the gain came from: the spec's field
     (``gain`` or ``gain.<gait>``) or the gain file."""
-    g, where = spec.gain, f"{spec.path}: gain"
+    g, where = spec.gain, (f"{spec.path}: gain" if spec.path is not None else "gain")
     if isinstance(g, dict):
         key = _gait_key(g, gait if gait is not None else spec.gait)
         g, where = g.get(key), f"{where}.{key}"
@@ -322,4 +326,14 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
             f"{where} has shape {G.shape}, but basis {basis!r} with "
             f"K={K} needs a ({K}, 6) gain (one row per basis function)"
         )
-    return schema.real_array(G, where, shape=(K, 6))  # finite: no NaN or inf
+    G = schema.real_array(G, where, shape=(K, 6))  # finite: no NaN or inf
+    from ..task import APEX_SCALES
+
+    big = float(np.max(np.abs(G * np.asarray(APEX_SCALES)[None, :])))
+    if big > MAX_GAIN:
+        raise ValueError(
+            f"{where} has entries up to {big:.3g} times the torque limit per apex scale "
+            f"(at most {MAX_GAIN:g}; the designed gains are ~1): a torque saturated by an "
+            "error of a millionth of a scale"
+        )
+    return G

@@ -2,11 +2,12 @@
 
 `mismatch_text` is the command line's summary of one result; `mismatch_markdown` the results
 page's section (`mismatch_summary`, its numbers as JSON, then `mismatch_tables`): every
-column's hold and r50 under each spec (by default ``pm5`` and ``pm10``), with intervals,
-and paired against a reference column where both met the same plants and directions (the
-same spec, seeds and budget): McNemar's exact test on the per-plant hold outcomes and the
+column's hold and r50 under each spec (by default ``pm5`` and ``pm10``), with intervals, and
+paired against a reference column where both met the same plants and directions (the same
+spec, seeds and budget): McNemar's exact test on the per-plant hold outcomes and the
 bootstrap of Delta r50 over the shared plant-direction pairs (`bound_env.analysis.paired`).
-A censored r50 (the curve fails already at the smallest size, or never) is printed as the bound it is ("< 0.01"), and so is a difference that rests on one
+A censored r50 (the curve fails already at the smallest size, or never) is printed as the
+bound it is ("< 0.01"), and so is a difference that rests on one
 (`bound_env.analysis.paired.delta_text`). A privileged column (it reads the robot's true
 plant: `bound_env.control.privileged`) is labelled so.
 """

@@ -299,15 +299,12 @@ def compute_margins(
     a `MismatchSpec`) or a list of them: the result then has the key ``mismatch`` too,
     {spec name: its block} (`mismatch_tasks`), each spec's tasks cached under `mismatch_key`.
     """
-    from bound_env.mismatch import as_spec
+    from bound_env.mismatch import as_spec, check_distinct
     from bound_env.params import load_gait
 
     budget = as_budget(budget)
     many = mismatch if isinstance(mismatch, (list, tuple)) else [mismatch]
-    specs = [as_spec(m) for m in many if m is not None]
-    names = [s.name for s in specs]
-    if len(set(names)) < len(names):
-        raise ValueError(f"--mismatch names a spec twice: {names}")
+    specs = check_distinct([as_spec(m) for m in many if m is not None])
     if specs and budget.name not in MISMATCH_BUDGETS:
         raise ValueError(f"--mismatch has budgets {sorted(MISMATCH_BUDGETS)}, got {budget.name!r}")
     if workers < 1:
