@@ -725,3 +725,106 @@ def train_adaptive(cfg: AdaptiveConfig, out_dir, progress: bool = True) -> dict:
                "policy": str(out_dir / "policy")}  # fmt: skip
     atomic_write(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+# --------------------------------------------------------------------------------------------
+# The recipe: ``bound-env train --config adaptive`` (a config section with ``algo:
+# adaptive-dagger``)
+# --------------------------------------------------------------------------------------------
+
+ALGO = "adaptive-dagger"
+_RANDOMIZED = ("bound_env.wrappers.RandomizedPlant", "bound_env.randomized.RandomizedPlant")
+_SECTION_KEYS = ("algo", "env_wrapper", "env_kwargs", "adaptive")
+
+
+def is_dagger_section(hp) -> bool:
+    """A config section of this module (``algo: adaptive-dagger``), not a PPO one."""
+    return isinstance(hp, dict) and hp.get("algo") == ALGO
+
+
+def config_from_section(hp: dict, env_id: str, seed: int, where: str = "config") -> AdaptiveConfig:
+    """The run's `AdaptiveConfig` from a config section (keys `_SECTION_KEYS`):
+
+    - the env id must be a stride env (its step is the one stride map's stride, which the
+      rollouts advance directly);
+    - ``env_wrapper``: `RandomizedPlant` with its ``mismatch`` (the training plants and
+      noise; none: the nominal plant);
+    - ``env_kwargs``: the stride env's gait, basis, K and max_torque, which must be the
+      expert's (its LQR's);
+    - ``adaptive``: any field of `AdaptiveConfig` but ``mismatch`` and ``seed``.
+
+    Every bad key is a one-line ValueError naming it."""
+    from dataclasses import fields
+
+    from bound_env import STRIDE_ENV_IDS
+    from bound_env.control import load_controller as load_classical
+
+    if env_id not in STRIDE_ENV_IDS:
+        raise ValueError(
+            f"{where}: algo {ALGO} trains on a stride env {STRIDE_ENV_IDS}, got {env_id}"
+        )
+    unknown = sorted(set(hp) - set(_SECTION_KEYS))
+    if unknown:
+        raise ValueError(
+            f"{where}: unknown key {unknown[0]!r} for algo {ALGO}; known: {_SECTION_KEYS}"
+        )
+    mismatch = "none"
+    for item in hp.get("env_wrapper") or []:
+        name, kw = (item, {}) if isinstance(item, str) else next(iter(dict(item).items()))
+        if name not in _RANDOMIZED:
+            raise ValueError(
+                f"{where}: env_wrapper {name!r}: algo {ALGO} takes RandomizedPlant only"
+            )
+        kw = kw or {}
+        if set(kw) - {"mismatch"}:
+            raise ValueError(f"{where}: RandomizedPlant takes mismatch only, got {sorted(kw)}")
+        mismatch = str(kw.get("mismatch", "pm5"))
+    as_spec(mismatch)
+    extra = dict(hp.get("adaptive") or {})
+    names = {f.name for f in fields(AdaptiveConfig)} - {"mismatch", "seed"}
+    for key in extra:
+        if key not in names:
+            raise ValueError(f"{where}: adaptive.{key}: unknown; known: {sorted(names)}")
+    if "hidden" in extra:
+        extra["hidden"] = tuple(int(h) for h in extra["hidden"])
+    cfg = AdaptiveConfig(mismatch=mismatch, seed=int(seed), **extra)
+    expert = load_classical(cfg.expert)
+    want = {
+        "gait": expert.gait,
+        "basis": expert.basis.name,
+        "K": expert.basis.K,
+        "max_torque": expert.max_torque,
+    }
+    env_kwargs = dict(hp.get("env_kwargs") or {})
+    for key, value in env_kwargs.items():
+        if key in want and value != want[key]:
+            raise ValueError(
+                f"{where}: env_kwargs.{key} = {value!r}, but the expert {cfg.expert!r} has "
+                f"{want[key]!r}"
+            )
+    return cfg
+
+
+def train_from_config(
+    config, env_id: str, seed: int, name=None, runs_dir="runs", sets=None, progress=True
+) -> Path:
+    """``bound-env train`` of a section with ``algo: adaptive-dagger``: DAgger into
+    ``runs_dir/name`` (default ``adaptive_s<seed>``; resumed when it holds the same settings),
+    with the policy in ``policy/`` and its ``run.json``. Returns the run folder."""
+    from .config import apply_sets, load_hyperparams, resolve_config_path
+    from .distill import write_run_info
+
+    hp = apply_sets(load_hyperparams(config, env_id), sets)
+    cfg = config_from_section(hp, env_id, seed, str(resolve_config_path(config)))
+    run = Path(runs_dir) / (name or f"adaptive_s{seed}")
+    summary = train_adaptive(cfg, run, progress=progress)
+    rounds = summary["rounds"]
+    write_run_info(
+        run / "policy",
+        seed,
+        "bound-env " + " ".join(sys.argv[1:]),
+        summary["seconds"],
+        f"{sum(r['states'] for r in rounds)} apex states in {len(rounds)} DAgger rounds "
+        f"({sum(r['labelled'] for r in rounds)} labelled by the privileged teacher)",
+    )
+    return run
