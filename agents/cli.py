@@ -17,7 +17,7 @@ from bound_env.cli_args import (
     strict_json,
 )
 
-from .policy_args import POLICY_HELP, policy_label
+from .runtime.policy_args import POLICY_HELP, policy_label
 
 SEED_MAX = 2**32 - 1  # NumPy's and Gymnasium's seeds are unsigned 32-bit integers
 BUDGET_HELP = (
@@ -54,7 +54,7 @@ def register(sub) -> None:
     from bound_env.cli_args import add_progress_args, name_type, number
     from bound_env.parallel import MAX_WORKERS, add_scheduler_args
 
-    from .config import DEFAULT_CONFIG, DEFAULT_ENV_ID
+    from .common.config import DEFAULT_CONFIG, DEFAULT_ENV_ID
 
     p = sub.add_parser("train", help="train a PPO spine controller (runs/<name>/)")
     p.add_argument(
@@ -102,7 +102,7 @@ def register(sub) -> None:
         "--init-from",
         metavar="POLICY",
         help="warm start (PassiveBound-v0): clone a stride controller's torques (a name, e.g. "
-        "default, or a policy folder) into the actor before PPO (agents/warmstart.py)",
+        "default, or a policy folder) into the actor before PPO (agents/training/warmstart.py)",
     )
     p.add_argument(
         "--out",
@@ -315,30 +315,30 @@ def register(sub) -> None:
     )
     p.set_defaults(func=cmd_compare)
 
-    from .basin_cli import register as register_basin_map
+    from .results.basin_cli import register as register_basin_map
 
     register_basin_map(sub)
 
-    from .learn_cli import register_distill, register_finetune
+    from .experts.learn_cli import register_distill, register_finetune
 
     register_distill(sub)
     register_finetune(sub)
 
-    # the main job's passive-vs-learned comparison (bound-env demo; agents/demo.py)
+    # the main job's passive-vs-learned comparison (bound-env demo; agents/results/demo.py)
     from bound_env.render_cli import register_demo_part
 
     register_demo_part("comparison", demo_comparison)
 
 
 def demo_comparison(**kwargs):
-    """`agents.demo.demo_comparison`, imported when ``bound-env demo`` runs it."""
-    from .demo import demo_comparison as run
+    """`agents.results.demo.demo_comparison`, imported when ``bound-env demo`` runs it."""
+    from .results.demo import demo_comparison as run
 
     return run(**kwargs)
 
 
 def cmd_rollout(args) -> int:
-    from .rollout import rollout, summary_text
+    from .runtime.rollout import rollout, summary_text
 
     r = rollout(
         args.policy,
@@ -368,12 +368,12 @@ def _write_json(path: Path, data) -> Path:
 
 
 def cmd_train(args) -> int:
-    from .train import train
+    from .training.train import train
 
     t0 = time.perf_counter()
     n = int(args.n_timesteps) if args.n_timesteps is not None else None
     if args.env_id is None:
-        from .config import default_env_id
+        from .common.config import default_env_id
 
         args.env_id = default_env_id(args.config)
     if args.seeds is not None:
@@ -501,8 +501,8 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
         raise FileNotFoundError(f"no model.zip in {run_dir}")
     best = run_dir / "best"
     src = best if source == "best" and (best / "model.zip").is_file() else run_dir
-    from .policy import write_policy_fingerprint
-    from .policy_files import check_policy_files, find_policy_files
+    from .common.policy_files import check_policy_files, find_policy_files
+    from .runtime.policy import write_policy_fingerprint
 
     files = find_policy_files(src)
     check_policy_files(files, {}, force=True)  # refuses statistics of another model
@@ -521,7 +521,7 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
         info.update(json.loads((src / "best.json").read_text()))
     (dest / "exported.json").write_text(json.dumps(info, indent=2) + "\n")
     if (dest / "eval.csv").is_file():  # the curve of what was exported: no best marker on a final
-        from .run_files import plot_eval
+        from .common.run_files import plot_eval
 
         try:
             plot_eval(dest / "eval.csv", dest / "eval.png", kept="best" if src == best else "final")
@@ -532,7 +532,7 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
 
 
 def cmd_margins(args) -> int:
-    from .margins_cli import run_margins  # loaded when the command runs, not when parsing
+    from .results.margins_cli import run_margins  # loaded when the command runs, not when parsing
 
     return run_margins(args)
 
@@ -546,7 +546,7 @@ def _checked(path, flag: str) -> Path:
 
 
 def cmd_compare(args) -> int:
-    from .compare import chosen_entries, compare, parse_entry
+    from .results.compare import chosen_entries, compare, parse_entry
 
     parsed = [parse_entry(t) for t in args.entry or ()]
     mismatch = None

@@ -113,7 +113,7 @@ def main() -> None:
             row(f"passive {g}, Dask LocalCluster 2", spec.n_starts, su, dask, serial)
             print(f"Dask vs process pool: {pool / dask:.2f}x the pool's rate")
     if args.policy_grid:
-        from agents.policy import load_controller
+        from agents.runtime.policy import load_controller
 
         names = [args.policy] + [n for n in args.also.split(",") if n.strip()]
         for name in names:

@@ -35,7 +35,7 @@ MEASURES = ("cycle", "basin", "ceiling", "curve", "terrain", "mfpt", "window", "
 
 
 def _api():
-    """The margins API of this checkout: the core package, or the old agents/margins.py."""
+    """The margins API of this checkout: the core package, or the old agents/results/margins.py."""
     try:
         from bound_env.analysis.margins import closed_loop as cl
         from bound_env.analysis.margins import run as core
@@ -45,7 +45,7 @@ def _api():
             core.MFPT_CHUNK,
         )  # fmt: skip
     except ImportError:  # a checkout from before the move (no stride counter)
-        from agents import margins as core
+        from agents.results import margins as core
 
         return (
             core.Setup, core.run_task, core.setup_key, core.BUDGETS.get, None, "agents",
@@ -131,7 +131,7 @@ def measure(policy: str, budget_name: str, measures: list[str], gait: str) -> di
 
     import numpy as np
 
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
     from bound_env.params import load_gait
 
     Setup, run_task, setup_key, as_budget, strides, where, chunk = _api()

@@ -12,7 +12,7 @@ Importing the package registers these Gymnasium environments:
   published task, the one every shipped policy and controller acts in and every published
   margin was measured in (`PUBLISHED_TASK`: ``max_torque`` 80 N m; dt 0.01 s, rtol 1e-10 and
   the full observation as in v0), so that ``gym.make("PassiveBound-v1")`` and a shipped
-  policy (`agents.rollout.load_policy`) fit as they are. v0 stays registered unchanged
+  policy (`agents.runtime.rollout.load_policy`) fit as they are. v0 stays registered unchanged
   (40 N m; code and configs name it with their kwargs);
 - ``PassiveBoundStride-v1``: the stride-level `bound_env.stride_env.PassiveBoundStrideEnv`
   (one step = one stride of the step env, through the one stride map `bound_env.stride_map`;

@@ -138,7 +138,7 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
     angle, as the model assumes, so entries 9-12 are continuous at touchdown; at liftoff the
     leg angle jumps back to the touchdown angle (the massless leg snaps back), and entries 7-8
     jump at every contact change (a policy that must be continuous in the state can drop
-    them, as `agents.wrappers.ObservationFilter` does). Entries 13-14
+    them, as `agents.common.wrappers.ObservationFilter` does). Entries 13-14
     decide whether the next apex ends a stride (both legs must have touched down), entry 15
     when the episode ends for lack of an apex. The bounds are far outside anything a running
     robot reaches; the observation is clipped to them, which can only matter in the state a

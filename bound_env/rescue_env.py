@@ -1,8 +1,8 @@
 """PassiveBoundRescue-v0 and -v1: the rescue task, one step = one stride from a start past the
 safe radius.
 
-The task that fine-tuning solves (`agents.finetune`), public: starts beyond the safe radius of
-the LQR (where the gate hands over to a learned controller), a stride of the one stride map
+The task that fine-tuning solves (`agents.experts.finetune`), public: starts beyond the safe radius
+of the LQR (where the gate hands over to a learned controller), a stride of the one stride map
 (`bound_env.stride_map`) per step, and a return inside the safe radius ends the episode.
 v0 (`PassiveBoundRescueEnv`) pays for survival; v1 (`PassiveBoundRescueV1Env`) pays for a
 return only, so that standard RL learns to rescue. The start distribution (`sample_direction`,
@@ -239,7 +239,7 @@ class PassiveBoundRescueEnv(_RescueBase, utils.EzPickle):
     such as `mpc` or `default` hands over from the LQR) and must bring the apex state back
     inside it without falling. Inside the safe radius the LQR takes over for good, so a
     return ends the episode. This is the task of `bound-env finetune`
-    (`agents.finetune`), which plays it through the `bound_env.wrappers.LibraryActions`
+    (`agents.experts.finetune`), which plays it through the `bound_env.wrappers.LibraryActions`
     wrapper (discrete actions: the rows of the MPC's profile library).
 
     ## Action Space

@@ -4,7 +4,7 @@ Each checker takes the value and ``where``, the file and the field it came from
 (``"policies/x/config.json: expert.settings.safe"``), and returns the value in its checked
 type, or raises a one-line ValueError that starts with ``where``. The schema of each kind of
 file lives in one place and is written with these: controller specs in
-`bound_env.control.spec`, the policy folders in `agents.schema`.
+`bound_env.control.spec`, the policy folders in `agents.common.schema`.
 
 Strings are never read as numbers (``horizon: "12"`` is an error, not 12), booleans are never
 read as integers, and numbers must be finite.

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.policy import load_controller
+from agents.runtime.policy import load_controller
 from bound_env.analysis.margins import RETURN_TOL, ClosedLoop, fd_steps, random_directions
 from bound_env.analysis.numerics import map_fixed_point
 from bound_env.cache import atomic_write

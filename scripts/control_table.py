@@ -2,12 +2,12 @@
 
     PYTHONPATH=. .venv/bin/python scripts/control_table.py [--budget quick] [--seed S] [--out DIR]
 
-Each setting is a `bound_env.control.ControllerSpec` measured by `agents.margins.compute_margins`
-in the step env (PassiveBound-v0, the same yardsticks as every policy) on the random samples
-of ``--seed``: by default the validation seed (777, `agents.distill.VALIDATION_SEED`), on which
-the shipped designs are chosen; ``--seed 12345`` is the test set
-(`bound_env.analysis.margins.DEFAULT_SEED`, the table's old behaviour). Results are cached per
-setting under ``DIR/seed-<S>/<label>/`` (the test set: ``DIR/<label>/``, as before; an
+Each setting is a `bound_env.control.ControllerSpec` measured by
+`agents.results.margins.compute_margins` in the step env (PassiveBound-v0, the same yardsticks as
+every policy) on the random samples of ``--seed``: by default the validation seed (777,
+`agents.common.seeds.VALIDATION_SEED`), on which the shipped designs are chosen; ``--seed 12345`` is
+the test set (`bound_env.analysis.margins.DEFAULT_SEED`, the table's old behaviour). Results are
+cached per setting under ``DIR/seed-<S>/<label>/`` (the test set: ``DIR/<label>/``, as before; an
 interrupted run resumes), and the table is written to ``table.csv`` and ``table.md`` in that
 seed's directory (atomically).
 """
@@ -20,8 +20,8 @@ import io
 import sys
 from pathlib import Path
 
-from agents.distill import VALIDATION_SEED
-from agents.margins import compute_margins
+from agents.common.seeds import VALIDATION_SEED
+from agents.results.margins import compute_margins
 from bound_env.analysis.margins import DEFAULT_SEED, check_seed
 from bound_env.cache import atomic_write
 from bound_env.control import ControllerSpec, load_controller

@@ -120,7 +120,7 @@ def table(path: Path, seeds: list[int]) -> str:
 
 
 def load(name: str, gait: str):
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     return load_controller(name, gait=gait)
 

@@ -7,11 +7,11 @@ or a run folder holding one; its ``vecnormalize.pkl`` beside it is applied when 
 observations; the env id and ``env_kwargs`` of the run's ``config.yaml`` beside it make the
 env, so a PassiveBoundRescue-v1 model sees its own observation and action mode; without one,
 ``--env-id``), or a stride controller by name or path (``lqr``, ``mpc``, ``default``, a policy
-folder: `agents.policy.load_controller`), which plays its plan at each apex state of
+folder: `agents.runtime.policy.load_controller`), which plays its plan at each apex state of
 PassiveBoundRescue-v0 (the same plant, starts and returns as v1).
 
 The starts are z* + r |z*| xi for ``--dirs`` validation directions xi (seed 777,
-`agents.distill.VALIDATION_SEED`; `bound_env.analysis.margins.random_directions`, never the
+`agents.common.seeds.VALIDATION_SEED`; `bound_env.analysis.margins.random_directions`, never the
 test set's 12345) at each size r of ``--sizes``; a start inside the safe radius is not counted.
 An episode returns when the env says so (the apex state back inside the safe radius within
 ``horizon`` strides, without a fall). Prints one row per size and the mean over all starts;
@@ -30,10 +30,10 @@ import gymnasium as gym
 import numpy as np
 
 import bound_env
+from agents.common.seeds import VALIDATION_SEED
 from bound_env import RESCUE_ENV_ID
 from bound_env.analysis.margins import random_directions
 
-VALIDATION_SEED = 777  # agents.distill.VALIDATION_SEED
 SIZES = (0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45)
 N_DIRS = 32
 
@@ -84,7 +84,7 @@ def model_actor(path: Path):
 
 def controller_actor(name: str):
     """act(obs, env) of a stride controller: its plan at the env's apex state."""
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     ctrl = load_controller(name)
     plan = getattr(ctrl, "stride_action", None)

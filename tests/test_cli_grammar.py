@@ -170,8 +170,8 @@ def test_animate_out_is_a_folder_and_a_gif_path_still_works(tmp_path, monkeypatc
 
 def test_train_grammar_hp_set_gait_out_and_old_spellings(capsys):
     from agents.cli import train_sets
-    from agents.config import DEFAULT_CONFIG
-    from agents.train import resolve_section
+    from agents.common.config import DEFAULT_CONFIG
+    from agents.training.train import resolve_section
     from bound_env.cli import build_parser
 
     parser = build_parser()

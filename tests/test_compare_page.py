@@ -2,11 +2,11 @@
 
 The page is rewritten from a fixture (tests/data/render_only: a test-budget ``margins.json``
 of passive and of lqr, as `compute_margins` wrote them, and a ``paired.json`` with decision
-times) and must equal, byte for byte, what the code before the split of agents/compare.py made
-from the same files (``MARGINS.md``, ``headline.json`` and ``paired.expected.json`` beside
+times) and must equal, byte for byte, what the code before the split of agents/results/compare.py
+made from the same files (``MARGINS.md``, ``headline.json`` and ``paired.expected.json`` beside
 them; two later, deliberate changes of the page applied to ``MARGINS.md``: the
 reproducibility paragraph quotes differences, not an older page's numbers, and the full table
-is split with the headline columns first, `agents.table_split`). A malformed
+is split with the headline columns first, `agents.results.table_split`). A malformed
 ``margins.json``, ``paired.json`` or ``headline.json`` is one line naming the file and the key,
 exit 2, never a traceback.
 """
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.compare import chosen_entries, default_entries, parse_entry
+from agents.results.compare import chosen_entries, default_entries, parse_entry
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data" / "render_only"
@@ -54,7 +54,7 @@ def test_keep_defaults_keeps_every_default_column():
 
 
 def test_keep_defaults_on_the_command_line(monkeypatch):
-    import agents.compare as compare_mod
+    import agents.results.compare as compare_mod
     from bound_env.cli import main
 
     seen = {}
@@ -103,7 +103,7 @@ def _render_here(out, docs, capsys):
 
 
 def test_render_only_reproduces_the_page_byte_for_byte(tmp_path):
-    """The renderer split into agents/page.py & co. writes what the old compare.py wrote."""
+    """The renderer split into agents/results/page.py & co. writes what the old compare.py wrote."""
     out, docs = _fixture(tmp_path)
     r = _render(out, docs)
     assert r.returncode == 0, r.stderr
@@ -170,7 +170,7 @@ def test_render_only_refuses_a_paired_json_that_is_not_an_object(tmp_path, capsy
     ],
 )
 def test_a_malformed_headline_json_is_one_line(tmp_path, capsys, change, key):
-    from agents.headline import main
+    from agents.results.headline import main
 
     bad = tmp_path / "headline.json"
     shutil.copyfile(DATA / "headline.json", bad)
@@ -186,7 +186,7 @@ def test_a_malformed_headline_json_is_one_line(tmp_path, capsys, change, key):
 def test_no_top_level_key_of_margins_json_can_crash_the_page(tmp_path):
     """Without any one of its top-level keys, a margins.json renders or is one ValueError
     naming the file: never a KeyError, TypeError or AttributeError."""
-    from agents.compare import compare
+    from agents.results.compare import compare
 
     keys = list(json.loads((DATA / "out" / "lqr" / "margins.json").read_text()))
     for k, key in enumerate(keys):

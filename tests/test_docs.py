@@ -15,14 +15,14 @@ from pathlib import Path
 
 import pytest
 
-from agents.compare import (
+from agents.results.compare import (
     HEADLINE,
     headline_numbers,
     headline_table,
     load_result,
     mfpt_sigma_100_interval,
 )
-from agents.headline import END, START, load_headline, main, render_block, update_readme
+from agents.results.headline import END, START, load_headline, main, render_block, update_readme
 from bound_env.analysis.margins import column_styles
 from bound_env.analysis.margins.stats import t_interval
 
@@ -395,7 +395,7 @@ def test_load_result_refuses(tmp_path):
 
 
 def test_column_styles_unique_and_fixed():
-    from agents.compare import COLUMN_STYLES, default_entries
+    from agents.results.compare import COLUMN_STYLES, default_entries
 
     labels = [e[0] for e in default_entries()] + ["extra one", "extra two"]
     st = column_styles(labels, COLUMN_STYLES)

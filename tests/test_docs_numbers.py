@@ -2,9 +2,9 @@
 
 Every decision time, r50 and decision-speed ratio quoted in docs/*.md and README.md equals a
 value of the results page's JSON (``docs/headline.json``, ``docs/paired.json``, and the r50
-row of ``docs/MARGINS.md``'s table, which `agents.compare` writes from the columns'
+row of ``docs/MARGINS.md``'s table, which `agents.results.compare` writes from the columns'
 ``margins.json``) to the digits it is printed with. The sentences that quote the page are
-written from the JSON (``<!-- numbers:NAME -->`` blocks, `agents.prose`) and must be up to
+written from the JSON (``<!-- numbers:NAME -->`` blocks, `agents.results.prose`) and must be up to
 date; a sentence (or a clause between semicolons) that quotes another measurement says so
 (validation, a quick budget, the history of an archived policy) and is not checked against
 the page.
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.prose import BLOCK, doc_files, load_numbers, main, update_text
+from agents.results.prose import BLOCK, doc_files, load_numbers, main, update_text
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -120,7 +120,8 @@ def test_the_generated_sentences_are_up_to_date(capsys):
     blocks = 0
     for f in doc_files():
         text = f.read_text()
-        assert update_text(text, numbers, str(f)) == text, f"{f}: run python -m agents.prose"
+        run = "python -m agents.results.prose"
+        assert update_text(text, numbers, str(f)) == text, f"{f}: run {run}"
         blocks += len(BLOCK.findall(text))
     assert blocks >= 3
     assert main(["--check"]) == 0
@@ -146,7 +147,7 @@ def test_the_checker_finds_the_old_contradictions(tmp_path):
 
 
 def test_a_malformed_json_is_one_line(tmp_path, capsys, monkeypatch):
-    import agents.prose as prose
+    import agents.results.prose as prose
 
     bad = tmp_path / "paired.json"
     bad.write_text(json.dumps({"pairs": [], "decision_times": {"controllers": {}}}))
@@ -154,7 +155,7 @@ def test_a_malformed_json_is_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(
         prose,
         "load_numbers",
-        lambda: prose.Numbers(prose.load_headline(), prose.read_json_object(bad), paired_path=bad),
+        lambda: prose.Numbers(prose.load_headline(), prose.read_json(bad), paired_path=bad),
     )
     assert main(["--check"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

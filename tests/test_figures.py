@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.table_split import HEADLINE_LABELS, base_label, split_table
+from agents.results.table_split import HEADLINE_LABELS, base_label, split_table
 from bound_env.analysis.basin import return_scale
 from bound_env.analysis.margins.stats import bounded_t_interval, t_interval
 
@@ -101,7 +101,7 @@ def test_comparison_plots_are_wide_with_legends_outside(tmp_path, monkeypatch):
 
 
 def test_headline_columns_have_distinct_colours():
-    from agents.compare import COLUMN_STYLES, default_entries
+    from agents.results.compare import COLUMN_STYLES, default_entries
     from bound_env.analysis.margins import column_styles
 
     labels = [e[0] for e in default_entries()]
@@ -135,7 +135,7 @@ def _plot_texts(monkeypatch, **kwargs) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from agents.run_files import plot_eval
+    from agents.common.run_files import plot_eval
 
     figs = []
     close = plt.close
@@ -164,7 +164,7 @@ def test_training_plot_titles_and_markers(tmp_path, monkeypatch):
 
 def _wide_table() -> tuple[list[str], list[tuple[str, list[str]]]]:
     """The default page's columns (labels as the page writes them) and a few rows."""
-    from agents.compare import default_entries
+    from agents.results.compare import default_entries
 
     labels = [
         f"{e[0]} (3 seeds)" if len(e[1]) > 1 else e[0] for e in default_entries()

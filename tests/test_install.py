@@ -198,9 +198,9 @@ def test_installed_package_runs_outside_the_checkout(installed):
             [
                 py,
                 "-c",
-                "import json\nfrom agents.policy import policy_names\n"
+                "import json\nfrom agents.runtime.policy import policy_names\n"
                 "from bound_env.control import controller_names\n"
-                "from agents.config import resolve_config_path\n"
+                "from agents.common.config import resolve_config_path\n"
                 "print(json.dumps([policy_names(), controller_names(), "
                 "str(resolve_config_path('ppo-stride'))]))",
             ],

@@ -5,8 +5,8 @@ Every import counts, also those inside functions (deferred imports), those of a 
 imports from above would hide a circle), and imports by name at run time: through
 ``importlib.import_module`` / ``__import__`` with a literal, with an f-string whose literal
 prefix and one of the module's string constants name a module (``f"agents.{module}"``), and
-through `agents.config.get_class_by_name` / `agents.config.preprocess`, which import the
-classes the run configs name (``env_wrapper``, ``callback``, ``policy`` in configs/ and in the
+through `agents.common.config.get_class_by_name` / `agents.common.config.preprocess`, which import
+the classes the run configs name (``env_wrapper``, ``callback``, ``policy`` in configs/ and in the
 shipped policies' config.yaml): the module that calls them imports those modules. Neither
 `bound_env` nor `agents` has an import cycle, `bound_env` never imports `agents`,
 `bound_env.analysis` never imports `bound_env.control` (the stride protocol they share is
@@ -22,14 +22,16 @@ from pathlib import Path
 
 import pytest
 
+from agents import MOVED
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("bound_env", "agents")
-# Where the run configs live whose class paths `agents.config` imports by name
+# Where the run configs live whose class paths `agents.common.config` imports by name
 CONFIG_GLOBS = ("configs/**/*.yaml", "agents/policies/**/config.yaml")
-# Functions of agents.config that import classes by name: the caller imports those modules
-# (env_wrapper entries only for get_class_by_name's callers outside agents.config, which
+# Functions of agents.common.config that import classes by name: the caller imports those modules
+# (env_wrapper entries only for get_class_by_name's callers outside agents.common.config, which
 # resolve a run's wrappers; every kind for preprocess, which builds a whole training run).
-# agents.config itself is the resolver, not a user: its own calls count for its callers.
+# agents.common.config itself is the resolver, not a user: its own calls count for its callers.
 BY_NAME = {
     "get_class_by_name": ("env_wrapper",),
     "preprocess": ("env_wrapper", "callback", "policy"),
@@ -102,7 +104,7 @@ def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
                     first = arg.values[0]
                     if isinstance(first, ast.Constant) and isinstance(first.value, str):
                         names.update(first.value + c for c in constants)  # f"agents.{x}"
-            if fname in BY_NAME and mod != "agents.config":
+            if fname in BY_NAME and mod != "agents.common.config":
                 names.update(_config_modules(BY_NAME[fname]))
     return names
 
@@ -135,7 +137,8 @@ def _config_modules(keys) -> set[str]:
         for f in sorted(ROOT.glob(pattern)):
             for k, name in _config_entries(yaml.safe_load(f.read_text())):
                 if k in keys:
-                    out.add(name.rsplit(".", 1)[0])
+                    module = name.rsplit(".", 1)[0]
+                    out.add(MOVED.get(module, module))  # an old flat name: its module now
     return out
 
 
@@ -209,17 +212,21 @@ def test_the_walker_sees_deferred_and_string_imports():
     assert _cycles({"a": ["b"], "b": []}) == []
     # agents: deferred imports, script blocks and imports by name
     _, _, edges = _graph("agents")
-    assert "agents.stride_policy" in edges["agents.names"]  # inside load_apex_controller
-    assert "agents.config" in edges["agents.stride_policy"]  # inside wrapper_kwargs
-    assert "agents.policy" in edges["agents.stride_validation"]
-    assert {"agents.distill", "agents.finetune"} <= set(edges["agents.learn_cli"])  # f-string
-    # the controller wrapper agents.residual.ResidualOver, named in configs/ppo-residual.yaml
-    assert "agents.residual" in edges["agents.policy"]  # get_class_by_name in controller_wrapper
-    assert {"agents.stride", "agents.train", "agents.residual"} <= set(
-        edges["agents.train"] + ["agents.train"]
+    # inside load_apex_controller
+    assert "agents.runtime.stride_policy" in edges["agents.runtime.names"]
+    assert "agents.common.config" in edges["agents.runtime.stride_policy"]  # inside wrapper_kwargs
+    assert "agents.runtime.policy" in edges["agents.experts.stride_validation"]
+    learned = {"agents.experts.distill", "agents.experts.finetune"}
+    assert learned <= set(edges["agents.experts.learn_cli"])  # f-string
+    # the controller wrapper agents.runtime.residual.ResidualOver, named in
+    # configs/ppo-residual.yaml: get_class_by_name in controller_wrapper
+    assert "agents.runtime.residual" in edges["agents.runtime.policy"]
+    assert {"agents.runtime.stride", "agents.training.train", "agents.runtime.residual"} <= set(
+        edges["agents.training.train"] + ["agents.training.train"]
     )
-    assert "agents.residual" not in edges["agents.config"]  # the resolver: counted for callers
-    tree = ast.parse("if __name__ == '__main__':\n    import agents.policy\n")
+    # the resolver: counted for its callers
+    assert "agents.runtime.residual" not in edges["agents.common.config"]
+    tree = ast.parse("if __name__ == '__main__':\n    import agents.runtime.policy\n")
     assert _script_blocks(tree)  # and such a block's imports are the module's own
 
 
@@ -397,3 +404,91 @@ def test_no_module_is_too_long(package):
     }
     long = {f: n for f, n in lines.items() if n > MAX_LINES[package]}
     assert long == {}, f"over {MAX_LINES[package]} lines: split them along their concepts"
+
+
+# agents/ in rooms by job, lowest first: a module imports its own room's modules and the rooms
+# below it, never one above nor a sibling of its rank (training and experts are independent).
+# The package itself (`agents/__init__.py`: `register_envs`, the old names' aliases) is below all.
+ROOMS = {
+    "agents": 0,
+    "agents.common": 1,
+    "agents.runtime": 2,
+    "agents.training": 3,
+    "agents.experts": 3,
+    "agents.results": 4,
+    "agents.multiseed": 5,
+    "agents.cli": 6,
+}
+MAX_MODULES = 15  # per folder of agents/
+
+
+def _room(module: str) -> str:
+    """The room of an agents module: its subpackage, or the top-level module itself."""
+    parts = module.split(".")
+    return ".".join(parts[:2])
+
+
+def _arrows_up(edges: dict[str, list[str]]) -> list[str]:
+    """Every import of ``edges`` from a room to another room not below it."""
+    bad = []
+    for m, targets in edges.items():
+        for n in targets:
+            a, b = _room(m), _room(n)
+            if a != b and ROOMS[b] >= ROOMS[a]:
+                bad.append(f"{m} -> {n}")
+    return bad
+
+
+def test_the_room_check_sees_an_arrow_up():
+    edges = {
+        "agents.runtime.names": ["agents.experts.distill", "agents.common.schema"],
+        "agents.training.train": ["agents.experts.distill", "agents.results.page"],
+        "agents.results.page": ["agents.runtime.policy", "agents.results.prose"],
+        "agents.common.schema": ["agents"],
+    }
+    assert _arrows_up(edges) == [
+        "agents.runtime.names -> agents.experts.distill",
+        "agents.training.train -> agents.experts.distill",  # siblings
+        "agents.training.train -> agents.results.page",
+    ]
+
+
+def test_agents_rooms_point_down():
+    """results -> training, experts -> runtime -> common (and the package root): training never
+    imports the results page, runtime neither training nor experts; no circle (above)."""
+    mods, _, edges = _graph("agents")
+    assert {_room(m) for m in mods} == set(ROOMS)  # every module lives in a room
+    assert _arrows_up(edges) == []
+
+
+def test_agents_rooms_are_small_and_say_their_job():
+    """No folder of agents/ with more than `MAX_MODULES` modules; each room's ``__init__`` says
+    its job in one sentence."""
+    for folder in [
+        ROOT / "agents",
+        *sorted(p.parent for p in (ROOT / "agents").glob("*/__init__.py")),
+    ]:
+        modules = [f for f in folder.glob("*.py") if f.name != "__init__.py"]
+        assert len(modules) <= MAX_MODULES, folder
+    for room in (r for r in ROOMS if r.count(".") == 1 and (ROOT / r.replace(".", "/")).is_dir()):
+        doc = ast.get_docstring(_tree(ROOT / room.replace(".", "/") / "__init__.py"))
+        assert doc and doc.count(". ") == 0 and doc.endswith("."), room
+
+
+def test_old_flat_names_are_aliases_of_the_moved_modules():
+    """``agents.policy`` & co. (run configs, shipped policies' pickled classes, users' scripts)
+    name the module that moved, the same object; every alias points at a module that exists."""
+    import importlib
+
+    mods = _modules("agents")
+    assert set(MOVED.values()) <= set(mods)
+    assert all(not (ROOT / (old.replace(".", "/") + ".py")).exists() for old in MOVED)
+    import agents.policy_files
+
+    import agents.common.schema as schema
+
+    assert importlib.import_module("agents.schema") is schema
+    assert agents.policy_files is importlib.import_module("agents.common.policy_files")
+    assert agents.policy_files.__spec__.name == "agents.common.policy_files"
+    # the class paths of every run config (also the shipped ones, which are fingerprinted)
+    assert _config_modules(("env_wrapper", "callback", "policy")) <= set(mods)

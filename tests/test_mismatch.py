@@ -183,7 +183,7 @@ def _setup(policy, spec="pm5", seed=12345):
 
     ctrl = load_controller(policy) if policy != "passive" else None
     if ctrl is None:
-        from agents.controllers import ZeroController
+        from agents.runtime.controllers import ZeroController
 
         ctrl = ZeroController()
     g = load_gait("default")
@@ -319,7 +319,7 @@ def test_noise_and_delay_reach_the_controller():
 
 
 def test_compute_margins_refuses_a_spec_twice():
-    from agents.controllers import ZeroController
+    from agents.runtime.controllers import ZeroController
     from bound_env.analysis.margins import compute_margins
 
     with pytest.raises(ValueError, match="names a spec twice"):

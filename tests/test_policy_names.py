@@ -1,5 +1,5 @@
-"""The curated set of shipped policies (issue 30): one name table (`agents.policy_table`) for
-the loader, ``--policy``'s help and docs/learned.md; ``default`` a name for ``finetuned/s0``,
+"""The curated set of shipped policies (issue 30): one name table (`agents.runtime.policy_table`)
+for the loader, ``--policy``'s help and docs/learned.md; ``default`` a name for ``finetuned/s0``,
 not a copy; the superseded policies archived, their old names saying where they went."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.policy_table import (
+from agents.runtime.policy_table import (
     ALIASES,
     ARCHIVE_DIR,
     ARCHIVED,
@@ -38,8 +38,8 @@ def test_the_shipped_set_is_the_curated_one():
 
 
 def test_default_loads_everywhere_it_did():
-    from agents.policy import load_controller, policy_names, resolve_policy
-    from agents.rollout import load_policy
+    from agents.runtime.policy import load_controller, policy_names, resolve_policy
+    from agents.runtime.rollout import load_policy
 
     assert "default" in policy_names()
     assert resolve_policy("default") == SHIPPED_DIR / "finetuned" / "s0"
@@ -51,7 +51,7 @@ def test_default_loads_everywhere_it_did():
 
 @pytest.mark.parametrize("name", ["ppo-v1", "warm-started/s1", "distilled/s0", "stride-residual"])
 def test_an_archived_name_says_where_it_went(name):
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     with pytest.raises(FileNotFoundError) as e:
         load_controller(name)
@@ -74,7 +74,7 @@ def test_an_archived_name_on_the_command_line_is_one_line():
 
 
 def test_an_archived_policy_still_loads_by_its_path():
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     ctrl = load_controller(ARCHIVE_DIR / "distilled" / "s0")
     assert callable(getattr(ctrl, "on_apex", None))
@@ -107,7 +107,7 @@ def test_help_and_docs_list_the_same_names():
 
 def test_an_archived_name_in_an_installed_package(monkeypatch, tmp_path):
     """A wheel has no archive: the message points at the repository."""
-    import agents.policy_table as table
+    import agents.runtime.policy_table as table
 
     monkeypatch.setattr(table, "ARCHIVE_DIR", tmp_path / "none")
     msg = table.archived_message("stride-residual/s0")

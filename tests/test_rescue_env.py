@@ -17,14 +17,14 @@ gym.register_envs(bound_env)
 
 @pytest.fixture(scope="module")
 def student():
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     return load_controller("default")
 
 
 def student_env(student, **kw):
     """The rescue env + wrapper on the student's own LQR and library (as `bound-env finetune`)."""
-    from agents.finetune import rescue_env_kwargs
+    from agents.experts.finetune import rescue_env_kwargs
 
     env = gym.make(RESCUE_ENV_ID, **rescue_env_kwargs(student), **kw)
     return LibraryActions(env, student.rows)
@@ -323,7 +323,7 @@ def test_train_with_a_bad_rescue_kwarg_leaves_no_run_folder(tmp_path):
     import sys
     from pathlib import Path
 
-    from agents.train import train
+    from agents.training.train import train
 
     with pytest.raises(ValueError, match="safe=13"):
         train("ppo-rescue", RESCUE_ENV_ID_V1, name="bad", runs_dir=tmp_path,
@@ -428,8 +428,8 @@ def test_the_shipped_config_section_makes_the_env():
     env with continuous actions."""
     from stable_baselines3 import PPO
 
-    from agents.config import preprocess
-    from agents.train import check_algo_kwargs, check_env_spec, resolve_section
+    from agents.common.config import preprocess
+    from agents.training.train import check_algo_kwargs, check_env_spec, resolve_section
 
     spec = preprocess(resolve_section("ppo-rescue", RESCUE_ENV_ID, None, None))
     check_algo_kwargs(spec.algo_kwargs, PPO)

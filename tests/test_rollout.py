@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.policy import find_policy_files, load_controller, shipped_policies
-from agents.policy_table import ARCHIVE_DIR
-from agents.rollout import load_policy, rollout
+from agents.runtime.policy import find_policy_files, load_controller, shipped_policies
+from agents.runtime.policy_table import ARCHIVE_DIR
+from agents.runtime.rollout import load_policy, rollout
 from bound_env.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent

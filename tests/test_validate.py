@@ -147,7 +147,7 @@ def test_stride_env_refuses_a_step_after_termination(envs):
 
 @pytest.fixture(scope="module")
 def choice_src():
-    from agents.policy import shipped_policies
+    from agents.runtime.policy import shipped_policies
 
     return shipped_policies()["default"]
 
@@ -173,7 +173,7 @@ def _copy(src, tmp_path, name="p"):
 def test_choice_npz_fields_are_checked(choice_src, tmp_path, key, value):
     """Any one array of choice.npz replaced: refused with the file and the array named (a
     fingerprint rewritten, so only the schema can catch it), or the policy still loads."""
-    from agents.distill import load_choice_policy, write_choice_fingerprint
+    from agents.runtime.choice_policy import load_choice_policy, write_choice_fingerprint
 
     d = _copy(choice_src, tmp_path)
     with np.load(d / "choice.npz") as f:
@@ -196,7 +196,7 @@ MPC = ["safe", "horizon", "rtol", "n_random", "cem_elites", "noise"]
 @FAST
 @given(where=st.sampled_from(SETTINGS + MPC), value=JSON_VALUE)
 def test_choice_config_fields_are_checked(choice_src, tmp_path, where, value):
-    from agents.distill import load_choice_policy, write_choice_fingerprint
+    from agents.runtime.choice_policy import load_choice_policy, write_choice_fingerprint
 
     d = _copy(choice_src, tmp_path)
     cfg = json.loads((d / "config.json").read_text())
@@ -210,7 +210,7 @@ def test_choice_config_fields_are_checked(choice_src, tmp_path, where, value):
 
 
 def test_shipped_choice_configs_name_their_sources_relative_to_the_package():
-    from agents.policy import SHIPPED_DIR, shipped_policies, source_name
+    from agents.runtime.policy import SHIPPED_DIR, shipped_policies, source_name
 
     for name, folder in shipped_policies().items():
         for f in ("config.json", "run.json", "exported.json"):
@@ -279,7 +279,7 @@ def test_progress_lines_when_stderr_is_not_a_terminal(capsys, monkeypatch):
 
 
 def test_rollout_summary_without_an_apex_says_so():
-    from agents.rollout import summary_text
+    from agents.runtime.rollout import summary_text
 
     r = {
         "apex_error": [],

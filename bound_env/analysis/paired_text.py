@@ -1,8 +1,8 @@
 """The paired comparisons of `bound_env.analysis.paired` in words and as Markdown tables.
 
 `paired_text` writes the results page's "Paired differences" section from the entries that
-``agents.compare.paired_comparisons`` makes (one per column and reference: ``delta_r50`` with
-its bootstrap interval, the per-size curve with McNemar's p, ``stands_out``; or ``skipped``
+``agents.results.compare.paired_comparisons`` makes (one per column and reference: ``delta_r50``
+with its bootstrap interval, the per-size curve with McNemar's p, ``stands_out``; or ``skipped``
 with the reason), i.e. from ``docs/paired.json``'s ``pairs``. Text only, no numerics.
 """
 

@@ -43,7 +43,7 @@ from ..stride_protocol import notify_apex, reset_controller
 from ..task import DEFAULT_DT, OBS_NAMES
 
 FULL_OBS_DIM = len(OBS_NAMES) - 1  # the default observation (x_g excluded)
-_MAKE = 'gym.make("PassiveBound-v1") (or the env factory of agents.rollout.load_policy)'
+_MAKE = 'gym.make("PassiveBound-v1") (or the env factory of agents.runtime.rollout.load_policy)'
 _SHARED = "one act per env: call load_policy once per env, or copy.deepcopy(act)"
 
 
@@ -59,7 +59,8 @@ class PlainPolicy:
             raise TypeError(
                 "PlainPolicy: controller must be a callable controller (obs -> action in "
                 f"[-1, 1]), got {type(controller).__name__}; load one with "
-                "agents.rollout.load_policy(NAME) or bound_env.control.load_controller(NAME)"
+                "agents.runtime.rollout.load_policy(NAME) or "
+                "bound_env.control.load_controller(NAME)"
             )
         self.controller = controller  # public; the loop below calls its own reference
         self._ctrl = controller

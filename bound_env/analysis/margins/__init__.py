@@ -70,7 +70,7 @@ Measures (JSON keys)
   depends on the grid); ``r50_ci`` = the same crossing of the interval's bounds.
   ``outcomes``: per size, the outcome (1: returned, 0: not) from each direction, in the
   order of ``random_directions(directions, direction_seed)``, for paired comparisons of two
-  controllers on the same directions (`agents.compare`, `bound_env.analysis.paired`).
+  controllers on the same directions (`agents.results.compare`, `bound_env.analysis.paired`).
 - ``terrain``: survival of ``terrain_runs`` runs of ``terrain_strides`` strides from z_cl on
   rough terrain (``slope_noise_deg`` = sigma: the slope changes by sigma xi at every apex,
   `bound_env.terrain`), each run one long episode with its own seed (``TERRAIN_SEED`` + k),
