@@ -22,8 +22,8 @@ def main(argv=None) -> int:
     ap.add_argument("--policy", default="adaptive")
     ap.add_argument("--strides", type=int, default=2000)
     args = ap.parse_args(argv)
-    from agents.adaptive import true_map, validation_plants
-    from agents.policy import load_controller
+    from agents.experts.adaptive import true_map, validation_plants
+    from agents.runtime.policy import load_controller
     from bound_env.control import load_controller as classical
 
     torch_threads = os.environ.get("OMP_NUM_THREADS")

@@ -25,7 +25,7 @@ import numpy as np
 
 
 def hold_entry(policy: str, spec_text: str, seed: int) -> dict:
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
     from bound_env.analysis.margins import as_budget
     from bound_env.analysis.margins.closed_loop import Setup
     from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS, task_mm_hold

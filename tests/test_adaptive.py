@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from agents.adaptive import (
+from agents.experts.adaptive import (
     POLICY_FILE,
     AdaptiveConfig,
     load_adaptive_policy,
