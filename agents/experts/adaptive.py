@@ -577,4 +577,60 @@ def train_from_config(
         f"{sum(r['states'] for r in rounds)} apex states in {len(rounds)} DAgger rounds "
         f"({sum(r['labelled'] for r in rounds)} labelled by the privileged teacher)",
     )
+    write_model_card(run / "policy")
     return run
+
+
+def model_card(folder) -> str:
+    """The model card of a policy folder (markdown): the plants and their range, the noise,
+    k, the teacher, the DAgger rounds and apex states, the training time and the validation
+    curve, all read from its ``config.json`` (and ``run.json`` when there is one)."""
+    folder = Path(folder)
+    cfg = json.loads((folder / "config.json").read_text())
+    a = cfg["adaptive"]
+    spec = as_spec(a["mismatch"]).to_dict()
+    ranges = ", ".join(f"{k} ±{d:.0%}" for k, d in spec["params"].items()) or "none (nominal)"
+    noise = sorted(set(spec["noise"].values()))
+    curve = cfg.get("validation_curve", [])
+    run = json.loads((folder / "run.json").read_text()) if (folder / "run.json").is_file() else {}
+    seconds = run.get("wall_time_s", curve[-1]["seconds"] if curve else float("nan"))
+    lines = [
+        f"# Model card: {folder.name}",
+        "",
+        "The learned adaptive controller (`agents.experts.adaptive`): deployable; its teacher "
+        "was privileged.",
+        "",
+        f"- plants: {ranges} (uniform, one plant per episode)",
+        f"- sensor noise: {noise[0]:.0%} of each component's scale" if noise else "- no noise",
+        f"- history: k = {a['k']} strides"
+        + (" plus the episode's means" if a.get("summary") and a["k"] > 0 else ""),
+        f"- teacher: {a['teacher']} (privileged: the expert {a['expert']}'s LQR gain about the "
+        "true plant's nearest cycle, else the MPC planning on the true plant)"
+        if a["teacher"] == "cycle"
+        else f"- teacher: the MPC {a['expert']} planning on the true plant (privileged)",
+        f"- DAgger: {a['rounds']} rounds, {a['episodes_first']} + {a['episodes_round']} per "
+        f"later round episodes of {a['strides']} strides, beta {a.get('beta', 0)}; "
+        f"{sum(r['states'] for r in curve)} apex states "
+        f"({sum(r['labelled'] for r in curve)} labelled)",
+        f"- network: tanh {list(a['hidden'])}, {a['epochs']} epochs per round, seed {a['seed']}",
+        f"- training time: {seconds:.0f} s on {run.get('machine', 'this machine')}",
+        "- selection: the final model (no selection); validation only on seed 777's plants",
+        "",
+        f"Validation curve (hold of {a['val_plants']} {a['val_mismatch']} plants of seed 777 "
+        f"for {a['val_strides']} strides from the nominal z*, the stride map):",
+        "",
+        "| round | states (total) | correction rms (targets') | factor rms | held |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for r in curve:
+        lines.append(
+            f"| {r['round']} | {r['states']} ({r['total']}) | {r['correction_rms']:.3f} "
+            f"({r['target_rms']:.3f}) | {r['factor_rms']:.3f} | "
+            f"{r['validation_hold']}/{r['validation_n']} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def write_model_card(folder) -> Path:
+    """`model_card` written to ``folder/MODEL_CARD.md`` (atomically)."""
+    return atomic_write(Path(folder) / "MODEL_CARD.md", model_card(folder))
