@@ -62,9 +62,74 @@ def hold_entry(policy: str, spec_text: str, seed: int) -> dict:
     }
 
 
+PRIVILEGED = ("cycle-teacher", "mpc-true-plant", "cycle-teacher-blind1", "cycle-teacher-blind2")
+
+
+class Blind:
+    """A privileged reference that plays the nominal LQR for its first ``n`` strides (as a
+    controller that must first see its robot), then the reference."""
+
+    def __init__(self, ref, lqr, n: int):
+        self.ref, self.lqr, self.n, self.k = ref, lqr, n, 0
+
+    def reset(self):
+        self.k = 0
+
+    def plan(self, z):
+        self.k += 1
+        return self.lqr.coefficients(z) if self.k <= self.n else self.ref.plan(z)
+
+
+def privileged_entry(name: str, spec_text: str, seed: int) -> dict:
+    """A privileged reference on the same plants (it reads each robot's true plant, so it
+    runs outside the margins' controller protocol): robot i on plant i of the seed's plants
+    from the nominal z*, ``hold_strides`` strides through the one stride map (the step env's
+    strides to rounding). ``cycle-teacher``: the adaptive controller's DAgger teacher
+    (`agents.experts.adaptive.CycleTeacher`); ``mpc-true-plant``: the shipped mpc planning on
+    the true plant (issue 37's probe); ``cycle-teacher-blindN``: the teacher after N strides of
+    the nominal LQR (what knowing the plant is worth once N strides were played without
+    knowing it). Privileged: never deployable."""
+    from agents.experts.adaptive import CycleTeacher, hold_on, privileged_teacher
+    from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS, mismatch_seeds
+    from bound_env.control import load_controller as classical
+    from bound_env.mismatch import as_spec, sample_plant_params
+
+    spec = as_spec(spec_text)
+    mb = MISMATCH_BUDGETS["quick"]
+    mpc = classical("mpc")
+    plants = sample_plant_params(spec, mb.plants, mismatch_seeds(seed)["plants"], mpc.params)
+    t0 = time.perf_counter()
+    reached = []
+    for p in plants:
+        if name.startswith("cycle-teacher"):
+            ref = CycleTeacher(mpc, p)
+        else:
+            ref = privileged_teacher(mpc, p)
+        if "-blind" in name:
+            ref = Blind(ref, mpc.lqr, int(name.rsplit("blind", 1)[1]))
+        reached += hold_on(ref, mpc, [p], mb.hold_strides)
+    outcomes = [int(n == mb.hold_strides) for n in reached]
+    return {
+        "policy": name,
+        "privileged": True,
+        "loop": "stride map",
+        "spec": spec.to_dict(),
+        "spec_name": spec.name,
+        "seed": seed,
+        "held": int(sum(outcomes)),
+        "n": len(outcomes),
+        "outcomes": outcomes,
+        "strides_reached": reached,
+        "effort_median": None,
+        "seconds": time.perf_counter() - t0,
+    }
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--policy", nargs="+", required=True)
+    ap.add_argument(
+        "--policy", nargs="+", required=True, help=f"policies, or privileged {PRIVILEGED}"
+    )
     ap.add_argument("--mismatch", nargs="+", required=True, help="specs (presets or .yaml)")
     ap.add_argument("--seed", type=int, default=12345)
     ap.add_argument("--out", required=True)
@@ -80,7 +145,10 @@ def main(argv=None) -> int:
 
             if (policy, as_spec(spec).name, args.seed) in done:
                 continue
-            e = hold_entry(policy, spec, args.seed)
+            if policy in PRIVILEGED:
+                e = privileged_entry(policy, spec, args.seed)
+            else:
+                e = hold_entry(policy, spec, args.seed)
             data["entries"].append(e)
             atomic_write(out, json.dumps(data, indent=1) + "\n")
             print(
