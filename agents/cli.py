@@ -379,7 +379,17 @@ def cmd_train(args) -> int:
     from .common.config import load_hyperparams
 
     if load_hyperparams(args.config, args.env_id).get("algo") == "adaptive-dagger":
-        return _train_adaptive(args, t0)  # the learned adaptive controller (DAgger, no PPO)
+        from .experts.adaptive_recipe import train_recipe  # DAgger, no PPO
+
+        run, dest = train_recipe(args, train_sets(args))
+        say(
+            args,
+            f"run {run}  ({time.perf_counter() - t0:.0f} s)"
+            + (f", exported to {dest}" if dest else ""),
+        )
+        if args.json:
+            print(strict_json({"run": str(run), "export": str(dest) if dest else None}))
+        return 0
     if args.seeds is not None:
         return _train_seeds(args, n, t0)
     if args.export:  # refused before training, not after it
@@ -407,36 +417,6 @@ def cmd_train(args) -> int:
         say(args, f"exported to {dest}")
     if args.json:
         info = json.loads((Path(run) / "run.json").read_text())
-        print(strict_json({"run": str(run), "export": str(dest) if dest else None, **info}))
-    return 0
-
-
-def _train_adaptive(args, t0) -> int:
-    """``bound-env train`` of a config section with ``algo: adaptive-dagger``
-    (`agents.experts.adaptive.train_from_config`); ``--export-out`` copies its policy."""
-    from .experts.adaptive import train_from_config
-    from .experts.distill import export_folder
-
-    for flag, value in (("--seeds", args.seeds), ("--init-from", args.init_from)):
-        if value is not None:
-            raise ValueError(f"{flag}: not for algo adaptive-dagger (one seed per run)")
-    if args.export:
-        check_export_dest(args.export, args.force)
-    run = train_from_config(
-        args.config,
-        args.env_id,
-        args.seed,
-        name=args.name,
-        runs_dir=args.runs_dir,
-        sets=train_sets(args),
-        progress=not args.no_progress,
-    )
-    say(args, f"run {run}  ({time.perf_counter() - t0:.0f} s)")
-    dest = export_folder(run / "policy", args.export) if args.export else None
-    if dest is not None:
-        say(args, f"exported to {dest}")
-    if args.json:
-        info = json.loads((run / "summary.json").read_text())
         print(strict_json({"run": str(run), "export": str(dest) if dest else None, **info}))
     return 0
 

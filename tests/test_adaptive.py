@@ -170,3 +170,61 @@ def test_tiny_training_history_changes_the_action(mpc, tmp_path):
     # a resumed run (every round saved) refits the same policy
     train_adaptive(cfg, tmp_path / "run", progress=False)
     assert load_adaptive_policy(tmp_path / "run" / "policy").fingerprint() == ctrl.fingerprint()
+
+
+@pytest.mark.parametrize(
+    "hp, match",
+    [
+        ({"algo": "adaptive-dagger", "adaptive": {"kk": 3}}, "adaptive.kk: unknown"),
+        ({"algo": "adaptive-dagger", "extra": 1}, "unknown key 'extra'"),
+        (
+            {"algo": "adaptive-dagger", "env_kwargs": {"max_torque": 40.0}},
+            "env_kwargs.max_torque = 40.0, but the expert",
+        ),
+        (
+            {"algo": "adaptive-dagger", "env_wrapper": [{"agents.stride.StrideControl": {}}]},
+            "RandomizedPlant only",
+        ),
+        (
+            {
+                "algo": "adaptive-dagger",
+                "env_wrapper": [{"bound_env.wrappers.RandomizedPlant": {"mismatch": "pm99"}}],
+            },
+            "unknown mismatch preset",
+        ),
+    ],
+)
+def test_recipe_section_refuses_bad_keys(hp, match):
+    from agents.experts.adaptive_recipe import config_from_section
+
+    with pytest.raises(ValueError, match=match):
+        config_from_section(hp, "PassiveBoundStride-v1", 0)
+    with pytest.raises(ValueError, match="stride env"):
+        config_from_section({"algo": "adaptive-dagger"}, "PassiveBound-v1", 0)
+
+
+def test_recipe_section_reads_the_shipped_config():
+    from agents.common.config import load_hyperparams
+    from agents.experts.adaptive_recipe import config_from_section
+
+    cfg = config_from_section(
+        load_hyperparams("adaptive", "PassiveBoundStride-v1"), "PassiveBoundStride-v1", 4
+    )
+    assert cfg.mismatch == "pm10+noise" and cfg.k == 3 and cfg.seed == 4 and cfg.hidden == (64, 64)
+
+
+@pytest.mark.slow
+def test_train_command_runs_the_recipe(tmp_path):
+    """``bound-env train --config adaptive`` (tiny settings): a run folder, an exported policy
+    with its model card, loadable by path."""
+    from agents.runtime.policy import load_controller
+    from bound_env.cli import main
+
+    argv = ["train", "--config", "adaptive", "--seed", "3", "--out", str(tmp_path / "runs")]
+    for kv in ("rounds=1", "episodes_first=2", "strides=3", "val_plants=1", "val_strides=2"):
+        argv += ["--hp", f"adaptive.{kv}"]
+    argv += ["--hp", "adaptive.epochs=2", "--export-out", str(tmp_path / "pol"), "--no-progress"]
+    assert main(argv) == 0
+    assert (tmp_path / "pol" / "MODEL_CARD.md").is_file()
+    assert "k = 3" in (tmp_path / "pol" / "MODEL_CARD.md").read_text()
+    assert load_controller(tmp_path / "pol").k == 3
