@@ -374,6 +374,24 @@ def cmd_train(args) -> int:
 
     t0 = time.perf_counter()
     n = int(args.n_timesteps) if args.n_timesteps is not None else None
+    if args.env_id is None:
+        from .common.config import default_env_id
+
+        args.env_id = default_env_id(args.config)
+    from .common.config import load_hyperparams
+
+    if load_hyperparams(args.config, args.env_id).get("algo") == "adaptive-dagger":
+        from .experts.adaptive_recipe import train_recipe  # DAgger, no PPO
+
+        run, dest = train_recipe(args, train_sets(args))
+        say(
+            args,
+            f"run {run}  ({time.perf_counter() - t0:.0f} s)"
+            + (f", exported to {dest}" if dest else ""),
+        )
+        if args.json:
+            print(strict_json({"run": str(run), "export": str(dest) if dest else None}))
+        return 0
     if args.seeds is not None:
         return _train_seeds(args, n, t0)
     if args.export:  # refused before training, not after it

@@ -21,7 +21,16 @@ from agents.runtime.policy_table import (
 
 ROOT = Path(__file__).resolve().parent.parent
 CURATED = {"default", "literal-cycle"} | {
-    f"{g}/s{k}" for g in ("finetuned", "step-ppo", "ppo-v1-final") for k in range(3)
+    f"{g}/s{k}"
+    for g in (
+        "finetuned",
+        "step-ppo",
+        "ppo-v1-final",
+        "adaptive",
+        "adaptive-nohist",
+        "adaptive-nominal",
+    )
+    for k in range(3)
 }
 
 

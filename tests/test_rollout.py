@@ -157,6 +157,9 @@ def test_fingerprint_covers_the_config_and_old_fingerprints_still_load(policy_co
         if (folder / "choice.npz").is_file():  # a distilled choice policy (test_distill)
             assert set(fp) == {"choice.npz", "config.json"}, name
             continue
+        if (folder / "adaptive.npz").is_file():  # a learned adaptive policy (test_adaptive)
+            assert set(fp) == {"adaptive.npz", "config.json"}, name
+            continue
         assert "config.yaml" in fp, name
         assert ("base.json" in fp) == (folder / "base.json").is_file(), name
     # a fingerprint written before it covered the config (model and statistics only) loads

@@ -168,6 +168,10 @@ def load_apex_controller(path: str | Path, gait: str | Path | None = None, force
     path = resolve_policy(path)
     if isinstance(path, str):
         return CONTROLLERS[path][0](gait=gait)
+    if Path(path).is_dir() and (Path(path) / "adaptive.npz").is_file():
+        from .adaptive_policy import load_adaptive_policy  # the learned adaptive controller
+
+        return load_adaptive_policy(path, gait=gait, force=force)
     if Path(path).is_dir() and policy_kind(path) == "choice":  # a PPO + choice.npz: refused
         from .choice_policy import load_choice_policy  # a distilled student
 
