@@ -41,7 +41,7 @@ OTHER = re.compile(
     r"validation|seed\s+777|seeds?\s+20\d\d|seed\s+2024|quick\s+budget|budget\s+quick|"
     r"--budget\s+quick|--budget\s+test|test\s+budget|[Hh]istory|archived|[Tt]he\s+literal\s+reading|"
     r"\b20\d\d-\d\d-\d\d\b|hold_eval|control_table|control_effort|rescue_eval|validation_curve|"
-    r"stride_validation|run\.json|[Aa]blation|measured\s+with\s+margins\s+v2|older\s+page|not\s+shipped|tried",
+    r"stride_validation|run\.json|[Aa]blation|earlier\s+(?:version|measure)|own\s+benchmark|measured\s+with\s+margins\s+v2|older\s+page|not\s+shipped|tried",
 )
 NUM = r"[+−-]?\d+(?:\.\d+)?"
 NOT_A_COUNT = r"(?!\s?(?:%|strides|directions|plants|seeds|robots|runs|windows))"
@@ -94,6 +94,21 @@ def _cells(row: str) -> list[str]:
     return [c.strip() for c in re.split(r"(?<!\\)\|", row.strip().strip("|"))]
 
 
+def _clauses(para: str) -> list[str]:
+    """The sentences of a paragraph, and their clauses between semicolons outside
+    parentheses (a parenthesis is one clause with the text around it)."""
+    out, start, depth = [], 0, 0
+    for i, ch in enumerate(para):
+        depth += {"(": 1, ")": -1}.get(ch, 0)
+        ends = ch == "." and (i + 1 == len(para) or para[i + 1].isspace())
+        if (ends or (ch == ";" and depth <= 0)) and para[start : i + 1].strip():
+            out.append(para[start : i + 1].strip())
+            start, depth = i + 1, (0 if ends else depth)
+    if para[start:].strip():
+        out.append(para[start:].strip())
+    return out
+
+
 def _passages(text: str):
     """(line, passage, other, table, context) outside the generated blocks and fenced code:
     the sentences (and clauses between semicolons) of each paragraph, and each cell of a
@@ -105,6 +120,9 @@ def _passages(text: str):
     caption_other, caption = False, ""
     for para in re.split(r"(\n\s*\n)", text):
         if not para.strip():
+            line += para.count("\n")
+            continue
+        if not para.replace("§", "").strip():  # a code block between a caption and its table
             line += para.count("\n")
             continue
         rows = para.splitlines()
@@ -119,7 +137,7 @@ def _passages(text: str):
                     yield line + i, f"{cells[0]}, {head}: {cell}", row_other, True, caption
         else:
             caption_other, caption = bool(OTHER.search(para)), para
-            for s in re.split(r"(?<=[.;])\s+", para):
+            for s in _clauses(para):
                 at = line + para[: para.find(s)].count("\n")
                 yield at, s, bool(OTHER.search(s)), False, ""
         line += para.count("\n")
