@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import sys
 import time
@@ -25,14 +26,12 @@ BUDGET_HELP = (
     "directions), standard or full (256 directions, the finest curves); the time of one "
     "policy's margins is not measured per budget (a whole compare page: see compare --help)"
 )
-# compare's budgets with their measured times (a whole page of the default columns)
+# compare's budgets (the page's own run time is in docs/columns.json, quoted by the docs)
 COMPARE_BUDGET_HELP = (
-    "margins budget of every column (bound_env.analysis.margins.BUDGETS): test (a smoke test; "
-    "time not measured), quick (32 random directions; the default page took about 20 min in "
-    "the one timing reported, machine load not stated), standard (time not "
-    "measured) or full (256 directions, the finest curves: 12.2 min of wall time for the "
-    "default page from an empty cache on 2 idle cores, docs/MARGINS.md); with a warm cache "
-    "only the page is rewritten"
+    "margins budget of every column (bound_env.analysis.margins.BUDGETS): test (a smoke test), "
+    "quick (32 random directions), standard or full (256 directions, the finest curves: the "
+    "results page's; the run that made it records its wall time in docs/columns.json, "
+    "docs/yardsticks.md quotes it); with a warm cache only the page is rewritten"
 )
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv", "eval.png")
@@ -75,7 +74,10 @@ def register(sub) -> None:
         help="run name: runs/<name>/ (default: <env-id>_s<seed>; letters, digits, . _ + -)",
     )
     p.add_argument(
-        "--seed", type=number(int, 0, SEED_MAX), default=0, help="training seed (default: 0)"
+        "--seed",
+        type=number(int, 0, SEED_MAX),
+        default=None,
+        help="training seed (default: 0; on --resume the run's)",
     )
     p.add_argument("--n-timesteps", type=number(float, 1, 1e10), help="override n_timesteps")
     p.add_argument(
@@ -376,6 +378,20 @@ def cmd_train(args) -> int:
         from .common.config import default_env_id
 
         args.env_id = default_env_id(args.config)
+    from .common.config import load_hyperparams
+
+    if load_hyperparams(args.config, args.env_id).get("algo") == "adaptive-dagger":
+        from .experts.adaptive_recipe import train_recipe  # DAgger, no PPO
+
+        run, dest = train_recipe(args, train_sets(args))
+        say(
+            args,
+            f"run {run}  ({time.perf_counter() - t0:.0f} s)"
+            + (f", exported to {dest}" if dest else ""),
+        )
+        if args.json:
+            print(strict_json({"run": str(run), "export": str(dest) if dest else None}))
+        return 0
     if args.seeds is not None:
         return _train_seeds(args, n, t0)
     if args.export:  # refused before training, not after it
@@ -468,6 +484,10 @@ def _train_seeds(args, n, t0) -> int:
         save_freq=_default(args.save_freq, 200_000, args.resume),
     )
     budget = None if args.compare_budget == "none" else args.compare_budget
+    if args.name is None and args.env_id is None:
+        from .common.config import default_env_id
+
+        args.name = default_env_id(args.config)  # the seeds' runs: <env id>_s<seed>
     r = train_seeds(
         seeds,
         args.name or args.env_id,
@@ -551,9 +571,9 @@ def cmd_compare(args) -> int:
     parsed = [parse_entry(t) for t in args.entry or ()]
     mismatch = None
     if args.mismatch is not None:
-        from bound_env.mismatch import as_spec
+        from bound_env.mismatch import parse_specs
 
-        mismatch = [as_spec(t) for t in args.mismatch.split(",")]  # a bad spec: before any work
+        mismatch = parse_specs(args.mismatch)  # a bad spec: before any work
     entries = chosen_entries(parsed, keep_defaults=args.keep_defaults)
     path = compare(
         entries,
@@ -567,6 +587,7 @@ def cmd_compare(args) -> int:
         seed=args.seed,
         render_only=args.render_only,
         mismatch=mismatch,
+        command=shlex.join(["bound-env", *getattr(args, "argv", ["compare"])]),
     )
     say(args, f"wrote {path}")
     if args.json:

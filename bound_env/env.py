@@ -14,6 +14,7 @@ import numpy as np
 from gymnasium import spaces, utils
 
 from .params import P_ALPHA, Params
+from .schema import integer
 from .task import (
     DEFAULT_ALIVE_REWARD,
     DEFAULT_CTRL_COST_WEIGHT,
@@ -33,6 +34,7 @@ from .task import (
 )
 
 RENDER_MODES = ("human", "rgb_array")
+MAX_FRAME = 4096  # frame width and height [pixels] at most
 
 
 def check_action(action, n: int = 1) -> np.ndarray:
@@ -289,7 +291,8 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
             zip(self.task.obs_names, self.task.obs_units, strict=True)
         )
         self.render_mode = render_mode
-        self.width, self.height = int(width), int(height)
+        self.width = integer(width, "width", 1, MAX_FRAME)  # [pixels]; a bool or 1.5 refused
+        self.height = integer(height, "height", 1, MAX_FRAME)
         self._renderer = None
         self._b = self.task.new_batch(1)
 

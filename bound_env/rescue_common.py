@@ -18,7 +18,8 @@ from gymnasium import spaces
 from .params import Z_NAMES
 from .schema import dt_value, real_array
 from .stride_env import Z_HIGH, Z_LOW, refuse_step_after_end
-from .stride_map import EVAL_RTOL, StrideMap, interval_weights
+from .stride_map import EVAL_RTOL, StrideMap
+from .stride_protocol import ProfileActions
 from .task import APEX_SCALES, PassiveBoundTask, check_reset_options
 
 DEFAULT_CONTROLLER = "mpc"  # the spec whose LQR (and safe radius) the defaults are
@@ -161,7 +162,7 @@ class RescueBase(gym.Env):
         b = self.lqr.basis
         self.K = b.K
         # the profile's interval averages a = W u (as the MPC's planning model applies it)
-        self._W = interval_weights(b.edges, b.phi, self.lqr.dt)
+        self._profile = ProfileActions(b, self.lqr.dt)
         self.plant = StrideMap(self.lqr.gait, None, self.lqr.dt, self.lqr.max_torque, EVAL_RTOL)
         self.action_space = spaces.Box(-1.0, 1.0, (self.K,), dtype=np.float32)
         self._z = self.z_ref.copy()
@@ -210,7 +211,7 @@ class RescueBase(gym.Env):
 
     def profile_actions(self, u) -> np.ndarray:
         """The interval actions of the coefficients u (the plant's input)."""
-        return (np.atleast_2d(u) @ self._W.T)[0]
+        return self._profile(u)[0]
 
     def _start(self, options) -> np.ndarray:
         """The start apex state: ``options["apex_state"]`` (past the safe radius), or a draw

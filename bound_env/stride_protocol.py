@@ -8,8 +8,9 @@ imports control:
   observation (`OBS_Z`, `OBS_TIME`, `OBS_TH2DOT`), and the times it reads on each control
   interval (`observed_times`, `grid_times`);
 - a profile's interval actions (`interval_averages`, `interval_actions_of`: bit for bit what a
-  stride controller's ``__call__`` outputs), the plans of n robots under one controller
-  (`StridePlans`) and the loop side of ``on_apex`` (`notify_apex`);
+  stride controller's ``__call__`` outputs; `ProfileActions`: the stride map's a = W u), the
+  plans of n robots under one controller (`StridePlans`) and the loop side of ``on_apex``
+  (`notify_apex`);
 - who made an apex decision (`DECISION_KINDS`; a gated planner's ``decision_kinds``).
 
 The controller side of the protocol is described in `bound_env.control.controllers`.
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .stride_map import max_intervals
+from .stride_map import interval_weights, max_intervals
 from .stride_task import TorqueBasis
 from .task import OBS_NAMES
 
@@ -70,6 +71,19 @@ def interval_actions_of(basis: TorqueBasis, max_torque: float, U, times, dt: flo
     return np.clip(avg / max_torque, -1.0, 1.0)
 
 
+class ProfileActions:
+    """A profile's coefficients -> its interval actions a = W u on the step env's control grid
+    from the apex (`bound_env.stride_map.interval_weights` of the ``basis`` at ``dt``): the
+    stride map's input for a planned profile (the MPC's planning model, the rescue env's
+    plant). Rows of U in, rows of actions out."""
+
+    def __init__(self, basis: TorqueBasis, dt: float):
+        self.W = interval_weights(basis.edges, basis.phi, dt)
+
+    def __call__(self, U) -> np.ndarray:
+        return np.atleast_2d(U) @ self.W.T
+
+
 class StridePlans:
     """The stride plans of n robots under one stride controller, for loops that step many
     robots through the step env at once (long episodes, `bound_env.stride_map.to_next_apex`):
@@ -105,6 +119,22 @@ def notify_apex(controller, obs, info) -> None:
     if on_apex is None:
         return
     if "apex_z" in info:
-        on_apex(np.asarray(info["apex_z"], dtype=float), float(obs[OBS_TIME]))
+        on_apex(_apex_state(info, "apex_z"), float(obs[OBS_TIME]))
     elif "start_z" in info:
-        on_apex(np.asarray(info["start_z"], dtype=float), 0.0)
+        on_apex(_apex_state(info, "start_z"), 0.0)
+
+
+def _apex_state(info, key: str) -> np.ndarray:
+    """``info[key]`` as six finite numbers (a stride controller plans from it); ValueError
+    naming the key otherwise (a NaN apex state would become a NaN torque)."""
+    try:
+        z = np.asarray(info[key], dtype=float)
+    except (TypeError, ValueError):
+        z = None
+    if z is None or z.shape != (6,) or not np.all(np.isfinite(z)):
+        got = " ".join(repr(info[key]).split())  # one line
+        raise ValueError(
+            f"info[{key!r}] must be the apex state, six finite numbers, got {got[:160]}; "
+            "pass the info the env returned"
+        )
+    return z

@@ -52,6 +52,11 @@ class LibraryActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env, rows=None):
         gym.utils.RecordConstructorArgs.__init__(self, rows=rows)
         gym.ActionWrapper.__init__(self, env)
+        if not isinstance(env.action_space, gym.spaces.Box) or env.action_space.shape is None:
+            raise ValueError(  # e.g. a LibraryActions already: its actions are rows, not a profile
+                f"LibraryActions needs an env whose action is a profile's coefficients (a Box), "
+                f"got {env.action_space}: wrap the env once"
+            )
         base = env.unwrapped
         if not (hasattr(base, "lqr") and hasattr(base, "z")):
             raise ValueError("LibraryActions needs an env with an LQR and an apex state z "

@@ -1,16 +1,21 @@
-"""Hold under parameter error: does a stride controller hold random plants from the nominal z*?
+"""Hold under parameter error: does a controller hold random plants from the nominal z*?
 
     PYTHONPATH=. python scripts/hold_eval.py --policy lqr lqr+of default default+of \
         --delta 0.05 0.1 0.2 --seed 777 [--robots 32] [--strides 100] [--out results.jsonl]
 
-Each robot runs on its own plant: m1, m2, I1, I2, kb, kf, kc and zeta of the controller's gait
-each scaled by U(1 - delta, 1 + delta), drawn from ``--seed`` (the same plants for every
-controller). Every robot starts on the nominal z* and runs ``--strides`` strides through the
-one stride map (`bound_env.stride_map.StrideMap.run` with per-robot parameters); hold = no
-fall. Reported: the held count and, over the held robots, the median of the mean |tau| over
-the last 10 strides (impulse / time). A stateful controller (`OffsetFree`) keeps one state per
-robot (``start`` / ``plan_actions``). Each finished (policy, delta, seed) row is appended to
-``--out`` (JSON lines) and skipped when already there, so a killed run resumes.
+The hold measure of ``bound-env margins --mismatch pmD`` (``mismatch.hold``), alone, for many
+controllers, error sizes and seeds. Each robot runs on its own plant: m1, m2, I1, I2, kb, kf,
+kc and zeta of the controller's gait each scaled by U(1 - delta, 1 + delta), drawn by the
+library's plant sampling (`bound_env.mismatch.sample_plant_params`) from the library's plant
+seed of ``--seed`` (`bound_env.analysis.margins.mismatch_tasks.mismatch_seeds`), so that
+``--seed 777 --delta 0.05`` names the same plants, in the same order, as
+``bound-env margins --mismatch pm5 --seed 777`` (the same plants for every controller).
+Every robot starts on the nominal z* and runs ``--strides`` strides through the library's
+hold measure (`mismatch_tasks.task_mm_hold`: the step env, each stride restarted at its apex,
+every robot with a fresh controller state); hold = no fall. Reported: the held count and,
+over the held robots, the median of the mean |tau| over the last 10 strides (impulse / time).
+Each finished (policy, delta, seed) row is appended to ``--out`` (JSON lines) and skipped
+when already there, so a killed run resumes.
 """
 
 from __future__ import annotations
@@ -19,63 +24,71 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from bound_env.dynamics import make_aux
+from bound_env.analysis.margins.budget import BUDGETS, check_seed
+from bound_env.analysis.margins.closed_loop import Setup
+from bound_env.analysis.margins.mismatch_tasks import (
+    MISMATCH_BUDGETS,
+    mismatch_seeds,
+    plants_of,
+    task_mm_hold,
+)
+from bound_env.mismatch import EIGHT, from_dict
 from bound_env.params import load_gait
-from bound_env.stride_map import EVAL_RTOL, StrideMap
 
-VARIED = ("m1", "m2", "I1", "I2", "kb", "kf", "kc", "zeta")
 TAIL = 10  # strides of the effort average
+MEASURE = "mm_hold"  # the rows' measure (rows of the earlier stride-map script have none)
 
 
-def sample_plants(gait: str, delta: float, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """(factors (n, 8), aux (n, N_AUX)): the plants of ``n`` robots from ``seed``."""
-    base = load_gait(gait).params
-    rng = np.random.default_rng(seed)
-    F = rng.uniform(1.0 - delta, 1.0 + delta, size=(n, len(VARIED)))
-    aux = []
-    for f in F:
-        values = {k: getattr(base, k) * float(x) for k, x in zip(VARIED, f, strict=True)}
-        aux.append(make_aux(base.with_values(**values).to_array()))
-    return F, np.array(aux)
+def spec_of(delta: float):
+    """The model-error spec of ``--delta``: the eight parameters at +-delta (``pm5`` for
+    0.05, as `bound_env.mismatch.PRESETS`)."""
+    return from_dict({"params": dict.fromkeys(EIGHT, delta), "name": f"pm{100 * delta:g}"})
 
 
-def hold(ctrl, aux: np.ndarray, strides: int, gait: str = "default") -> dict:
-    """Run every robot ``strides`` strides from z*; per robot: held, strides, tail effort."""
-    kw = dict(getattr(ctrl, "env_kwargs", None) or {})
-    sm = StrideMap(gait, None, kw.get("dt", 0.01), kw.get("max_torque", 80.0), EVAL_RTOL)
-    n = len(aux)
-    Z = np.tile(sm.z_ref, (n, 1))
-    live = np.arange(n)
-    done = np.zeros(n, dtype=np.int64)
-    impulse = np.zeros((n, strides))
-    period = np.zeros((n, strides))
-    state = ctrl.start(n) if getattr(ctrl, "stateful", False) else None
-    for k in range(strides):
-        if state is not None:
-            A = ctrl.plan_actions(state, Z[live], live)
-        else:
-            A = ctrl.interval_actions(Z[live])
-        r = sm.run(Z[live], A, aux=aux[live])
-        ok = r.ok & np.all(np.isfinite(r.z1), axis=1)
-        impulse[live, k] = r.effort * r.period
-        period[live, k] = r.period
-        Z[live[ok]] = r.z1[ok]
-        done[live[ok]] += 1
-        live = live[ok]
-        if not len(live):
-            break
-    held = done >= strides
-    tail = impulse[:, -TAIL:].sum(axis=1) / np.maximum(period[:, -TAIL:].sum(axis=1), 1e-12)
-    return {"held": held.tolist(), "strides": done.tolist(), "tail_effort": tail.tolist()}
+def setup_of(ctrl, key: str, delta: float, robots: int, strides: int, seed: int, gait: str):
+    """The margins `Setup` of the hold measure (only its model-error part is used)."""
+    mb = replace(
+        MISMATCH_BUDGETS["quick"],
+        name="hold_eval",
+        plants=robots,
+        hold_strides=strides,
+        effort_strides=TAIL,
+    )
+    return Setup(
+        controller=ctrl,
+        gait=gait,
+        budget=BUDGETS["test"],
+        z_star=np.asarray(load_gait(gait).z0, dtype=float),
+        key=f"hold_eval/{key}",
+        seed=check_seed(seed),
+        mismatch=spec_of(delta),
+        mismatch_budget=mb,
+    )
+
+
+def plants(delta: float, robots: int, seed: int, gait: str = "default") -> list:
+    """The plants (`bound_env.params.Params`) of ``robots`` robots (`plants_of`)."""
+    return plants_of(setup_of(None, "", delta, robots, 1, seed, gait), robots)
+
+
+def hold(setup) -> dict:
+    """Per robot: held, strides, tail effort (None unless held), by `task_mm_hold`."""
+    r = task_mm_hold(setup)
+    return {
+        "held": [bool(o) for o in r["outcomes"]],
+        "strides": r["strides"],
+        "tail_effort": r["effort"],
+    }
 
 
 def summary(res: dict) -> tuple[int, float]:
     held = np.array(res["held"])
-    eff = np.array(res["tail_effort"])[held]
+    eff = np.array([e for e, h in zip(res["tail_effort"], held, strict=True) if h], dtype=float)
     return int(held.sum()), float(np.median(eff)) if eff.size else float("nan")
 
 
@@ -88,7 +101,9 @@ def table(path: Path, seeds: list[int]) -> str:
     from bound_env.analysis.paired import mcnemar_exact
 
     rows = [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
-    rows = [r for r in rows if r["seed"] in seeds and not r.get("set")]
+    rows = [
+        r for r in rows if r["seed"] in seeds and not r.get("set") and r.get("measure") == MEASURE
+    ]
     pols = list(dict.fromkeys(r["policy"] for r in rows))
     deltas = sorted({r["delta"] for r in rows})
     pooled: dict = {}
@@ -105,7 +120,9 @@ def table(path: Path, seeds: list[int]) -> str:
                 cells.append("")
                 continue
             held = np.concatenate([pooled[(p, d)][0][s] for s in seeds]).astype(bool)
-            eff = np.concatenate([pooled[(p, d)][1][s] for s in seeds])
+            eff = np.array(
+                [np.nan if e is None else e for s in seeds for e in pooled[(p, d)][1][s]]
+            )
             lo, hi = wilson_interval(int(held.sum()), held.size)
             med = f", {np.median(eff[held]):.2g} N·m" if held.any() else ""
             cell = f"{held.sum()}/{held.size} [{lo:.2f}, {hi:.2f}]{med}"
@@ -126,28 +143,7 @@ def load(name: str, gait: str):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--policy", nargs="+", default=["lqr", "lqr+of"])
-    ap.add_argument("--delta", nargs="+", type=float, default=[0.05, 0.1, 0.2])
-    ap.add_argument("--seed", type=int, default=777)
-    ap.add_argument("--robots", type=int, default=32)
-    ap.add_argument("--strides", type=int, default=100)
-    ap.add_argument("--gait", default="default")
-    ap.add_argument("--out", type=Path, default=None)
-    ap.add_argument(
-        "--set",
-        nargs="*",
-        default=[],
-        metavar="KEY=VALUE",
-        help="OffsetFree settings of the '+of' policies (estimator, gain, deadband, max_shift)",
-    )
-    ap.add_argument(
-        "--table",
-        type=int,
-        nargs="+",
-        metavar="SEED",
-        help="print the Markdown table of --out on these seeds (pooled) and exit",
-    )
+    ap = parser()  # typed, range-checked options (end of the file)
     args = ap.parse_args(argv)
     if args.table:
         if args.out is None or not args.out.is_file():
@@ -158,6 +154,11 @@ def main(argv=None) -> int:
     if not (0.0 <= min(args.delta) and max(args.delta) < 1.0):
         print("error: --delta must lie in [0, 1)", file=sys.stderr)
         return 2
+    try:
+        check_seed(args.seed)
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     overrides = {}
     for item in args.set:
         k, _, v = item.partition("=")
@@ -167,7 +168,8 @@ def main(argv=None) -> int:
     if args.out is not None and args.out.exists():
         for line in args.out.read_text().splitlines():
             row = json.loads(line)
-            seen.add((row["policy"], row["delta"], row["seed"], row.get("set", ""), row["n"]))
+            if row.get("measure") == MEASURE:
+                seen.add((row["policy"], row["delta"], row["seed"], row.get("set", ""), row["n"]))
     for name in args.policy:
         ctrl = None
         for delta in args.delta:
@@ -182,9 +184,11 @@ def main(argv=None) -> int:
                     ctrl = OffsetFree(
                         ctrl.inner, name=ctrl.name, **{**ctrl.settings(), **overrides}
                     )
-            _, aux = sample_plants(args.gait, delta, args.robots, args.seed)
+            setup = setup_of(
+                ctrl, f"{name}/{tag}", delta, args.robots, args.strides, args.seed, args.gait
+            )
             t0 = time.time()
-            res = hold(ctrl, aux, args.strides, args.gait)
+            res = hold(setup)
             n_held, eff = summary(res)
             print(
                 f"{name:14s} delta={delta:.2f} seed={args.seed} {tag:28s} held {n_held:2d}/"
@@ -196,6 +200,8 @@ def main(argv=None) -> int:
                     "policy": name,
                     "delta": delta,
                     "seed": args.seed,
+                    "measure": MEASURE,
+                    "plant_seed": mismatch_seeds(args.seed)["plants"],
                     "set": tag,
                     "n": args.robots,
                     "strides": args.strides,
@@ -208,5 +214,77 @@ def main(argv=None) -> int:
     return 0
 
 
+def parser() -> argparse.ArgumentParser:
+    """The options, typed and range-checked with the command line's own argparse types
+    (`bound_env.cli_args.number`): a bad one is a usage error, exit 2."""
+    from bound_env.cli_args import number
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--policy", nargs="+", type=_policy, default=["lqr", "lqr+of"])
+    ap.add_argument("--delta", nargs="+", type=number(float, 0.0, 0.99), default=[0.05, 0.1, 0.2])
+    ap.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=777)
+    ap.add_argument("--robots", type=number(int, 1, 100_000), default=32)
+    ap.add_argument("--strides", type=number(int, TAIL, 100_000), default=100)
+    ap.add_argument("--gait", default="default")
+    ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument(
+        "--set",
+        nargs="*",
+        type=_of_setting,
+        default=[],
+        metavar="KEY=VALUE",
+        help="OffsetFree settings of the '+of' policies (estimator, gain, deadband, max_shift)",
+    )
+    ap.add_argument(
+        "--table",
+        type=number(int, 0, 2**32 - 1),
+        nargs="+",
+        metavar="SEED",
+        help="print the Markdown table of --out on these seeds (pooled) and exit",
+    )
+    return ap
+
+
+def _policy(text: str) -> str:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("a policy must be a name or a path, got ''")
+    return text
+
+
+def _of_setting(text: str) -> str:
+    """``KEY=VALUE`` of an `OffsetFree` setting, its value checked (`OF_LIMITS`)."""
+    from bound_env.control.offset_free import ESTIMATORS, OF_LIMITS
+
+    key, eq, value = text.partition("=")
+    if not eq or key not in ("estimator", *OF_LIMITS):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: give KEY=VALUE with KEY one of estimator, {', '.join(OF_LIMITS)}"
+        )
+    if key == "estimator":
+        if value not in ESTIMATORS:
+            raise argparse.ArgumentTypeError(
+                f"estimator must be one of {ESTIMATORS}, got {value!r}"
+            )
+        return text
+    from bound_env.cli_args import number
+
+    lo, hi = OF_LIMITS[key]
+    try:
+        number(float, lo, hi, lo_open=key == "gain")(value)
+    except argparse.ArgumentTypeError as e:
+        raise argparse.ArgumentTypeError(f"{key}: {e}") from None  # names the setting
+    return text
+
+
+def run(argv=None) -> int:
+    """`main`, with what fails after the options parsed (an unknown policy or gait, an --out
+    that is a folder) as one line and exit 2."""
+    try:
+        return main(argv)
+    except (ValueError, OSError, TypeError) as e:
+        print(f"hold_eval.py: error: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run())

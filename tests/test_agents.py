@@ -460,6 +460,8 @@ def test_cli_margins_json_and_compare(tmp_path, capsys):
                 "compare",
                 "--budget",
                 "test",
+                "--entry",  # passive and lqr: the curated columns are test_install's
+                "lqr",
                 "--workers",
                 "1",
                 "--out",
@@ -471,5 +473,5 @@ def test_cli_margins_json_and_compare(tmp_path, capsys):
         == 0
     )
     page = (docs / "MARGINS.md").read_text()
-    assert "basin_min" in page and "passive" in page
+    assert "basin_min" in page and "passive" in page and "lqr" in page
     assert (docs / "margins_basin.png").is_file()

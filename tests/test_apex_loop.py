@@ -100,3 +100,39 @@ def test_margins_times_every_apex_decision_of_its_loops():
             assert (kinds == "override").any() and (kinds == "gate").any()
             assert np.median(t[kinds == "override"]) > 5 * np.median(t[kinds == "gate"])
     CLOCK.seconds.clear()
+
+
+def test_every_robot_starts_with_a_fresh_controller_state():
+    """One reset rule: an offset-free controller (its estimate of the plant's offset is
+    state) gives the same per-direction outcome whatever ran before it in the worker. Here a
+    spine-stiffness window task (a plant off its model, stepped through the same controller
+    object) leaves the controller with a large offset estimate; the random-direction curve
+    after it is the curve of a fresh worker, on the nominal plant and under model error."""
+    from dataclasses import replace
+
+    from bound_env.analysis.margins.budget import BUDGETS
+    from bound_env.analysis.margins.closed_loop import _LOOPS, Setup
+    from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
+    from bound_env.analysis.margins.run import run_task
+    from bound_env.mismatch import as_spec
+
+    z_star = load_controller("lqr").z_ref
+    budget = replace(BUDGETS["test"], curve_dirs=4, basin_strides=80)
+    mb = replace(MISMATCH_BUDGETS["test"], plants=4, curve_strides=30)
+
+    def worker(before=None):
+        _LOOPS.clear()  # a new worker process: no loop, a controller as loaded
+        setup = Setup(load_controller("lqr-of"), "default", budget, z_star, z_star, key="of",
+                      mismatch=as_spec("pm5"), mismatch_budget=mb)  # fmt: skip
+        if before is not None:
+            run_task(setup, *before)
+            assert np.max(np.abs(setup.controller.offset)) > 1.0  # it learned an offset
+        return [
+            run_task(setup, "curve", (0.01,))["outcomes"],
+            run_task(setup, "mm_curve", (0.01,))["outcomes"],
+        ]
+
+    fresh = worker()
+    assert sum(fresh[0]) > 0  # some directions return (a carried offset loses them all)
+    assert worker(("window", ("kc", 1))) == fresh
+    _LOOPS.clear()

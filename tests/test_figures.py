@@ -201,3 +201,44 @@ def test_split_table_small_and_wrong_inputs():
         split_table(["a", "b"], [("x", ["1"])])
     with pytest.raises(ValueError, match="per_table"):
         split_table(["a"], [], per_table=0)
+
+
+# ------------------------------------------------------------------ the images of docs/
+def test_every_image_in_docs_is_shown_and_none_is_a_copy():
+    """No PNG in docs/ that no page (or the site's config) shows, and no two that are the same
+    bytes (compare removes the training curves of columns it no longer has)."""
+    import hashlib
+
+    docs = ROOT / "docs"
+    text = "\n".join(p.read_text() for p in [*docs.rglob("*.md"), ROOT / "mkdocs.yml"])
+    pngs = sorted(docs.rglob("*.png"))
+    assert pngs
+    unused = [str(p.relative_to(docs)) for p in pngs if p.name not in text]
+    assert unused == []
+    seen: dict = {}
+    for p in pngs:
+        seen.setdefault(hashlib.sha256(p.read_bytes()).hexdigest(), []).append(p.name)
+    assert [names for names in seen.values() if len(names) > 1] == []
+
+
+def test_a_training_plot_with_no_evaluation_reward_shows_episode_lengths(tmp_path, monkeypatch):
+    """A task whose evaluation env's own reward is 0 (step-ppo's) is drawn as the evaluation
+    episodes' lengths, not as a flat line at zero."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from agents.common.run_files import plot_eval
+
+    csv = tmp_path / "eval.csv"
+    csv.write_text(
+        "timesteps,mean_reward,std_reward,mean_length,mean_strides,fall_rate,noise_scale,"
+        "wall_time_s\n1000,0.0,0.0,10,2.5,0.4,nan,1\n2000,0.0,0.0,20,4.0,0.3,nan,2\n"
+    )
+    drawn = {}
+    monkeypatch.setattr(plt.Figure, "savefig", lambda self, *a, **k: drawn.setdefault("f", self))
+    plot_eval(csv, tmp_path / "eval.png", kept="final")
+    ax = drawn["f"].axes[0]
+    assert list(ax.lines[0].get_ydata()) == [2.5, 4.0]
+    assert "strides" in ax.get_ylabel()

@@ -16,6 +16,8 @@ imports: the classical margins path (``bound-env margins --policy lqr``) never l
 """
 
 import ast
+import functools
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -59,6 +61,7 @@ def _from_module(mod: str, is_pkg: bool, node: ast.ImportFrom) -> str:
     return ".".join(base + ([node.module] if node.module else []))
 
 
+@functools.cache  # each file is parsed once per session (the checks walk the same trees)
 def _tree(path: Path) -> ast.AST:
     return ast.parse(path.read_text(), filename=str(path))
 
@@ -78,7 +81,8 @@ def _script_blocks(tree: ast.Module) -> list[ast.If]:
     ]
 
 
-def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
+@functools.cache
+def _imported_names(mod: str, path: Path, is_pkg: bool) -> frozenset[str]:
     """Every dotted name ``mod`` imports, absolute, including ``from X import submodule``,
     its script block's and its imports by name (module docstring)."""
     tree = _tree(path)
@@ -106,7 +110,7 @@ def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
                         names.update(first.value + c for c in constants)  # f"agents.{x}"
             if fname in BY_NAME and mod != "agents.common.config":
                 names.update(_config_modules(BY_NAME[fname]))
-    return names
+    return frozenset(names)
 
 
 def _config_entries(value, key=None):
@@ -128,7 +132,8 @@ def _config_entries(value, key=None):
             yield from _config_entries(v, key)
 
 
-def _config_modules(keys) -> set[str]:
+@functools.cache
+def _config_modules(keys: tuple[str, ...]) -> frozenset[str]:
     """The modules of the classes the run configs name under ``keys``."""
     import yaml
 
@@ -139,7 +144,7 @@ def _config_modules(keys) -> set[str]:
                 if k in keys:
                     module = name.rsplit(".", 1)[0]
                     out.add(MOVED.get(module, module))  # an old flat name: its module now
-    return out
+    return frozenset(out)
 
 
 def _private_imports(mod: str, tree: ast.AST, is_pkg: bool, mods) -> list[str]:
@@ -298,41 +303,56 @@ def test_no_private_name_is_imported_across_modules():
     assert _all_private_imports() == {}
 
 
-# Runs ``bound-env margins`` in a fresh interpreter up to the point where the work starts (the
-# first batch of tasks, `run_tasks`), then reports which heavy modules are loaded.
+# Runs each ``bound-env margins`` command line (JSON, argv[1]) in one fresh interpreter up to
+# the point where the work starts (the first batch of tasks, `run_tasks`), and reports after
+# each which heavy modules are loaded.
 _UP_TO_THE_TASKS = """
+import json
 import sys
 
 from bound_env.analysis.margins import run
 
 
+class Reached(BaseException):  # not an Exception: nothing on the way catches it
+    pass
+
+
 def stop(*args, **kwargs):
-    heavy = sorted(m for m in ("torch", "stable_baselines3") if m in sys.modules)
-    print("reached the tasks; heavy modules:", heavy)
-    raise SystemExit(0)
+    raise Reached
 
 
 run.run_tasks = stop
 from bound_env.cli import main
 
-sys.exit(main(sys.argv[1:]))
+for argv in json.loads(sys.argv[1]):
+    try:
+        main(argv)
+    except Reached:
+        heavy = sorted(m for m in ("torch", "stable_baselines3") if m in sys.modules)
+        print(argv[2], "reached the tasks; heavy modules:", heavy)
 """
 
 
-@pytest.mark.parametrize("policy", ["lqr", "passive"])
-def test_classical_margins_never_import_torch(policy, tmp_path):
+def test_classical_margins_never_import_torch(tmp_path):
     """The command line, the agents front, the controller (`bound_env.control` for lqr), the
-    cycle scale and the cache key: everything ``margins`` loads before its first task."""
-    argv = ["margins", "--policy", policy, "--budget", "test", "--workers", "1", "--no-cache"]
+    cycle scale and the cache key: everything ``margins`` loads before its first task, for lqr
+    and then passive (one interpreter: the report after lqr is lqr's alone)."""
+    runs = [
+        ["margins", "--policy", policy, "--budget", "test", "--workers", "1", "--no-cache"]
+        + ["--out", str(tmp_path / policy)]
+        for policy in ("lqr", "passive")
+    ]
     res = subprocess.run(
-        [sys.executable, "-c", _UP_TO_THE_TASKS, *argv, "--out", str(tmp_path / "m")],
+        [sys.executable, "-c", _UP_TO_THE_TASKS, json.dumps(runs)],
         cwd=ROOT,
         capture_output=True,
         text=True,
         timeout=300,
     )
     assert res.returncode == 0, res.stderr
-    assert "reached the tasks; heavy modules: []" in res.stdout, res.stdout + res.stderr
+    for policy in ("lqr", "passive"):
+        want = f"{policy} reached the tasks; heavy modules: []"
+        assert want in res.stdout.splitlines(), res.stdout + res.stderr
 
 
 @pytest.mark.parametrize(
@@ -479,6 +499,7 @@ def test_old_flat_names_are_aliases_of_the_moved_modules():
     """``agents.policy`` & co. (run configs, shipped policies' pickled classes, users' scripts)
     name the module that moved, the same object; every alias points at a module that exists."""
     import importlib
+    import importlib.util
 
     mods = _modules("agents")
     assert set(MOVED.values()) <= set(mods)
@@ -490,5 +511,8 @@ def test_old_flat_names_are_aliases_of_the_moved_modules():
     assert importlib.import_module("agents.schema") is schema
     assert agents.policy_files is importlib.import_module("agents.common.policy_files")
     assert agents.policy_files.__spec__.name == "agents.common.policy_files"
-    # the class paths of every run config (also the shipped ones, which are fingerprinted)
-    assert _config_modules(("env_wrapper", "callback", "policy")) <= set(mods)
+    # the class paths of every run config (also the shipped ones, which are fingerprinted):
+    # modules of agents, or of bound_env (an env wrapper of the simulator's, RandomizedPlant)
+    named = _config_modules(("env_wrapper", "callback", "policy"))
+    assert {m for m in named if not m.startswith("bound_env.")} <= set(mods)
+    assert all(importlib.util.find_spec(m) for m in named if m.startswith("bound_env."))

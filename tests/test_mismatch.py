@@ -257,7 +257,7 @@ def test_markdown_pairs_shared_plants():
     b = _block("pm5", [1, 0, 0, 0], [[1, 1, 0, 0], [0, 0, 0, 0]])
     c = _block("pm10", [0, 0, 0, 0], [[0, 0, 0, 0], [0, 0, 0, 0]])
     md = mismatch_markdown({"passive": [b], "lqr": {"pm5": a, "pm10": c}})
-    assert "#### pm5" in md and "#### pm10" in md
+    assert "### pm5" in md and "### pm10" in md and "#### " not in md
     assert "| lqr | 4/4" in md and "3/0, p = 0.25" in md  # McNemar: 3 discordant pairs
     assert "| passive | 1/4" in md
 

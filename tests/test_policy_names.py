@@ -5,8 +5,6 @@ not a copy; the superseded policies archived, their old names saying where they 
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -23,7 +21,16 @@ from agents.runtime.policy_table import (
 
 ROOT = Path(__file__).resolve().parent.parent
 CURATED = {"default", "literal-cycle"} | {
-    f"{g}/s{k}" for g in ("finetuned", "step-ppo", "ppo-v1-final") for k in range(3)
+    f"{g}/s{k}"
+    for g in (
+        "finetuned",
+        "step-ppo",
+        "ppo-v1-final",
+        "adaptive",
+        "adaptive-nohist",
+        "adaptive-nominal",
+    )
+    for k in range(3)
 }
 
 
@@ -60,17 +67,11 @@ def test_an_archived_name_says_where_it_went(name):
     assert str(ARCHIVE_DIR / name) in msg and "archived" in msg
 
 
-def test_an_archived_name_on_the_command_line_is_one_line():
-    r = subprocess.run(
-        [sys.executable, "-m", "bound_env.cli", "rollout", "--policy", "ppo-v1", "--strides", "1"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and "archive" in lines[0] and "ppo-v1" in lines[0], r.stderr
+def test_an_archived_name_on_the_command_line_is_one_line(cli):
+    code, _, err = cli("rollout", "--policy", "ppo-v1", "--strides", "1")
+    assert code == 2 and "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "archive" in lines[0] and "ppo-v1" in lines[0], err
 
 
 def test_an_archived_policy_still_loads_by_its_path():

@@ -335,28 +335,20 @@ def test_a_step_after_a_fall_or_past_truncation_is_refused(env_id):
     env.step(np.zeros(8, dtype=np.float32))
 
 
-def test_train_with_a_bad_rescue_kwarg_leaves_no_run_folder(tmp_path):
+def test_train_with_a_bad_rescue_kwarg_leaves_no_run_folder(tmp_path, cli):
     """`train` makes one env before its run folder: a `safe` no start can pass (it hung in
     reset and left the folder behind) is a one-line error, and the CLI exits 2."""
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-
     from agents.training.train import train
 
     with pytest.raises(ValueError, match="safe=13"):
         train("ppo-rescue", RESCUE_ENV_ID_V1, name="bad", runs_dir=tmp_path,
               sets=["env_kwargs.safe=13"], progress_bar=False)  # fmt: skip
     assert not (tmp_path / "bad").exists()
-    root = Path(__file__).resolve().parent.parent
-    env = dict(os.environ, PYTHONPATH=str(root))
-    cmd = [sys.executable, "-m", "bound_env.cli", "train", "--config", "ppo-rescue",
-           "--env-id", RESCUE_ENV_ID, "--hp", "env_kwargs.r_max=1e-9", "--name", "bad",
-           "--out", str(tmp_path), "--no-progress"]  # fmt: skip
-    r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode != 0 and "r_max=1e-09" in r.stderr, r.stderr
-    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    code, _, err = cli("train", "--config", "ppo-rescue", "--env-id", RESCUE_ENV_ID,
+                       "--hp", "env_kwargs.r_max=1e-9", "--name", "bad", "--out", tmp_path,
+                       "--no-progress")  # fmt: skip
+    assert code == 2 and "r_max=1e-09" in err, err
+    assert len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "bad").exists()
 
 

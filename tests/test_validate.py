@@ -252,14 +252,18 @@ def test_cli_parses_before_importing_the_heavy_modules():
     assert r.returncode == 2 and "--budget" in r.stderr and "Traceback" not in r.stderr
 
 
-def test_compare_defaults_to_quick_and_its_help_gives_measured_times(capsys):
+def test_compare_defaults_to_quick_and_its_help_says_where_its_time_is(capsys):
+    """The page's run time is one measured figure (docs/columns.json, quoted by the docs):
+    the help points there instead of quoting a time of its own."""
+    import re
+
     from bound_env.cli import build_parser, main
 
     args = build_parser().parse_args(["compare"])
     assert args.budget == "quick"
     assert main(["compare", "--help"]) == 0
     out = " ".join(capsys.readouterr().out.split())
-    assert "12.2 min" in out and "not measured" in out and "seconds" not in out
+    assert "docs/columns.json" in out and not re.search(r"\d min\b", out)
 
 
 def test_progress_lines_when_stderr_is_not_a_terminal(capsys, monkeypatch):

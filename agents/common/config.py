@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import importlib
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -207,18 +208,43 @@ class TrainSpec:
         return env
 
 
+# the counts of a section: (lowest, highest) whole number
+HP_COUNTS = {
+    "n_envs": (1, 1024),
+    "n_timesteps": (1, 10**12),
+    "n_steps": (1, 10**8),
+    "batch_size": (1, 10**8),
+    "n_epochs": (1, 10**6),
+}
+
+
+def hp_count(hp: dict, key: str, default=None) -> int:
+    """A hyperparameter that counts (`HP_COUNTS`): a whole number (``1e5`` and ``100000.0``
+    too; not a bool, a list, text or a fraction) in its range; ValueError naming the key."""
+    v = hp.get(key, default)
+    lo, hi = HP_COUNTS[key]
+    ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+    if not ok or v != int(v) or not lo <= v <= hi:
+        raise ValueError(f"hyperparameter {key} must be a whole number in [{lo}, {hi}], got {v!r}")
+    return int(v)
+
+
+def hp_real(v, key: str) -> float:
+    """A real hyperparameter (a learning rate, a clip range): a finite number > 0."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise ValueError(f"hyperparameter {key} must be a finite number > 0, got {v!r}")
+    return float(v)
+
+
 def preprocess(hp: dict) -> TrainSpec:
     """Turn a section into a `TrainSpec` (schedules, normalization, classes), as rl-zoo3 does."""
     hp = copy.deepcopy(hp)
     if "frame_stack" in hp:
         raise ValueError("frame_stack is not supported (the PassiveBound observation is Markov)")
-    try:
-        n_envs = int(hp.get("n_envs", 1))
-        n_timesteps = int(float(hp["n_timesteps"]))
-    except KeyError:
-        raise ValueError("the hyperparameters need n_timesteps") from None
-    if n_envs < 1 or n_timesteps < 1:
-        raise ValueError(f"n_envs and n_timesteps must be positive, got {n_envs}, {n_timesteps}")
+    if "n_timesteps" not in hp:
+        raise ValueError("the hyperparameters need n_timesteps")
+    n_envs = hp_count(hp, "n_envs", 1)
+    n_timesteps = hp_count(hp, "n_timesteps")
     normalize = hp.get("normalize", False)
     normalize_kwargs = None
     if isinstance(normalize, str):
@@ -239,16 +265,20 @@ def preprocess(hp: dict) -> TrainSpec:
             kind, _, value = v.partition("_")
             if kind != "lin":
                 raise ValueError(f"{key}: only 'lin_<value>' schedules are known, got {v!r}")
-            algo[key] = linear_schedule(float(value))
+            try:
+                start = float(value)
+            except ValueError:
+                raise ValueError(f"{key}: 'lin_<value>' needs a number, got {v!r}") from None
+            algo[key] = linear_schedule(hp_real(start, key))
         elif v is not None:
-            algo[key] = float(v)
+            algo[key] = hp_real(v, key)
     if isinstance(algo.get("policy"), str) and "." in algo["policy"]:  # a class path
         algo["policy"] = get_class_by_name(algo["policy"])
     if isinstance(algo.get("policy_kwargs"), str):
         algo["policy_kwargs"] = eval_kwargs_string(algo["policy_kwargs"])
     for key in ("n_steps", "batch_size", "n_epochs"):
         if key in algo:
-            algo[key] = int(algo[key])
+            algo[key] = hp_count(algo, key)
     return TrainSpec(
         n_envs=n_envs,
         n_timesteps=n_timesteps,

@@ -311,7 +311,7 @@ def check_base_pin(
 
 
 def check_policy_files(
-    files: PolicyFiles, section: dict, force: bool = False, env_given: bool = False
+    files: PolicyFiles, section: dict, force: bool = False, env_given: bool = False, also=()
 ) -> list[str]:
     """ValueError for a policy whose evaluation would be silently wrong; returns warnings.
 
@@ -324,7 +324,11 @@ def check_policy_files(
     - a ``config.yaml`` (or ``base.json``) that does not match the fingerprint: edited or cut
       short since the policy was saved (a config cut before ``env_kwargs`` still parses, and
       would evaluate the policy at the env's default max_torque); ``force`` evaluates it as it
-      is, with a warning.
+      is, with a warning;
+    - a policy of this project's layout with a config but no ``fingerprint.json`` (deleted, or
+      saved before fingerprints): nothing above can be checked, nor ``also`` (what else a
+      caller would check with it, e.g. a residual's base); ``force`` evaluates it as it is,
+      with a warning naming what was not checked.
     """
     warnings = []
     if files.config is None and not env_given:
@@ -369,6 +373,23 @@ def check_policy_files(
                         "policy with it as it is"
                     )
                 warnings.append(msg)
+    elif files.layout == "bound_env" and files.config is not None:
+        folder = files.model.parent
+        unchecked = [f"that vecnormalize.pkl belongs to {files.model.name}"] * bool(
+            files.vecnormalize
+        )
+        unchecked += [
+            f"that {key} is the one it was saved with"
+            for key in FINGERPRINTED_SETTINGS
+            if (folder / key).is_file()
+        ]
+        unchecked += list(also)
+        msg = f"{folder}: no {FINGERPRINT_FILE}, so it cannot be checked " + "; ".join(unchecked)
+        if not force:
+            raise ValueError(
+                msg + "; pass --force (margins, rollout, basin-map) to evaluate it as it is"
+            )
+        warnings.append(msg)
     elif files.vecnormalize is not None and files.layout == "bound_env":
         warnings.append(
             f"{files.model.parent}: no {FINGERPRINT_FILE}, so it cannot be checked "

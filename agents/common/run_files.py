@@ -48,7 +48,8 @@ def read_csv(path: Path) -> dict[str, np.ndarray]:
 
 
 def plot_eval(csv_path: Path, png_path: Path, title: str | None = None, kept: str = "best") -> None:
-    """Evaluation curve: mean return (± std) and fall rate against timesteps, and below it
+    """Evaluation curve: mean return (± std; where the evaluation env's own reward is always 0,
+    the episodes' mean length in strides instead) and fall rate against timesteps, and below it
     the basin validation score (``basin_validation.csv`` beside the CSV), if any. ``kept``:
     ``"best"`` (a run, which keeps its best-validation checkpoint in ``best/``) marks that
     checkpoint; ``"final"`` (an exported final model) marks the last point instead. The
@@ -75,15 +76,34 @@ def plot_eval(csv_path: Path, png_path: Path, title: str | None = None, kept: st
     )
     ax = axes[0, 0]
     t = d["timesteps"]
-    ax.plot(t, d["mean_reward"], color="C0", label="mean return (± std)")
-    ax.fill_between(
-        t,
-        d["mean_reward"] - d["std_reward"],
-        d["mean_reward"] + d["std_reward"],
-        color="C0",
-        alpha=0.2,
-    )
-    ax.set_ylabel("evaluation return", color="C0")
+    no_return = len(t) > 0 and not np.any(d["mean_reward"]) and not np.any(d["std_reward"])
+    if no_return:
+        # the evaluation env's own reward is 0 (a task whose reward is its wrapper's): what
+        # the evaluation episodes did is how long they lasted, in strides
+        ax.plot(
+            t, d["mean_strides"], color="C0", marker="o", ms=3, label="mean strides per episode"
+        )
+        ax.set_ylabel("evaluation: strides per episode", color="C0")
+        ax.set_ylim(bottom=0)
+        ax.text(
+            0.01,
+            0.04,
+            "the evaluation env's own reward is 0 for this task (its reward is its wrapper's): "
+            "episode length shown instead",
+            transform=ax.transAxes,
+            fontsize=8,
+            color="0.3",
+        )
+    else:
+        ax.plot(t, d["mean_reward"], color="C0", label="mean return (± std)")
+        ax.fill_between(
+            t,
+            d["mean_reward"] - d["std_reward"],
+            d["mean_reward"] + d["std_reward"],
+            color="C0",
+            alpha=0.2,
+        )
+        ax.set_ylabel("evaluation return", color="C0")
     ax2 = ax.twinx()
     ax2.plot(t, d["fall_rate"], color="C3", ls="--", label="fall rate")
     ax2.set_ylim(-0.05, 1.05)
@@ -91,15 +111,6 @@ def plot_eval(csv_path: Path, png_path: Path, title: str | None = None, kept: st
     noise = d["noise_scale"][-1] if len(t) else math.nan
     with_noise = f" (start noise {noise:g} × apex_scales)" if math.isfinite(noise) else ""
     ax.set_title(title or f"PPO evaluation{with_noise}")
-    if len(t) and not np.any(d["mean_reward"]) and not np.any(d["std_reward"]):
-        ax.text(
-            0.01,
-            0.04,
-            "the evaluation env's own reward is 0 for this task (its reward is its wrapper's)",
-            transform=ax.transAxes,
-            fontsize=8,
-            color="0.3",
-        )
     handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
     ax2.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(1.1, 1.0))
     if rows == 2:

@@ -82,6 +82,27 @@ class PerturbedStarts(gym.Wrapper):
         return self.env.reset(options={**(options or {}), "apex_state": z})
 
 
+def full_observation_names(env: gym.Env, who: str) -> list[str]:
+    """The names of the full observation of the PassiveBound step env that ``env`` gives
+    (``env.unwrapped.task.obs_names``); a one-line ValueError naming ``who`` when ``env`` is
+    not a step env (the stride and rescue envs observe an apex state) or a wrapper below
+    already changed its observation (an `ObservationFilter`, a `ResidualOver`): ``who``
+    indexes the observation by those names."""
+    names = getattr(getattr(env.unwrapped, "task", None), "obs_names", None)
+    if names is None:
+        kind = env.unwrapped.spec.id if env.unwrapped.spec else type(env.unwrapped).__name__
+        raise ValueError(
+            f"{who} needs a PassiveBound step env (PassiveBound-v0/-v1, Literal), not {kind}"
+        )
+    shape = getattr(env.observation_space, "shape", None)
+    if shape != (len(names),):
+        raise ValueError(
+            f"{who} needs the env's full observation ({len(names)} entries), got shape {shape}: "
+            f"the wrapper below it ({type(env).__name__}) changed it; wrap {who} first"
+        )
+    return list(names)
+
+
 class ObservationFilter(gym.ObservationWrapper):
     """Keep only some observation entries, by name (``env.unwrapped.task.obs_names``).
 
@@ -108,7 +129,7 @@ class ObservationFilter(gym.ObservationWrapper):
 
     def __init__(self, env: gym.Env, drop=DEFAULT_DROP):
         super().__init__(env)
-        names = list(env.unwrapped.task.obs_names)
+        names = full_observation_names(env, "ObservationFilter")
         unknown = set(drop) - set(names)
         if unknown:
             raise ValueError(f"unknown observation names {sorted(unknown)}; known: {names}")

@@ -31,13 +31,22 @@ from bound_env.analysis.paired_text import paired_text as paired_text
 from bound_env.cache import atomic_write
 from bound_env.cli_args import strict_json
 from bound_env.parallel import open_pool
+from bound_env.schema import load_json_strict
 
 from ..runtime.policy import SHIPPED_DIR
 
 # `X as X`: re-exported, the names the page's modules define stay importable from here
-from .formatting import ROOT
+from .formatting import ROOT, rel
+from .headline import (
+    COLUMNS_FILE,
+    HEADLINE_FILE,
+    MODEL_ERROR_FILE,
+    columns_json,
+    headline_numbers,
+    model_error_json,
+    run_record,
+)
 from .headline import HEADLINE as HEADLINE
-from .headline import HEADLINE_FILE, headline_numbers
 from .headline import headline_table as headline_table
 from .headline import mfpt_sigma_100_interval as mfpt_sigma_100_interval
 from .margins import compute_margins
@@ -112,7 +121,11 @@ def parse_entry(text: str) -> tuple[str, list[str], str]:
         label = name.strip() if not gait.strip() else f"{name.strip()} {g}"
         return label, [name.strip()], (gait.strip() or "default")
     if "=" not in text:
-        raise ValueError(f"--entry {text!r} must look like LABEL=PATH[,PATH...][@GAIT]")
+        from ..runtime.policy_table import archived_message
+
+        gone = archived_message(name.strip())  # an archived name: where it went
+        where = f" ({gone})" if gone else ""
+        raise ValueError(f"--entry {text!r} must look like LABEL=PATH[,PATH...][@GAIT]{where}")
     label, rest = text.split("=", 1)
     paths, _, gait = rest.rpartition("@") if "@" in rest else (rest, "", "")
     policies = [p.strip() for p in paths.split(",") if p.strip()]
@@ -195,6 +208,7 @@ def compare(
     seed: int = DEFAULT_SEED,
     render_only: bool = False,
     mismatch=None,
+    command: str = "",
 ) -> Path:
     """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path.
 
@@ -217,7 +231,19 @@ def compare(
     ``mismatch`` (specs of `bound_env.mismatch`, e.g. ``["pm5", "pm10"]``) measures every
     column under model error too, and the page gets a "Model error" section
     (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`, paired against lqr).
+
+    Beside the page go ``columns.json`` (every column's fingerprint and headline measures,
+    and the run: `agents.results.headline`, ``command`` recorded there) and, with
+    ``mismatch``, ``model_error.json``. The entries that are not default columns
+    (`default_entries`) are the user's: they get headline rows, and the page then says
+    nothing of the project's own measurements. Each trained column's training curve is
+    plotted from its ``eval.csv``; a ``training_*.png`` of the folder that no column drew is
+    removed.
     """
+    import os
+    import time
+
+    t0, load0 = time.perf_counter(), [round(v, 2) for v in os.getloadavg()]
     entries = [
         (lab, [pol] if isinstance(pol, str) else list(pol), gait)
         for lab, pol, gait in (entries or default_entries())
@@ -228,6 +254,8 @@ def compare(
     if seed != DEFAULT_SEED:
         out = out / f"seed-{seed}"
     docs.mkdir(parents=True, exist_ok=True)
+    defaults = {(lab, tuple(pols), gait) for lab, pols, gait in default_entries()}
+    yours = [lab for lab, pols, gait in entries if (lab, tuple(pols), gait) not in defaults]
     groups = []
     with contextlib.ExitStack() as stack:
         if executor is None and not render_only:
@@ -241,7 +269,7 @@ def compare(
                     else out / _slug(label) / _slug(Path(policy).name)
                 )
                 if render_only:
-                    r = load_result(sub / "margins.json", budget, seed)
+                    r = load_result(sub / "margins.json", budget, seed, mismatch)
                 else:
                     r = compute_margins(
                         policy,
@@ -258,27 +286,31 @@ def compare(
                 r["source"] = policy
                 runs.append(r)
             groups.append({"label": label, "gait": gait, "policies": policies, "runs": runs})
+    old = docs / "paired.json"
+    # render_only: the decision times measured by the run that computed the columns, checked
+    # (one line naming the file and the key) before any figure is drawn
+    times = read_decision_times(old) if render_only and old.is_file() else None
     firsts = [g["runs"][0] for g in groups]
     plots = plot_margins(firsts, docs, prefix="margins_", styles=COLUMN_STYLES)
-    curves = []
-    for g in groups:
-        src = Path(g["policies"][0]) / "eval.png"
-        if src.is_file():
-            dst = docs / f"training_{g['label'].replace(' ', '_')}.png"
-            shutil.copyfile(src, dst)
-            curves.append((g["label"], g["policies"][0], dst))
+    curves = training_curves(groups, docs)
     pairs = paired_comparisons(groups)
-    head = headline_numbers(groups, budget, seed)
+    head = headline_numbers(groups, budget, seed, yours)
     path = docs / "MARGINS.md"
     from ..runtime.policy import load_controller
     from .decisions import decisions_text, fair_decision_times, real_time_text
 
-    old = path.with_name("paired.json")
-    if render_only and old.is_file():  # measured by the run that computed the columns
-        times = read_decision_times(old)  # checked: one line naming the file and the key
-    else:
+    if times is None:
         times = fair_decision_times(groups, load_controller, seed)  # the workers are done
-    page = render_markdown(groups, plots, curves, budget, note, pairs, basin_maps(docs), head)
+    cols_path = path.with_name(COLUMNS_FILE)
+    if not render_only:
+        run = run_record(t0, workers, scheduler, load0, groups, command)
+    elif cols_path.is_file():  # the run that computed the columns, not this rewrite
+        run = load_json_strict(cols_path, {"run": (dict, None)})["run"]
+    else:
+        run = None  # not known: the columns were computed by a run that left no record
+    page = render_markdown(
+        groups, plots, curves, budget, note, pairs, basin_maps(docs), head, run, not yours
+    )
     page += decisions_text(times, groups)
     page += real_time_text(groups)  # each column's own decisions (empty before they were timed)
     page += model_error_text(groups)
@@ -286,8 +318,46 @@ def compare(
     atomic_write(path.with_name("paired.json"), json.dumps(body, indent=2) + "\n")
     # strict JSON: a measure that could not be made is null (and listed under "nonfinite")
     atomic_write(path.with_name(HEADLINE_FILE), strict_json(head, indent=2) + "\n")
+    cols = columns_json(groups, budget, seed, run)
+    atomic_write(cols_path, strict_json(cols, indent=2) + "\n")
+    me = model_error_json(groups, budget, seed, run)
+    if me is not None:
+        atomic_write(path.with_name(MODEL_ERROR_FILE), strict_json(me, indent=2) + "\n")
     atomic_write(path, page)
     return path
+
+
+def training_curves(groups, docs: Path) -> list:
+    """Each trained column's training curve in ``docs`` (``training_<label>.png``), plotted
+    from its first policy's ``eval.csv`` (`agents.common.run_files.plot_eval`: the selected
+    checkpoint marked where one was selected, else the final model), or its ``eval.png`` when
+    it has no CSV; a ``training_*.png`` in ``docs`` that no column drew is removed (it would
+    be a figure of a column the page no longer has). [(label, policy, png)]."""
+    from ..common.run_files import plot_eval
+
+    curves = []
+    for g in groups:
+        folder = Path(g["policies"][0])
+        dst = docs / f"training_{g['label'].replace(' ', '_')}.png"
+        if (folder / "eval.csv").is_file():
+            exp = folder / "exported.json"
+            selected = exp.is_file() and "timesteps" in json.loads(exp.read_text())
+            plot_eval(
+                folder / "eval.csv",
+                dst,
+                title=f"training of {g['label']} ({rel(str(folder))})",
+                kept="best" if selected else "final",
+            )
+        elif (folder / "eval.png").is_file():
+            shutil.copyfile(folder / "eval.png", dst)
+        else:
+            continue
+        curves.append((g["label"], g["policies"][0], dst))
+    drawn = {c[2].name for c in curves}
+    for old in docs.glob("training_*.png"):
+        if old.name not in drawn:
+            old.unlink()
+    return curves
 
 
 def model_error_text(groups) -> str:
@@ -303,11 +373,13 @@ def model_error_text(groups) -> str:
     return "\n## Model error\n\n" + mismatch_markdown(measured, specs=specs, reference=ref)
 
 
-def load_result(path: Path, budget: str, seed: int) -> dict:
+def load_result(path: Path, budget: str, seed: int, mismatch=None) -> dict:
     """A column's ``margins.json`` as `compute_margins` wrote it, for ``render_only``: it must
     exist, be of ``budget`` and ``seed`` and hold every key the page reads
     (`agents.results.page_inputs.check_margins_result`), else a ValueError naming the file (and the
-    key)."""
+    key). ``mismatch`` (specs): the result must hold a model-error block of each, measured
+    under that very spec, and keeps only those (the page's section is theirs); None keeps
+    the blocks it holds."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no margins.json to render (run compare without --render-only)")
@@ -322,7 +394,32 @@ def load_result(path: Path, budget: str, seed: int) -> dict:
             f"{path}: budget {r.get('budget')!r}, seed {r.get('seed')!r}; "
             f"the page asks for budget {budget!r}, seed {seed}"
         )
-    return check_margins_result(r, path)  # every key the page reads, or one line naming it
+    r = check_margins_result(r, path)  # every key the page reads, or one line naming it
+    if mismatch is not None:
+        r["mismatch"] = _measured_blocks(r, path, mismatch)
+    return r
+
+
+def _measured_blocks(r: dict, path: Path, specs) -> dict:
+    """{name: block} of ``r``'s model-error blocks of ``specs``, each measured under that
+    spec (its ``spec`` entry); ValueError naming the file and the spec otherwise."""
+    held = r.get("mismatch") if isinstance(r.get("mismatch"), dict) else {}
+    out = {}
+    for spec in specs:
+        block = held.get(spec.name)
+        if not isinstance(block, dict):
+            have = ", ".join(sorted(held)) or "none"
+            raise ValueError(
+                f"{path}: no model-error block {spec.name!r} (it holds: {have}); run compare "
+                f"--mismatch {spec.name} without --render-only first"
+            )
+        if block.get("spec") != spec.to_dict():
+            raise ValueError(
+                f"{path}: its model-error block {spec.name!r} was measured under another spec "
+                f"({block.get('spec')}); run compare --mismatch without --render-only first"
+            )
+        out[spec.name] = block
+    return out
 
 
 def _reference(groups, name: str, gait: str):

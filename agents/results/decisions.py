@@ -158,6 +158,5 @@ def real_time_text(groups) -> str:
     return (
         "\n## Real time: every apex decision of each controller's own measures\n\n"
         "Wall time of every apex decision a controller made during its own margins measures "
-        "(first seed; a controller without apex decisions has none):\n\n"
-        + real_time_table(columns)
+        "(first seed; a controller without apex decisions has none):\n\n" + real_time_table(columns)
     )

@@ -9,15 +9,36 @@ command puts the same table into README.md, between the markers ``<!-- headline:
 ``<!-- headline:end -->``, so that it is regenerated, never edited by hand; ``--check`` only
 says whether the README is up to date (exit 1 if not). tests/test_docs.py checks both tables
 against the JSON.
+
+The page's other JSON beside it, so that every number the docs quote of the page is one value
+of a committed file (`agents.results.numbers`):
+
+- ``columns.json`` (`columns_json`): every column, with each policy's **fingerprint** (what
+  decided its numbers: `bound_env.analysis.margins.fingerprint`, recorded in its
+  ``margins.json`` when it was computed), its r50, the sigma where the MFPT falls to 100
+  strides and sigma50 with their 95 % intervals, its wall time in the run and the tasks it
+  took from the cache; and ``run``: the page run's wall time, workers, load and commit
+  (`run_record`);
+- ``model_error.json`` (`model_error_json`), when the columns were measured under model error
+  (``compare --mismatch``): the page's "Model error" section as numbers
+  (`bound_env.analysis.margins.mismatch_report.mismatch_summary`), each column's
+  fingerprints and the run.
+
+tests/test_page_fingerprints.py checks that every committed column's fingerprint is what its
+controller is now.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
+import platform
 import sys
+import time
 from pathlib import Path
 
+from bound_env.analysis.margins.fingerprint import git_commit
 from bound_env.analysis.margins.stats import t_interval
 from bound_env.cache import atomic_write
 from bound_env.schema import check_keys, load_json_strict
@@ -67,7 +88,7 @@ def mfpt_sigma_100_interval(r: dict) -> list:
     return [mfpt_crossing(sig, lo, no, MFPT_LEVEL), mfpt_crossing(sig, hi, no, MFPT_LEVEL)]
 
 
-def _headline_measure(runs, fn, single_interval, single_method) -> dict:
+def headline_measure(runs, fn, single_interval, single_method) -> dict:
     vals = [value(fn, r) for r in runs]
     if len(runs) > 1:
         ti = t_interval(vals)
@@ -82,14 +103,28 @@ def _headline_measure(runs, fn, single_interval, single_method) -> dict:
     return {"value": vals[0], "low": lo, "high": hi, "interval": single_method}
 
 
-def headline_numbers(groups, budget: str, seed: int) -> dict:
+def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
     """The headline (`HEADLINE`): per row present among the default-gait columns, r50 and the
     sigma at which the MFPT falls to 100 strides, each with its 95 % interval (Student-t over
-    seeds; one run: Wilson-based for r50, Poisson-based for the sigma). What docs/headline.json
-    holds and `headline_table` renders."""
+    seeds; one run: Wilson-based for r50, Poisson-based for the sigma). ``yours``: the labels
+    of a user's own columns (``compare --entry``), each a row after them. What
+    docs/headline.json holds and `headline_table` renders."""
     rows = []
-    for role, label, what in HEADLINE:
-        g = next((g for g in groups if g["label"] == label and g["gait"] == "default"), None)
+    known = {label for _, label, _ in HEADLINE}
+    mine = []
+    for label in yours:
+        g = next((g for g in groups if g["label"] == label), None)
+        if label not in known and g is not None:
+            what = "your column: " + ", ".join(f"`{rel(p)}`" for p in g["policies"])
+            if g["gait"] != "default":
+                what += f" (gait `{g['gait']}`)"
+            mine.append((label, label, what))
+    for role, label, what in (*HEADLINE, *mine):
+        gaits = ("default",) if label in known else (None,)  # a user's column: any gait
+        g = next(
+            (g for g in groups if g["label"] == label and (g["gait"] in gaits or not gaits[0])),
+            None,
+        )
         if g is None:
             continue
         runs = g["runs"]
@@ -99,13 +134,13 @@ def headline_numbers(groups, budget: str, seed: int) -> dict:
                 "label": label,
                 "what": what,
                 "policies": [rel(p) for p in g["policies"]],
-                "r50": _headline_measure(
+                "r50": headline_measure(
                     runs,
                     lambda r: r["basin_curve"]["r50"],
                     lambda r: r["basin_curve"].get("r50_ci", [None, None]),
                     "Wilson-based (the directions' sampling error)",
                 ),
-                "mfpt_sigma_100_deg": _headline_measure(
+                "mfpt_sigma_100_deg": headline_measure(
                     runs,
                     lambda r: r.get("mfpt_sigma_100_deg"),
                     mfpt_sigma_100_interval,
@@ -139,6 +174,119 @@ def headline_table(head: dict) -> str:
         name = row["role"] if row["role"] == row["label"] else f"{row['role']} ({row['label']})"
         lines.append(f"| **{name}** | {row['what']} | {cells[0]} | {cells[1]} | {kind} |")
     return "\n".join(lines)
+
+
+COLUMNS_FILE = "columns.json"
+MODEL_ERROR_FILE = "model_error.json"
+
+
+def run_record(t0: float, workers: int, scheduler, load_before, groups, command: str) -> dict:
+    """How the page run went: its wall time since ``t0`` (`time.perf_counter`), the workers
+    and scheduler, the machine's load before and after, the tasks its columns took from the
+    cache and computed (a page made from an empty cache computed them all), and the commit."""
+    tasks = {"cached": 0, "computed": 0}
+    for g in groups:
+        for r in g["runs"]:
+            for k in tasks:
+                tasks[k] += int((r.get("tasks") or {}).get(k, 0))
+    commit, dirty = git_commit()
+    return {
+        "wall_seconds": time.perf_counter() - t0,
+        "workers": workers,
+        "scheduler": scheduler,
+        "cores": os.cpu_count(),
+        "machine": platform.machine(),
+        "load_average_before": load_before,
+        "load_average_after": [round(v, 2) for v in os.getloadavg()],
+        "tasks": tasks,
+        "commit": commit,
+        "dirty": dirty,
+        "command": command,
+    }
+
+
+def _fingerprints(g) -> list:
+    return [r.get("fingerprint") for r in g["runs"]]
+
+
+def _sigma50_interval(r: dict) -> list:
+    return list(r.get("terrain_sigma50_ci_deg") or [None, None])
+
+
+def columns_json(groups, budget: str, seed: int, run: dict) -> dict:
+    """``columns.json``: every column's fingerprints and headline measures, and the run."""
+    cols = []
+    for g in groups:
+        runs = g["runs"]
+        tasks = {"cached": 0, "computed": 0}
+        for r in runs:
+            for k in tasks:
+                tasks[k] += int((r.get("tasks") or {}).get(k, 0))
+        cols.append(
+            {
+                "label": g["label"],
+                "gait": g["gait"],
+                "policies": [rel(p) for p in g["policies"]],
+                "fingerprints": _fingerprints(g),
+                "seconds": sum(float(r.get("seconds") or 0.0) for r in runs),
+                "tasks": tasks,
+                "r50": headline_measure(
+                    runs,
+                    lambda r: r["basin_curve"]["r50"],
+                    lambda r: r["basin_curve"].get("r50_ci", [None, None]),
+                    "Wilson-based (the directions' sampling error)",
+                ),
+                "mfpt_sigma_100_deg": headline_measure(
+                    runs,
+                    lambda r: r.get("mfpt_sigma_100_deg"),
+                    mfpt_sigma_100_interval,
+                    "Poisson-based (the robots' sampling error)",
+                ),
+                "terrain_sigma50_deg": headline_measure(
+                    runs,
+                    lambda r: r.get("terrain_sigma50_deg"),
+                    _sigma50_interval,
+                    "Wilson-based (the terrain runs' sampling error)",
+                ),
+            }
+        )
+    return {"budget": budget, "seed": seed, "run": run, "columns": cols}
+
+
+def measured_under_error(groups) -> dict:
+    """{label: first run} of the columns measured under model error."""
+    return {g["label"]: g["runs"][0] for g in groups if g["runs"][0].get("mismatch")}
+
+
+def model_error_json(groups, budget: str, seed: int, run: dict) -> dict | None:
+    """``model_error.json``: the "Model error" section's numbers (paired against lqr where it
+    is a column), the columns' fingerprints and the run; None when no column was measured
+    under model error."""
+    from bound_env.analysis.margins.mismatch_report import mismatch_summary
+
+    measured = measured_under_error(groups)
+    if not measured:
+        return None
+    specs = list(dict.fromkeys(k for r in measured.values() for k in r["mismatch"]))
+    ref = "lqr" if "lqr" in measured else None
+    summary = mismatch_summary(measured, specs=specs, reference=ref)
+    return {
+        "budget": budget,
+        "seed": seed,
+        "reference": summary["reference"],
+        "specs": summary["specs"],
+        "columns": [
+            {
+                "label": g["label"],
+                "gait": g["gait"],
+                "policies": [rel(p) for p in g["policies"][:1]],
+                "fingerprints": _fingerprints(g)[:1],
+            }
+            for g in groups
+            if g["label"] in measured
+        ],
+        "run": run,
+    }
 
 
 START, END = "<!-- headline:start -->", "<!-- headline:end -->"

@@ -43,6 +43,7 @@ POLICY_SOURCES = (
     "common/mlp.py",
     "runtime/stride.py",
     "runtime/choice_policy.py",
+    "runtime/adaptive_policy.py",
     "runtime/residual.py",
     "common/wrappers.py",
 )

@@ -25,10 +25,9 @@ def run_margins(args) -> int:
     progress = not args.no_progress
     mismatch = None
     if args.mismatch is not None:
-        from bound_env.mismatch import as_spec
+        from bound_env.mismatch import parse_specs
 
-        # a bad spec fails before a policy is loaded
-        mismatch = [as_spec(t) for t in args.mismatch.split(",")]
+        mismatch = parse_specs(args.mismatch)  # a bad spec fails before a policy is loaded
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force, env_id=args.env_id)
     gait = args.gait or getattr(ctrl, "env_kwargs", {}).get("gait") or "default"
     r = compute_margins(

@@ -16,6 +16,7 @@ absent, ``num|null`` must be there but may be null.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 from bound_env.analysis.margins import Z_LABELS
@@ -26,8 +27,13 @@ def _is_num(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+def _is_finite(v) -> bool:
+    return _is_num(v) and math.isfinite(v)
+
+
 KINDS = {
     "num": lambda v: _is_num(v),
+    "finite": lambda v: _is_finite(v),  # a measure the page prints with its interval
     "num|null": lambda v: v is None or _is_num(v),
     "str|null": lambda v: v is None or isinstance(v, str),
     "int": lambda v: isinstance(v, int) and not isinstance(v, bool),
@@ -38,6 +44,9 @@ KINDS = {
     "nums": lambda v: isinstance(v, list) and all(_is_num(x) or x is None for x in v),
     "pair": lambda v: (
         isinstance(v, list) and len(v) == 2 and all(_is_num(x) or x is None for x in v)
+    ),
+    "finite pair": lambda v: (
+        isinstance(v, list) and len(v) == 2 and all(_is_finite(x) or x is None for x in v)
     ),
 }
 NAMES = {
@@ -51,6 +60,8 @@ NAMES = {
     "list": "a list",
     "nums": "a list of numbers",
     "pair": "a list of two numbers",
+    "finite": "a finite number",
+    "finite pair": "a list of two finite numbers (or nulls)",
 }
 
 _SIGNS = ("+", "-")
@@ -59,8 +70,9 @@ MARGINS_FIELDS = [
     (("policy",), "str"),
     (("basin_curve",), "map"),
     *[(("basin_curve", k), "nums") for k in ("sizes", "success", "ci_low", "ci_high")],
-    (("basin_curve", "r50"), "num?"),
-    (("basin_curve", "r50_ci"), "pair?"),
+    # r50 is never NaN (`crossing_on_grid`): a NaN or inf one is a damaged file, not "—"
+    (("basin_curve", "r50"), "finite?"),
+    (("basin_curve", "r50_ci"), "finite pair?"),
     (("basin_curve", "directions"), "int"),
     (("basin_curve", "outcomes"), "list?"),
     (("settings",), "map"),

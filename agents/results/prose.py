@@ -4,9 +4,10 @@ A sentence that quotes the page's r50s, paired differences or decision times is 
 ``docs/headline.json`` and ``docs/paired.json`` (what ``bound-env compare --docs docs`` wrote),
 never by hand: it sits between ``<!-- numbers:NAME -->`` and ``<!-- /numbers:NAME -->`` in a
 page of ``docs/``, and `BLOCKS` [NAME] makes its text. ``python -m agents.results.prose`` rewrites
-every block after a new page; ``--check`` only says whether they are up to date (exit 1 if not).
-tests/test_docs_numbers.py checks the blocks, and that no decision time, r50 or speed ratio
-quoted elsewhere in docs/ and README.md differs from the JSON.
+every block after a new page, with the inline numbers and the tables of
+`agents.results.numbers` (``<!-- n:KEY -->``, ``<!-- table:NAME -->``: every number the docs
+quote of a measurement); ``--check`` only says whether they are up to date (exit 1 if not).
+tests/test_docs_numbers.py checks the blocks, and that no such number is quoted outside them.
 """
 
 from __future__ import annotations
@@ -152,20 +153,23 @@ def update_text(text: str, numbers: Numbers, where: str = "") -> str:
 
 
 def doc_files(root: Path = ROOT) -> list[Path]:
-    """The pages the blocks may sit in: docs/*.md and README.md."""
-    return sorted((root / "docs").glob("*.md")) + [root / "README.md"]
+    """The pages the blocks may sit in: docs/**/*.md and README.md."""
+    return sorted((root / "docs").rglob("*.md")) + [root / "README.md"]
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m agents.results.prose", description=__doc__)
     ap.add_argument("--check", action="store_true", help="only check; exit 1 if out of date")
     args = ap.parse_args(argv)
+    from . import numbers as inline
+
     try:
         numbers = load_numbers()
-        stale = []
+        sources = inline.Sources()
+        stale, missing = [], []
         for f in doc_files():
             old = f.read_text()
-            new = update_text(old, numbers, str(f))
+            new = inline.update_text(update_text(old, numbers, str(f)), sources, str(f), missing)
             if new != old:
                 stale.append(f)
                 if not args.check:
@@ -176,6 +180,10 @@ def main(argv=None) -> int:
         return 2
     for f in stale:
         print(f"{f}: {'stale' if args.check else 'rewritten'}")
+    for e in dict.fromkeys(missing):  # blocks left as they were: their source lacks the value
+        print(f"error: {e}", file=sys.stderr)
+    if missing:
+        return 2
     return 1 if stale and args.check else 0
 
 

@@ -20,9 +20,9 @@ from .formatting import ROOT, command_text, rel
 CLASSICAL_SELECTION = {
     "lqr": "its design (8 windows, Q = I, R = 0.1) was **first chosen on the quick budget with "
     "the test seed** (criterion: largest basin_min, then r50, the slope window, push recovery; "
-    "its 32 random directions are the first 32 of this page's 256, so that choice saw part of "
+    "its 32 random directions are the first 32 of the test set's 256, so that choice saw part of "
     "the test set), then **re-chosen on the validation seed 777** (seed 777's random "
-    "directions, terrain and push samples, held out from this page's test set) among the 9 "
+    "directions, terrain and push samples, held out from the test set, seed 12345) among the 9 "
     "designs of the design table (docs/controllers.md): the same design, by a tie-break on r50 "
     "(0.1465 against 0.1462 for the other 8-window designs, which tie it on basin_min)",
     "deadbeat": "8 windows over 6: **first chosen on the quick budget with the test seed**, "
@@ -39,14 +39,14 @@ CLASSICAL_SELECTION = {
 # said under its column's provenance
 LEARNED_SELECTION = {
     "finetuned": "recipe **chosen on the validation seed 777** (96 random directions, r = "
-    "0.15-0.35), never on this page's test set: each seed is PPO (1.5e6 strides) from the "
+    "0.15-0.35), never on the test set (seed 12345): each seed is PPO (1.5e6 strides) from the "
     "student distilled by DAgger from `mpc` with the same seed "
     "(`agents/policies/archive/distilled/sS`); fine-tuning was chosen over the distilled "
     "students and 1.5e6 strides over 3e5 there; "
     "the name `default` is seed 0 (no choice among seeds)",
     "step-ppo": "recipe (configs/ppo-residual.yaml) **chosen on the validation seed 777** "
     "(agents/runtime/residual.py `validation_curve`: 64 random directions, r = 0.2-0.4), never "
-    "on this page's test set: step-level PPO on PassiveBound-v0 (`bound-env train --config "
+    "on the test set (seed 12345): step-level PPO on PassiveBound-v0 (`bound-env train --config "
     "ppo-residual`), a residual on `default`'s interval torques active past its safe radius; "
     "final models, one per seed",
     "warm-started": "ppo-v1's recipe (configs/ppo.yaml, 3e6 steps) unchanged, but the actor "

@@ -83,17 +83,64 @@ def policy_names() -> list[str]:
 
 
 def unwrapped_name(spec: str | Path) -> str | Path:
-    """The policy ``NAME+of`` wraps (`bound_env.control.offset_free`), else ``spec``."""
+    """The policy ``NAME+of`` wraps (`bound_env.control.offset_free`), else ``spec``. A folder
+    or file whose own name ends in ``+of`` is itself, unless what it would wrap is a policy's
+    name (``default+of`` is always ``default`` held offset-free)."""
     text = str(spec)
-    return text[: -len(OF_SUFFIX)] if text.endswith(OF_SUFFIX) and text != OF_SUFFIX else spec
+    if not text.endswith(OF_SUFFIX) or text == OF_SUFFIX:
+        return spec
+    inner = text[: -len(OF_SUFFIX)]
+    if _on_disk(text) and not _a_name(inner):
+        return spec  # runs/x+of: that folder, not runs/x held offset-free
+    return inner
+
+
+def wrapped_policy(text: str) -> str:
+    """What ``NAME+of`` holds offset-free (`unwrapped_name`); FileNotFoundError (one line)
+    when neither ``text`` nor ``NAME`` is a policy, rather than a word about a ``NAME`` the
+    user never gave alone."""
+    inner = str(unwrapped_name(text))
+    if not (
+        _a_name(inner) or _on_disk(inner) or archived_message(inner) or inner.endswith(OF_SUFFIX)
+    ):
+        raise FileNotFoundError(
+            f"policy {text!r} does not exist, nor {inner!r}, which {text!r} would hold "
+            "offset-free (give a name, e.g. default+of, or a path)"
+        )
+    return inner
+
+
+def _a_name(text: str) -> bool:
+    """Whether ``text`` names a policy (possibly wrapped): a built-in or shipped name, a
+    classical spec file."""
+    inner = unwrapped_name(text)
+    if inner != text:
+        return _a_name(str(inner))
+    return (
+        text in CONTROLLERS or text in shipped_policies() or Path(text).suffix in (".yaml", ".yml")
+    )
+
+
+def _on_disk(text: str) -> bool:
+    try:
+        return Path(text).exists()
+    except (OSError, ValueError):  # a name the OS refuses (too long, a NUL byte)
+        return False
 
 
 def resolve_policy(spec: str | Path) -> str | Path:
-    """A built-in controller's name (returned as is), a shipped policy's folder, or a path."""
-    if not isinstance(spec, (str, Path)) or not str(spec):
+    """A built-in controller's name (returned as is), a shipped policy's folder, or a path.
+    TypeError for what is not a name or path, ValueError for an empty one, FileNotFoundError
+    (an archived name: where it went) for one that does not exist."""
+    if not isinstance(spec, (str, Path)):
         raise TypeError(
             f"policy must be a name ({', '.join(policy_names())}) or a run or policy "
             f"folder's path, got {spec!r} ({type(spec).__name__})"
+        )
+    if not str(spec).strip():
+        raise ValueError(
+            f"policy {str(spec)!r} is empty: give a name ({', '.join(policy_names())}) or a run "
+            "or policy folder's path"
         )
     text = str(spec)
     if text in CONTROLLERS:
@@ -102,9 +149,9 @@ def resolve_policy(spec: str | Path) -> str | Path:
     if text in shipped:
         return shipped[text]
     p = Path(spec)
-    if not p.exists() and archived_message(text):
+    if not _on_disk(text) and archived_message(text):
         raise FileNotFoundError(archived_message(text))
-    if not p.exists():
+    if not _on_disk(text):
         raise FileNotFoundError(
             f"policy {text!r} does not exist (give a name: {', '.join(policy_names())}; or a "
             "run or policy directory with model.zip, or a model .zip)"
@@ -121,6 +168,10 @@ def load_apex_controller(path: str | Path, gait: str | Path | None = None, force
     path = resolve_policy(path)
     if isinstance(path, str):
         return CONTROLLERS[path][0](gait=gait)
+    if Path(path).is_dir() and (Path(path) / "adaptive.npz").is_file():
+        from .adaptive_policy import load_adaptive_policy  # the learned adaptive controller
+
+        return load_adaptive_policy(path, gait=gait, force=force)
     if Path(path).is_dir() and policy_kind(path) == "choice":  # a PPO + choice.npz: refused
         from .choice_policy import load_choice_policy  # a distilled student
 

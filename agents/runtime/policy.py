@@ -55,6 +55,7 @@ from .names import (  # noqa: F401 - the names API, importable from here as befo
     resolve_policy,
     shipped_policies,
     unwrapped_name,
+    wrapped_policy,
 )
 
 _INFERENCE_ONLY = {
@@ -98,7 +99,8 @@ def load_controller(
     if unwrapped_name(text) != text:  # NAME+of: NAME held on the robot's own cycle
         from bound_env.control.offset_free import OffsetFree
 
-        return OffsetFree(load_controller(unwrapped_name(text), gait, force, env_id), name=text)
+        inner = wrapped_policy(text)
+        return OffsetFree(load_controller(inner, gait, force, env_id), name=text)
     if env_id is not None:
         check_env_id(env_id)
         if Path(str(path)).suffix in (".yaml", ".yml") or isinstance(resolve_policy(path), str):
@@ -146,8 +148,9 @@ def load_controller(
         obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
     else:
         obs_index = None
-    warnings = check_policy_files(files, section, force, env_given=env_id is not None)
     base = residual_base(section)
+    pinned = [f"that base {base!r} is the controller it was trained over"] if base else []
+    warnings = check_policy_files(files, section, force, env_given=env_id is not None, also=pinned)
     want = read_fingerprint(files.model.parent) if files.layout == "bound_env" else None
     if base is not None and want is not None:  # a residual's base: the one it was trained over
         sha = policy_content_sha256(resolve_policy(base))

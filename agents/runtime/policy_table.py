@@ -41,8 +41,12 @@ ARCHIVED = {
 }
 
 
-def _is_policy(folder: Path) -> bool:  # a PPO model, or a distilled student (experts.distill)
-    return folder.is_dir() and ((folder / "model.zip").exists() or (folder / "choice.npz").exists())
+def _is_policy(folder: Path) -> bool:
+    """A PPO model, a distilled student (experts.distill) or a learned adaptive controller
+    (experts.adaptive)."""
+    return folder.is_dir() and any(
+        (folder / f).exists() for f in ("model.zip", "choice.npz", "adaptive.npz")
+    )
 
 
 def shipped_folders(root: Path = SHIPPED_DIR) -> dict[str, Path]:

@@ -48,7 +48,7 @@ import numpy as np
 from bound_env import schema as check
 from bound_env.stride_protocol import OBS_TIME, OBS_Z, notify_apex
 
-from ..common.wrappers import ObservationFilter
+from ..common.wrappers import ObservationFilter, full_observation_names
 
 MAX_START_DRAWS = 10_000  # draws of a start past the safe radius before reset gives up
 
@@ -145,6 +145,7 @@ class ResidualOver(gym.Wrapper):
         ramp = check.real(ramp, f"{w} ramp", 0.0, 10.0)
         if not isinstance(base, (str, Path)) or not str(base):
             raise ValueError(f"{w} base must be a policy name or folder, got {base!r}")
+        full_observation_names(env, w)  # a step env, its observation as the env gives it
         task = env.unwrapped.task
         self.base_name = str(base)
         self.base_ctrl = load_base(self.base_name)

@@ -54,6 +54,7 @@ from ..common.config import (
     apply_sets,
     default_env_id,
     load_hyperparams,
+    parse_set,
     preprocess,
 )
 from ..common.run_files import plot_eval, read_run_files, truncate_csv, write_config
@@ -204,11 +205,60 @@ def resolve_section(
     return hp
 
 
+def check_resume(run_dir, run: tuple, given: dict) -> None:
+    """ValueError (one line, naming the setting) when a ``--resume`` is given a setting that
+    differs from the run's (``run``: its env id, seed, hyperparameters and run.json): an env
+    id, a seed, a hyperparameter (``--hp``, ``--gait``, ``--set``; ``n_timesteps`` may
+    change) or a warm start, as ``given`` (None: not given). A resume continues the run as it
+    was made; another setting is another run (another ``--name``)."""
+    import copy
+
+    env_id, seed, hp, info = run  # the run's own: from its config.yaml and run.json
+    hint = "a resume continues the run as it was made; train another --name for another setting"
+    if given.get("env_id") is not None and given["env_id"] != env_id:
+        raise ValueError(
+            f"--resume: {run_dir} was trained on {env_id}, not --env-id {given['env_id']} ({hint})"
+        )
+    if given.get("seed") is not None and int(given["seed"]) != seed:
+        raise ValueError(
+            f"--resume: {run_dir} has seed {seed}, not --seed {given['seed']} ({hint})"
+        )
+    for text in given.get("sets") or []:
+        parts, _ = parse_set(text)
+        if parts == ["n_timesteps"]:
+            continue  # the budget may grow (as --n-timesteps)
+        old = copy.deepcopy(hp)
+        new = apply_sets(copy.deepcopy(hp), [text])
+        if new != old:
+            key = ".".join(parts)
+            was = _lookup(old, parts)
+            raise ValueError(
+                f"--resume: --hp {text} differs from the run's {key} = {was!r} in {run_dir} "
+                f"({hint})"
+            )
+    warm = (info.get("init_from") or {}).get("policy")
+    if given.get("init_from") is not None and str(given["init_from"]) != warm:
+        was = f"was warm-started from {warm}" if warm else "had no warm start"
+        raise ValueError(
+            f"--resume: {run_dir} {was}, not --init-from {given['init_from']} ({hint})"
+        )
+
+
+def _lookup(hp: dict, parts: list[str]):
+    """The value at a dotted key, or "unset"."""
+    node = hp
+    for p in parts:
+        if not isinstance(node, dict) or p not in node:
+            return "unset"
+        node = node[p]
+    return node
+
+
 def train(
     config: str | Path = DEFAULT_CONFIG,
     env_id: str | None = None,
     name: str | None = None,
-    seed: int = 0,
+    seed: int | None = None,
     n_timesteps: int | None = None,
     sets: list[str] | None = None,
     resume: bool = False,
@@ -224,6 +274,12 @@ def train(
     """Train PPO as the config section of ``env_id`` says; returns the run directory.
 
     ``env_id`` None: the config's only section, else ``PassiveBound-v0`` (`default_env_id`).
+    ``seed`` None: 0.
+
+    ``resume`` continues ``runs_dir/name`` as it was made: its env id, seed, hyperparameters
+    and warm start; a setting given that differs from the run's (`check_resume`) is a one-line
+    ValueError naming it (only ``n_timesteps`` and the evaluation and checkpoint schedule
+    may change). Given again with the run's own values, they are accepted.
 
     ``init_from``: a stride controller whose torques the actor clones before PPO
     (`agents.training.warmstart`; a fresh run only, a resume continues from its checkpoint)."""
@@ -234,8 +290,10 @@ def train(
 
     from bound_env.cli_args import check_name
 
+    given = {"env_id": env_id, "seed": seed, "sets": sets, "init_from": init_from}
     if env_id is None:
         env_id = default_env_id(config)
+    seed = 0 if seed is None else seed
     name = check_name(name or f"{env_id}_s{seed}", "--name")  # a folder of runs_dir, no path
     run_dir = Path(runs_dir) / name
     prev_info: dict = {}
@@ -245,6 +303,7 @@ def train(
         env_id = data["run"]["env_id"]
         seed = int(data["run"]["seed"])
         hp = data[env_id]
+        check_resume(run_dir, (env_id, seed, hp, prev_info), given)
         for key, value in schedule.items():  # the run's own schedule unless given again
             if value is None:
                 schedule[key] = data["run"].get(key)

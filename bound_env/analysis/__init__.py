@@ -12,10 +12,10 @@ Modules, read top to bottom:
   per stride (Fig. 5).
 - `fixed_point`: Newton-Raphson for P(z) = z with free parameters and pins, the paper's
   slope secant (eq. 27) and its search process (III.D.4).
-- `continuation`: the one continuation engine (`natural` with an ``on_stall`` hook for the
-  paper's fallback ladder, pseudo-arclength `arclength`) along any scalar path, and
-  `continue_branch` in kc or alpha with fold, period-doubling and Neimark-Sacker flags
-  (Figs. 3-4).
+- `continuation_engine`: the one continuation engine (`natural` with an ``on_stall`` hook
+  for the paper's fallback ladder, pseudo-arclength `arclength`) along any scalar path.
+- `continuation`: `continue_branch` in kc or alpha with fold, period-doubling and
+  Neimark-Sacker flags (Figs. 3-4), its files and plot (the engine's names re-exported).
 - `sweeps`: e_max against alpha and kc the paper's way, stability windows (Figs. 7-8).
 - `numerics`: finite-difference Jacobian, Newton, fixed points of a map, eigenvalue sort,
   bisection, on any map ``f(z) -> z | None`` (the margins use them too).

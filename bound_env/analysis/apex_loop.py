@@ -1,24 +1,35 @@
-"""The one batched closed loop: many robots under one controller, each restarted at its apex,
-all advanced together (`apex_loop`). `bound_env.analysis.margins` (its closed loop's
-``run_many``) and the basin atlas (`bound_env.analysis.basin`) both run their batches here.
+"""The one batched closed loop: many robots under one controller, all advanced together.
 
-Every robot starts at its apex state z (x_g = 0, both legs in flight, t = 0) and iterates the
-closed-loop apex map: at each apex it reached it is started again there, as a single
-PassiveBound-v0 env is reset at the apex (``reset(options={"apex_state": z})``), until
+`interval_loop` is the one per-interval batched closed loop of `bound_env`: the margins'
+step-level runs (`bound_env.analysis.margins.ClosedLoop.run_many`), the rough-terrain
+episodes (`margins.closed_loop.rough_episodes`), the runs under model error
+(`margins.mismatch_tasks.plant_runs`) and the basin atlas (`bound_env.analysis.basin`) all
+step their robots here, through the task's batch kernel (`bound_env.task.PassiveBoundTask.step`),
+with one reset rule: **every robot starts with a fresh controller state** (a stateful
+controller, e.g. `bound_env.control.offset_free.OffsetFree`, runs as one reset copy per robot,
+so nothing it learned before, in this worker or in another task, reaches a robot). A caller
+chooses what differs: restart at every apex (the apex map) or one long episode (rough
+terrain, with its slope draws), per-robot plants, sensor noise, actuation delay, kicks, a
+return test, effort bookkeeping (`interval_loop`'s docstring).
+
+`apex_loop` iterates the closed-loop apex map from every start: every robot starts at its apex
+state z (x_g = 0, both legs in flight, t = 0) and, at each apex it reached, is started again
+there, as a single PassiveBound-v0 env is reset at the apex (``reset(options={"apex_state":
+z})``), until
 
 - it returns: the max-abs apex error to ``z_target`` falls below ``tol`` (SI);
 - it falls: a stride fails (or reaches no apex within the step limit, `max_intervals`);
 - ``max_strides`` strides pass (undecided).
 
-Two ways to advance a batch, one per kind of controller:
+Two ways to advance the batch, one per kind of controller:
 
 - **a stride controller** (``interval_actions``): one batch of whole strides per stride count
   through the one stride map (``strides(Z, kicks)``, `bound_env.stride_map.StrideMap.run`);
-- **a step-level controller**: the task's batch kernel (`bound_env.task.PassiveBoundTask.step`),
-  one controller call per control interval for the whole batch: ``batch(obs)`` if it has one
-  (and no ``on_apex``), else one copy per robot, called row by row, with ``on_apex(z, 0.0)``
-  at each stride's start apex (a step-level residual over a stride controller). Each robot's
-  intervals are its own, so its outcome is that of the single env's loop.
+- **a step-level controller**: `interval_loop`, one controller call per control interval for
+  the whole batch (``batch(obs)``) or one fresh copy per robot (with ``on_apex(z, 0.0)`` at
+  each stride's start apex: a step-level residual over a stride controller, an offset-free
+  controller). Each robot's intervals are its own, so its outcome is that of the single
+  env's loop.
 
 `CLOCK` records the wall time of every apex decision while it is on (margins' tasks turn it
 on: the real-time yardstick, `bound_env.analysis.margins.decision_times`).
@@ -33,8 +44,9 @@ import numpy as np
 
 from ..events import F_NO_APEX, FAIL_FIRST, FAILURES
 from ..params import Z_IN_Y
-from ..stride_map import RETURN_TOL, max_intervals
-from ..task import S_NAPEX, S_PHASE, S_STATUS
+from ..stride_map import RETURN_TOL, max_intervals, to_next_apex
+from ..stride_protocol import StridePlans, reset_controller
+from ..task import S_NAPEX, S_PHASE, S_STATUS, S_STRIDES, S_T, S_T_APEX, S_TAU
 
 RETURNED, FELL, UNDECIDED = 0, 1, 2  # a robot's outcome
 NON_FINITE = FAILURES.index("non_finite") + FAIL_FIRST
@@ -174,26 +186,95 @@ def _through_map(out, Z, z_target, max_strides, tol, strides, kicks) -> None:
             break
 
 
-class _Actions:
-    """One call per control interval for the whole batch: ``controller.batch(obs)`` if it has
-    one (and no ``on_apex``); else one copy of the controller per robot, called row by row,
-    with ``on_apex(z, 0.0)`` at each stride's start apex when it has that hook."""
+def _through_task(out, Z, z_target, max_strides, tol, task, controller, kicks) -> None:
+    r = interval_loop(task, controller, Z, max_strides, kicks=kicks, z_target=z_target, tol=tol)
+    for i in range(len(Z)):
+        if r["returned"][i]:
+            out["outcome"][i], out["strides"][i] = RETURNED, r["strides"][i]
+        elif r["status"][i]:  # the stride that failed: one past the completed ones
+            fell(out, i, int(r["status"][i]), int(r["strides"][i]) + 1, int(r["phase"][i]))
+    out["error"][:], out["z_last"][:] = r["error"], r["z_last"]
+    out["apexes"] += r["apexes"]
 
-    def __init__(self, controller, Z):
+
+# --------------------------------------------------------------------------------------------
+# The one per-interval batched closed loop
+# --------------------------------------------------------------------------------------------
+
+
+class SensorNoise:
+    """What the controller sees under sensor noise: its observation plus sigma_obs N(0, 1)
+    (clipped to the observation's bounds), and the apex state handed to ``on_apex`` plus
+    sigma_z N(0, 1), robot i's draws from its own generator ``rngs[i]``."""
+
+    def __init__(self, obs_sigma, z_sigma, rngs, low, high):
+        self.obs_sigma = np.asarray(obs_sigma, dtype=np.float32)
+        self.z_sigma = np.asarray(z_sigma, dtype=float)
+        self.rngs, self.low, self.high = rngs, low, high
+
+    def obs(self, obs, rows) -> np.ndarray:
+        seen = obs.copy()
+        for i in rows:
+            draw = self.rngs[i].standard_normal(len(self.obs_sigma))
+            seen[i] = np.clip(obs[i] + self.obs_sigma * draw, self.low, self.high)
+        return seen
+
+    def z(self, i: int, z) -> np.ndarray:
+        return z + self.z_sigma * self.rngs[i].standard_normal(6)
+
+
+class _Controllers:
+    """The controller side of `interval_loop`, one rule for every caller: every robot starts
+    with a fresh controller state.
+
+    - a memoryless controller with ``batch(obs)`` (no ``on_apex``, not ``stateful``): one call
+      for the whole batch per control interval;
+    - a memoryless stride controller with ``apex_torques`` on the nominal plant with nothing
+      between its plan and the torque (no per-robot plant, sensor noise, delay, kick or
+      effort bookkeeping): every robot's plan in one array (`StridePlans`), stepped from
+      apex to apex by a compiled loop (`bound_env.stride_map.to_next_apex`: the copies'
+      intervals and actions, to rounding);
+    - any other controller: one copy per robot, reset (`reset_controller`: a stateful one,
+      e.g. `OffsetFree`, forgets whatever it learned before), called row by row, with
+      ``on_apex`` at the start and at every apex, as a single env calls it.
+
+    Every ``on_apex`` is timed into `CLOCK`; the copies' ``decision_kinds`` go, robot by
+    robot, into the controller's own record at the end (`close`)."""
+
+    def __init__(self, controller, n: int, compiled: bool, plants=None):
         self.controller = controller
-        self.batched = callable(getattr(controller, "batch", None)) and not callable(
-            getattr(controller, "on_apex", None)
-        )
-        if not self.batched:
-            self.kinds = getattr(controller, "decision_kinds", None)
-            self.n0 = len(self.kinds) if self.kinds is not None else 0
-            self.copies = [copy.deepcopy(controller) for _ in range(len(Z))]
-            for i, z in enumerate(Z):
-                self.restart(i, z)
+        hook = callable(getattr(controller, "on_apex", None))
+        # a privileged controller (`bound_env.control.privileged`) is handed its robot's true
+        # plant, so it runs as one copy per robot
+        privileged = plants is not None and getattr(controller, "privileged", False) is True
+        memoryless = not getattr(controller, "stateful", False) and not privileged
+        self.batched = callable(getattr(controller, "batch", None)) and not hook and memoryless
+        self.plans = None
+        if not self.batched and compiled and memoryless:
+            if callable(getattr(controller, "apex_torques", None)):
+                self.plans = StridePlans(controller, n)
+        self.copies = None
+        self.kinds = getattr(controller, "decision_kinds", None)
+        self.n0 = len(self.kinds) if self.kinds is not None else 0
+        if not self.batched and self.plans is None:
+            self.copies = [copy.deepcopy(controller) for _ in range(n)]
+            for i, c in enumerate(self.copies):
+                reset_controller(c)
+                if privileged:
+                    c.set_plant(plants[i])
+        self.hook = self.plans is not None or (self.copies is not None and hook)
 
-    def restart(self, i: int, z) -> None:
-        if not self.batched and hasattr(self.copies[i], "on_apex"):
-            timed_on_apex(self.copies[i].on_apex, np.asarray(z, dtype=float), 0.0)
+    def apex(self, i: int, z, time_since_apex: float, noise) -> None:
+        """Robot i is at the apex z (its stride's start): the controller's ``on_apex``, with
+        the apex state it sees."""
+        if not self.hook:
+            return
+        z = np.asarray(z, dtype=float)
+        seen = noise.z(i, z) if noise is not None else z
+        if self.plans is not None:
+            timed_on_apex(lambda z, t: self.plans.apex(i, z, t), seen, time_since_apex)
+        else:
+            timed_on_apex(self.copies[i].on_apex, seen, time_since_apex)
 
     def __call__(self, obs, live) -> np.ndarray:
         if self.batched:
@@ -204,50 +285,189 @@ class _Actions:
         return a
 
     def close(self) -> None:
-        """The copies' decisions, robot by robot, into the controller's own record."""
-        if not self.batched and self.kinds is not None:
+        if self.copies is not None and self.kinds is not None:
             for c in self.copies:
                 self.kinds.extend(c.decision_kinds[self.n0 :])
 
 
-def _through_task(out, Z, z_target, max_strides, tol, task, controller, kicks) -> None:
-    n = len(Z)
+def interval_loop(
+    task,
+    controller,
+    Z0,
+    max_strides: int,
+    *,
+    restart: bool = True,
+    aux=None,
+    terrain=None,
+    noise: SensorNoise | None = None,
+    delay: int = 0,
+    kicks=None,
+    z_target=None,
+    tol: float = RETURN_TOL,
+    effort_strides: int | None = None,
+    plants=None,
+) -> dict:
+    """The one per-interval batched closed loop: robot i starts at the apex state Z0[i] and
+    is stepped with ``controller`` through the ``task``'s batch kernel
+    (`bound_env.task.PassiveBoundTask.step`), all robots together, one control interval at
+    a time, each robot's intervals its own (so its outcome is that of a single env), until
+    it falls, returns (``z_target``) or completes ``max_strides`` strides. The controller
+    side (batch, compiled plans or one fresh copy per robot) is `_Controllers`: every robot
+    starts with a fresh controller state.
+
+    - ``restart``: the closed-loop apex map: at every apex the robot starts again there
+      (t = 0, the observation's time since the apex 0), as the stride map and
+      ``reset(options={"apex_state": z})`` do; an interval that reaches an apex ends the
+      stride there. False: one long episode per robot (the env's loop: a failure in the
+      interval of an apex ends it; the stride count is the env's, ``info["stride"]``).
+    - ``aux``: per-robot parameters (n, N_AUX) (model error), else the task's; ``plants``:
+      the same robots' `bound_env.params.Params`, handed (``set_plant``) only to a
+      controller that declares itself ``privileged`` (the privileged reference).
+    - ``terrain``: per-robot generators of the slope draws (rough terrain: the task's
+      ``slope_noise_deg``; long episodes only), drawn at the start and after each apex as
+      the env draws them.
+    - ``noise`` (`SensorNoise`): what the controller sees; ``delay``: the action decided on
+      interval k acts on interval k + delay (zero torque before; in flight across apexes).
+    - ``kicks[i]``: (interval, state index 4..7, delta) added to robot i's state before that
+      interval of its first stride (sensed one interval later), or None.
+    - ``z_target``, ``tol``: a robot *returns* (and stops) at the first apex with max-abs
+      error to ``z_target`` below ``tol``.
+    - ``effort_strides``: record each robot's mean |tau| [N m] over its last this many
+      strides when it completes ``max_strides``.
+
+    A robot also falls when a stride reaches no apex within `max_intervals` (``no_apex``)
+    or reaches a non-finite apex (``non_finite``, stance condition -1). Returns per robot
+    (arrays, lists): ``strides`` (completed), ``status`` (0, or the failure code),
+    ``phase`` (stance condition index at the failure; 0 for an impossible start),
+    ``returned``, ``error`` (the last apex's max-abs error to ``z_target``), ``z_last``
+    (the last apex reached, Z0 before any), ``settle`` (per component |z(N) - z(N - 1)| of
+    the last two apexes, None before two), ``effort`` (None unless recorded); and
+    ``apexes``, the apexes reached in all."""
+    if restart and terrain is not None:
+        raise ValueError("rough terrain runs long episodes (restart=False)")
+    Z0 = np.array(np.atleast_2d(Z0), dtype=float)
+    n = len(Z0)
     b = task.new_batch(n)
+
+    def start(i, z):
+        task.reset_robot(b, i, z)
+        if aux is not None:
+            b.aux[i] = aux[i]
+            task.restart_robot(b, i)
+
     for i in range(n):
-        task.reset_robot(b, i, Z[i])
-    live = np.ones(n, dtype=np.bool_)
-    for i in np.flatnonzero(b.s[:, S_STATUS] >= FAIL_FIRST):  # impossible starts
-        fell(out, i, int(b.s[i, S_STATUS]), 1, 0)
-        live[i] = False
-    act = _Actions(controller, Z)
-    stride = np.zeros(n, dtype=np.int64)  # strides completed
-    steps = np.zeros(n, dtype=np.int64)  # control intervals in the current stride
-    max_steps = max_intervals(task.dt)
-    kick_at = np.array([-1 if k is None else int(k[0]) for k in kicks], dtype=np.int64)
+        start(i, Z0[i])
+        if terrain is not None:
+            task.draw_slope_noise(b, i, terrain[i])
+    out = {
+        "strides": np.zeros(n, dtype=np.int64),
+        "status": np.zeros(n, dtype=np.int64),
+        "phase": np.full(n, -1, dtype=np.int64),
+        "returned": np.zeros(n, dtype=np.bool_),
+        "error": np.full(n, np.inf),
+        "z_last": Z0.copy(),
+        "settle": [None] * n,
+        "effort": [None] * n,
+        "apexes": 0,
+    }
+    live = b.s[:, S_STATUS] < FAIL_FIRST
+    for i in np.flatnonzero(~live):  # impossible starts
+        out["status"][i], out["phase"][i] = int(b.s[i, S_STATUS]), 0
+    nominal = aux is None and noise is None and delay == 0 and kicks is None
+    ctl = _Controllers(controller, n, compiled=nominal and effort_strides is None, plants=plants)
+    for i in range(n):
+        ctl.apex(i, Z0[i].copy(), 0.0, noise)
+    kick_at = np.full(n, -1, dtype=np.int64)
+    if kicks is not None:
+        kick_at[:] = [-1 if k is None else int(k[0]) for k in kicks]
+    queue = [np.zeros(n) for _ in range(delay)]
+    dt, n_max = task.dt, max_intervals(task.dt)
+    i_time = list(task.obs_names).index("time_since_apex")
+    steps = np.zeros(n, dtype=np.int64)  # control intervals since the stride's start
+    done = out["strides"]
+    seen_apex = np.zeros(n, dtype=np.bool_)
+    if effort_strides is not None:
+        imp = np.zeros(n)  # integral of |tau| dt since the last apex [N m s]
+        t_start = np.zeros(n)  # time of the last apex [s]
+        per_stride = [[] for _ in range(n)]  # (impulse, duration) of each stride
     while live.any():
-        for i in np.flatnonzero(live & (stride == 0) & (steps == kick_at)):
-            b.y[i, int(kicks[i][1])] += float(kicks[i][2])
-        b.actions[:] = act(b.obs, live)
-        b.active[:] = live
-        task.step(b)
-        steps[live] += 1
+        if ctl.plans is not None:  # every live robot to its next apex (or fall), compiled
+            c = ctl.controller
+            to_next_apex(
+                b.y, b.aux, b.flags, b.s, b.apex, b.obs, task.cfg, live, ctl.plans.taus,
+                ctl.plans.t0, bool(c.snaps_time), c.basis.edges, c.dt, i_time, n_max,
+            )  # fmt: skip
+        else:
+            for i in np.flatnonzero(live & (done == 0) & (steps == kick_at)):
+                b.y[i, int(kicks[i][1])] += float(kicks[i][2])
+            obs = b.obs if noise is None else noise.obs(b.obs, np.flatnonzero(live))
+            decided = ctl(obs, live)
+            if queue:
+                queue.append(decided)
+                decided = queue.pop(0)
+            b.actions[:] = decided
+            b.active[:] = live
+            task.step(b)
+            steps[live] += 1
         s = b.s
         napex = s[:, S_NAPEX].astype(np.int64)
-        done = live & (napex > 0)
-        failed = live & ~done & ((s[:, S_STATUS] >= FAIL_FIRST) | (steps >= max_steps))
-        for i in np.flatnonzero(failed):
-            code = int(s[i, S_STATUS]) if s[i, S_STATUS] >= FAIL_FIRST else F_NO_APEX
-            fell(out, i, code, int(stride[i]) + 1, int(s[i, S_PHASE]))
-        live &= ~failed
-        for i in np.flatnonzero(done):
+        reached = live & (napex > 0)
+        failed = live & (s[:, S_STATUS] >= FAIL_FIRST)
+        if restart:  # the stride ended at its apex: what follows in the interval is not run
+            failed &= ~reached
+        apex = reached & ~failed
+        timeout = live & ~apex & ~failed & (steps >= n_max)
+        if effort_strides is not None:
+            tau = np.abs(s[:, S_TAU])
+            imp[live & ~reached] += tau[live & ~reached] * dt
+        if terrain is not None:
+            for i in np.flatnonzero(reached):
+                task.draw_slope_noise(b, i, terrain[i])
+        for i in np.flatnonzero(failed | timeout):
+            out["status"][i] = int(s[i, S_STATUS]) if failed[i] else F_NO_APEX
+            out["phase"][i] = int(s[i, S_PHASE])
+            if not restart:
+                done[i] = int(s[i, S_STRIDES])
+        live &= ~(failed | timeout)
+        for i in np.flatnonzero(apex):
+            out["apexes"] += 1
             z1 = np.array(b.apex[i, min(napex[i], b.apex.shape[1]) - 1][_Z_IDX], dtype=float)
-            stride[i] += 1
-            if not _apex_reached(out, i, z1, int(stride[i]), z_target, tol):
+            if not np.all(np.isfinite(z1)):
+                out["status"][i] = NON_FINITE
                 live[i] = False
-            elif stride[i] >= max_strides:
+                continue
+            done[i] = done[i] + 1 if restart else int(s[i, S_STRIDES])
+            steps[i] = 0
+            if effort_strides is not None:
+                t_apex, t_end = float(s[i, S_T_APEX]), float(s[i, S_T])
+                last = imp[i] + tau[i] * (t_apex - (t_end - dt))
+                per_stride[i].append((last, t_apex - t_start[i]))
+            if seen_apex[i]:
+                out["settle"][i] = np.abs(z1 - out["z_last"][i]).tolist()
+            seen_apex[i] = True
+            out["z_last"][i] = z1
+            if z_target is not None:
+                out["error"][i] = float(np.max(np.abs(z1 - z_target)))
+                if out["error"][i] < tol:
+                    out["returned"][i], live[i] = True, False
+                    continue
+            if done[i] >= max_strides:
                 live[i] = False
+                if effort_strides is not None:
+                    tail = per_stride[i][-effort_strides:]
+                    dur = sum(d for _, d in tail)
+                    if len(tail) == effort_strides and dur > 0:
+                        out["effort"][i] = sum(m for m, _ in tail) / dur
+                continue
+            if restart:  # the apex map: the next stride from z1 at t = 0
+                start(i, z1)
+                t_seen = 0.0
+                if effort_strides is not None:
+                    imp[i], t_start[i] = 0.0, 0.0
             else:
-                task.reset_robot(b, i, z1)
-                act.restart(i, z1)
-                steps[i] = 0
-    act.close()
+                t_seen = float(b.obs[i, i_time])
+                if effort_strides is not None:
+                    imp[i], t_start[i] = tau[i] * (t_end - t_apex), t_apex
+            ctl.apex(i, z1, t_seen, noise)
+    ctl.close()
+    return out

@@ -58,7 +58,8 @@ def paired_text(pairs) -> str:
             for c in e["curve"]
         ]
         details.append(
-            f"<details><summary>per size: {e['column']} vs {e['reference']}</summary>\n\n"
+            f'<details markdown="1"><summary>per size: {e["column"]} vs {e["reference"]}'
+            "</summary>\n\n"
             "| r | P(return) | P(return), reference | Δ | directions better | "
             "directions worse | McNemar p |\n| --- | --- | --- | --- | --- | --- | --- |\n"
             + "\n".join(drows)

@@ -42,7 +42,8 @@ passive robot (the inner controller stabilizes it), as long as the target stays 
 State. The wrapper remembers, per robot, d^ and the last stride's apex state and actions. The
 step protocol (``on_apex`` / ``__call__``, `PlainPolicy`, `ClosedLoop` in its env loop) keeps
 one robot's state; ``reset()`` forgets it (`PlainPolicy.restart`, `ClosedLoop.run` and
-``episode`` call it at each start). Batched loops keep one `OffsetFreeState` per batch
+``episode`` call it at each start, the batched loop `bound_env.analysis.apex_loop.interval_loop`
+on each robot's copy). Batched loops keep one `OffsetFreeState` per batch
 (``start(n)``) and call ``plan_actions(state, Z, rows)``. The wrapper has no stateless
 ``interval_actions``: the margins' batched stride path assumes a memoryless controller, so a
 `ClosedLoop` steps it through the env instead.
@@ -56,6 +57,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..schema import real
 from ..stride_map import StrideMap, max_intervals
 from .controllers import OBS_TIME
 from .design import DESIGN_RTOL, FD_FLOOR_Z, FD_REL_Z, FD_U
@@ -147,6 +149,11 @@ class OffsetFree:
                 f"offset_free: estimator must be one of {ESTIMATORS}, got {estimator!r}"
             )
         self.estimator = estimator
+        if isinstance(inner, OffsetFree):
+            raise ValueError(
+                f"{inner.name!r} is held offset-free already: a second {SUFFIX} would estimate "
+                "the same offset twice, each chasing the other's shift (give it once)"
+            )
         if not callable(getattr(inner, "interval_actions", None)) or not callable(
             getattr(inner, "on_apex", None)
         ):
@@ -154,10 +161,16 @@ class OffsetFree:
                 f"{getattr(inner, 'name', inner)!r} is not a stride controller "
                 "(no interval_actions / on_apex): only stride controllers can be held offset-free"
             )
-        for key, v in (("gain", gain), ("deadband", deadband), ("max_shift", max_shift)):
+        given = {"gain": gain, "deadband": deadband, "max_shift": max_shift}
+        for key, v in given.items():  # any real number type (np.float32 too), not a bool
             lo, hi = OF_LIMITS[key]
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and lo <= v <= hi):
-                raise ValueError(f"offset_free: {key} must be a number in [{lo}, {hi}], got {v!r}")
+            try:
+                given[key] = real(v, f"offset_free: {key}", lo, hi)
+            except ValueError:
+                raise ValueError(
+                    f"offset_free: {key} must be a number in [{lo}, {hi}], got {v!r}"
+                ) from None
+        gain, deadband, max_shift = given["gain"], given["deadband"], given["max_shift"]
         if gain <= 0.0:
             raise ValueError(f"offset_free: gain must be > 0, got {gain!r}")
         self.inner = inner

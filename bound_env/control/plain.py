@@ -29,6 +29,10 @@ It fails loudly where the loop would silently go wrong:
   accepted), ``info["tau"]`` after a non-zero action (the env's ``max_torque``), and
   ``info["time"]`` between two calls (the env's ``dt``): ValueError naming the setting.
   The integrator tolerance and the gait do not show in what the env returns.
+
+A privileged controller (``privileged`` true: `bound_env.control.privileged`, an upper
+reference that reads the robot's true plant) gets ``info["plant"]`` at each reset of an env
+that reports it (`bound_env.wrappers.RandomizedPlant`); no other controller ever does.
 """
 
 from __future__ import annotations
@@ -122,6 +126,8 @@ class PlainPolicy:
         if "start_z" in info:  # a reset: a new episode
             self.restart()
             self._started = True
+            if getattr(self._ctrl, "privileged", False) is True and "plant" in info:
+                self._ctrl.set_plant(info["plant"])  # the privileged reference reads the plant
         elif not self._started:
             raise ValueError(
                 f"policy {self.name}: the first call of an episode must pass the info of "

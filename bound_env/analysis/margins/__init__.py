@@ -101,6 +101,11 @@ Measures (JSON keys)
   delay (`bound_env.mismatch`): ``hold``, ``curve`` and ``r50`` (settled, not returned),
   ``mfpt``; the reference is `mismatch_tasks`' docstring, the text and the results page's
   section `mismatch_report`.
+- ``seconds``, ``tasks``: the run's wall time and how many of its tasks it took from the cache
+  (``cached``) and ``computed`` (a run that computed nothing timed only the assembly).
+- ``fingerprint``: what decided these numbers (`fingerprint.column_fingerprint`): the
+  controller's ``fingerprint()`` and ``config``, hashes of its planning constants and of its
+  code, and the git ``commit`` (``dirty`` if a tracked .py file differed from it).
 
 Controllers
 -----------
@@ -134,6 +139,9 @@ Modules
 - `budget`: `Budget`, `BUDGETS`, the seeds and `sample_seeds`, `random_directions`;
 - `closed_loop`: `ClosedLoop` (the apex map, kicks, episodes, open-loop profiles),
   `rough_episodes` (batched), `Setup` and `loop_for` (one loop per worker and setting);
+  every batch of robots (``run_many``, `rough_episodes`, `mismatch_tasks.plant_runs`) runs
+  through the one batched loop `bound_env.analysis.apex_loop.interval_loop`, each robot with
+  a fresh controller state;
 - the measures, one task each (run in worker processes): `cycle` (fixed point, multipliers,
   effort), `basin` (per axis), `ceiling`, `curve` (basin stability), `terrain` (survival and
   MFPT), `windows` (slope and k_c), `push`;
@@ -142,6 +150,7 @@ Modules
 - `assemble`: the JSON result from the tasks' results;
 - `report`: margins.json, the CSV tables, the plots and `summary_text`;
 - `stats`: Wilson and Student-t intervals, crossings on a grid, the MFPT estimate.
+- `fingerprint`: what decided a column's numbers (`column_fingerprint`, `stale_parts`).
 - `mismatch_tasks`: the model-error measures (``mm_hold``, ``mm_curve``, ``mm_mfpt``) and
   `mismatch_tasks.plant_runs`; `mismatch_report`: `mismatch_text`, `mismatch_markdown`.
 """
@@ -156,6 +165,7 @@ from .basin import (
     physical_cap,
     start_geometry,
     task_basin,
+    task_basins,
 )
 from .budget import (
     BUDGETS,
@@ -268,6 +278,7 @@ __all__ = [
     "start_geometry",
     "summary_text",
     "task_basin",
+    "task_basins",
     "task_ceiling",
     "task_curve",
     "task_cycle",

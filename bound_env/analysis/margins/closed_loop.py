@@ -1,5 +1,6 @@
 """The closed loop: a controller in the loop of one PassiveBound environment, its apex-to-apex
-map (`ClosedLoop`), kicks, batched rough-terrain runs, and the per-worker `Setup` of a margins
+map (`ClosedLoop`), kicks, batched rough-terrain runs (through the one batched loop,
+`bound_env.analysis.apex_loop.interval_loop`), and the per-worker `Setup` of a margins
 evaluation with its cache of loops (`loop_for`)."""
 
 from __future__ import annotations
@@ -10,25 +11,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...events import PHASES
-from ...params import Z_IN_Y
-from ...stride_map import (
-    EVAL_RTOL,
-    RETURN_TOL,
-    StrideMap,
-    Strides,
-    max_intervals,
-    to_next_apex,
+from ...stride_map import EVAL_RTOL, RETURN_TOL, StrideMap, Strides, max_intervals
+from ...stride_protocol import reset_controller
+from ...task import FAIL_FIRST, FAILURE_NAMES
+from ..apex_loop import (
+    RETURNED,
+    apex_loop,
+    interval_loop,
+    timed_interval_actions,
+    timed_on_apex,
 )
-from ...stride_protocol import StridePlans, reset_controller
-from ...task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_STRIDES
-from ..apex_loop import RETURNED, apex_loop, timed_interval_actions, timed_on_apex
 from .budget import DEFAULT_SEED, Budget
 
 ENV_ID = "PassiveBound-v0"
 PROFILE_SEG = 5  # ceiling search: control intervals per piece of a torque profile
 PROFILE_SPAN = 1.3  # ceiling search: the profile covers 1.3 x the strides' nominal duration
 STRIDES = [0]  # strides advanced in this process (benchmarks/margins.py reads it)
-_Z_IDX = np.array(Z_IN_Y)  # z = y[_Z_IDX] at an apex
 FAILURES_BY_REASON = (None, *FAILURE_NAMES[FAIL_FIRST:])  # apex_loop's reason -> failure name
 
 
@@ -257,92 +255,29 @@ def apply_kick(env, index: int, delta: float) -> None:
 def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
     """`ClosedLoop.episode` for many robots at once: robot k runs the episode of
     ``loop.episode(z0, max_strides, seed=seeds[k])`` (the same task, hence ``loop``'s rough
-    terrain, and the same slope draws from its own env RNG), all advanced together by the
-    task's batch kernel, one controller call per control interval: ``batch(obs)`` for a
-    controller that has one (and no ``on_apex``), else one copy per robot called row by row
-    with ``on_apex`` at every apex, as the single env calls it (then bit-identical to
-    ``episode``). Returns {"strides": completed strides per robot, "fell": 0/1 per robot,
-    "failures": {reason: count}}."""
-    import copy
-
+    terrain, and the same slope draws from its own env RNG), all advanced together by the one
+    batched loop (`bound_env.analysis.apex_loop.interval_loop`, long episodes), each robot
+    with a fresh controller state (then bit-identical to ``episode``). Returns {"strides":
+    completed strides per robot, "fell": 0/1 per robot, "failures": {reason: count}}."""
     from gymnasium.utils import seeding
 
-    task, ctrl = loop.env.task, loop.controller
-    n = len(seeds)
+    task = loop.env.task
     z0 = task.check_apex_state(z0)
-    b = task.new_batch(n)
-    rngs = []
-    for i, sd in enumerate(seeds):
-        rngs.append(seeding.np_random(int(sd))[0])
-        task.reset_robot(b, i, z0)
-        task.draw_slope_noise(b, i, rngs[i])
-    on_apex = getattr(ctrl, "on_apex", None)
-    batched = callable(getattr(ctrl, "batch", None)) and on_apex is None
-    # a stride controller: every robot's plan in one array, stepped by a compiled loop from
-    # apex to apex (the same intervals and actions as its copies, bit for bit)
-    plans = None
-    if not batched and callable(getattr(ctrl, "apex_torques", None)):
-        plans = StridePlans(ctrl, n)
-        for i in range(n):
-            timed_on_apex(lambda z, t, i=i: plans.apex(i, z, t), z0.copy(), 0.0)
-    copies = None if batched or plans is not None else [copy.deepcopy(ctrl) for _ in range(n)]
-    if copies is not None and on_apex is not None:
-        for c in copies:
-            reset_controller(c)
-            timed_on_apex(c.on_apex, z0.copy(), 0.0)
-    strides = np.zeros(n, dtype=np.int64)
-    fell = np.zeros(n, dtype=np.int64)
+    terrain = [seeding.np_random(int(sd))[0] for sd in seeds]
+    r = interval_loop(
+        task, loop.controller, np.tile(z0, (len(seeds), 1)), max_strides, restart=False,
+        terrain=terrain,
+    )  # fmt: skip
     failures: dict = {}
-    live = b.s[:, S_STATUS] < FAIL_FIRST  # an invalid start fails at the reset (0 strides)
-    for i in np.flatnonzero(~live):
-        fell[i] = 1
-        name = FAILURE_NAMES[int(b.s[i, S_STATUS])]
+    for code in r["status"][r["status"] > 0]:
+        name = FAILURE_NAMES[int(code)]
         failures[name] = failures.get(name, 0) + 1
-    n_max = max_intervals(task.dt)
-    while live.any():
-        if plans is not None:  # every live robot to its next apex (or fall), compiled
-            to_next_apex(
-                b.y, b.aux, b.flags, b.s, b.apex, b.obs, task.cfg, live, plans.taus,
-                plans.t0, bool(ctrl.snaps_time), ctrl.basis.edges, ctrl.dt,
-                loop.i_since_apex, n_max,
-            )  # fmt: skip
-        else:
-            if batched:
-                b.actions[:] = ctrl.batch(b.obs)
-            else:
-                for i in np.flatnonzero(live):
-                    b.actions[i] = copies[i](b.obs[i])
-            b.active[:] = live
-            task.step(b)
-        s = b.s
-        apex = live & (s[:, S_NAPEX] > 0)
-        for i in np.flatnonzero(apex):
-            task.draw_slope_noise(b, i, rngs[i])
-        failed = live & (s[:, S_STATUS] >= FAIL_FIRST)
-        for i in np.flatnonzero(failed):
-            fell[i], strides[i] = 1, int(s[i, S_STRIDES])
-            name = FAILURE_NAMES[int(s[i, S_STATUS])]
-            failures[name] = failures.get(name, 0) + 1
-        live &= ~failed
-        for i in np.flatnonzero(apex & live):
-            strides[i] = int(s[i, S_STRIDES])
-            if strides[i] >= max_strides:
-                live[i] = False
-            elif plans is not None or (copies is not None and on_apex is not None):
-                napex = int(s[i, S_NAPEX])
-                z1 = np.array(b.apex[i, min(napex, b.apex.shape[1]) - 1][_Z_IDX], dtype=float)
-                t_seen = float(b.obs[i, loop.i_since_apex])
-                if plans is not None:
-                    timed_on_apex(lambda z, t, i=i: plans.apex(i, z, t), z1, t_seen)
-                else:
-                    timed_on_apex(copies[i].on_apex, z1, t_seen)
-    STRIDES[0] += int(strides.sum())
-    kinds = getattr(ctrl, "decision_kinds", None)
-    if copies is not None and kinds is not None:  # the copies' decisions, robot by robot
-        n0 = len(kinds)
-        for c in copies:
-            kinds.extend(c.decision_kinds[n0:])
-    return {"strides": strides.tolist(), "fell": fell.tolist(), "failures": failures}
+    STRIDES[0] += int(r["strides"].sum())
+    return {
+        "strides": r["strides"].tolist(),
+        "fell": (r["status"] > 0).astype(np.int64).tolist(),
+        "failures": failures,
+    }
 
 
 # --------------------------------------------------------------------------------------------

@@ -4,9 +4,11 @@ The controller keeps its nominal design (model, gains, network); robot i runs on
 plant, drawn from the spec (`bound_env.mismatch`: relative parameter ranges, sensor noise,
 actuation delay) with the seed's plant seed (`mismatch_seeds`), so every controller meets the
 same plants in the same order (paired comparisons: `mismatch_report`). Every run steps the
-step env interval by interval (`plant_runs`); on smooth ground each stride restarts at its
-apex (the nominal apex map's convention), on rough terrain a run is one long episode (the
-nominal MFPT's); delayed actions stay in flight across apexes.
+step env interval by interval (`plant_runs`, through the one batched loop
+`bound_env.analysis.apex_loop.interval_loop`, every robot with a fresh controller state); on
+smooth ground each stride restarts at its apex (the nominal apex map's convention), on rough
+terrain a run is one long episode (the nominal MFPT's); delayed actions stay in flight across
+apexes.
 
 Measures
 --------
@@ -36,7 +38,6 @@ returns acts ``delay`` control intervals later (zero torque before).
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
 
@@ -44,16 +45,15 @@ import numpy as np
 
 from ...dynamics import make_aux
 from ...mismatch import MismatchSpec, sample_plant_params
-from ...params import Z_IN_Y, Z_NAMES
-from ...stride_map import RETURN_TOL, max_intervals
-from ...stride_protocol import reset_controller
-from ...task import FAIL_FIRST, FAILURE_NAMES, S_NAPEX, S_STATUS, S_T, S_T_APEX, S_TAU
+from ...params import Z_NAMES
+from ...stride_map import RETURN_TOL
+from ...task import FAILURE_NAMES
+from ..apex_loop import SensorNoise, interval_loop
 from .budget import DEFAULT_SEED, random_directions, sample_seeds
 from .closed_loop import STRIDES, Setup, loop_for
 
 MISMATCH_SEED = 40_000  # the plants of the default (test) seed; any other seed derives its own
 SETTLE_NOISE = 4.0  # settle tolerance: RETURN_TOL + this many noise sigmas per component
-_Z_IDX = np.array(Z_IN_Y)
 
 
 @dataclass(frozen=True)
@@ -125,142 +125,54 @@ def plant_runs(
     spec: MismatchSpec,
     noise_seeds,
     terrain_seeds=None,
-    effort_strides: int = 10,
+    effort_strides: int | None = 10,
 ) -> dict:
-    """One long episode per robot i from the apex state Z0[i] on the plant ``plants[i]``
-    (`Params`), all stepped together through ``loop``'s task, one controller call per
-    control interval (``batch(obs)`` for a controller with one and no ``on_apex``, else a
-    copy per robot with ``on_apex`` at every apex, as `rough_episodes`), with the spec's
-    sensor noise (robot i's generator seeded ``noise_seeds[i]``) and actuation delay, until
-    ``max_strides`` strides or a fall. On smooth ground every stride restarts at its apex
-    (t = 0 there, as the nominal apex map `ClosedLoop.stride`; delayed actions stay in
-    flight); ``terrain_seeds`` (env seeds of the slope draws, rough terrain: the loop's
-    ``slope_noise_deg``) runs one long episode per robot instead, as the nominal MFPT.
+    """One run per robot i from the apex state Z0[i] on the plant ``plants[i]`` (`Params`),
+    all stepped together through ``loop``'s task by the one batched loop
+    (`bound_env.analysis.apex_loop.interval_loop`: each robot with a fresh controller
+    state), with the spec's sensor noise (robot i's generator seeded ``noise_seeds[i]``) and
+    actuation delay, until ``max_strides`` strides or a fall. On smooth ground every stride
+    restarts at its apex (t = 0 there, as the nominal apex map `ClosedLoop.stride`; delayed
+    actions stay in flight); ``terrain_seeds`` (env seeds of the slope draws, rough terrain:
+    the loop's ``slope_noise_deg``) runs one long episode per robot instead, as the nominal
+    MFPT.
 
     Returns per robot: ``strides``, ``fell`` (0/1), ``failure`` (name or None), ``settle``
     (per component |z(N) - z(N - 1)| of the last two apexes, None before two), ``effort``
-    (mean |tau| [N m] over the last ``effort_strides`` strides, None before as many)."""
+    (mean |tau| [N m] over the last ``effort_strides`` strides, None before as many or with
+    ``effort_strides`` None)."""
     from gymnasium.utils import seeding
 
-    task, ctrl = loop.env.task, loop.controller
-    n = len(plants)
-    Z0 = np.atleast_2d(np.asarray(Z0, dtype=float))
-    b = task.new_batch(n)
-    noise_rng = [np.random.default_rng(int(s)) for s in noise_seeds]
-    terrain_rng = None
+    task = loop.env.task
+    terrain = None
     if terrain_seeds is not None:
-        terrain_rng = [seeding.np_random(int(s))[0] for s in terrain_seeds]
-    plant_aux = [make_aux(p.to_array()) for p in plants]
-    for i in range(n):
-        task.reset_robot(b, i, Z0[i])
-        b.aux[i] = plant_aux[i]
-        task.restart_robot(b, i)
-        if terrain_rng is not None:
-            task.draw_slope_noise(b, i, terrain_rng[i])
-    sig_obs = spec.obs_sigma(task.obs_names).astype(np.float32)
-    sig_z = spec.obs_sigma(Z_NAMES)
-    noisy = bool(np.any(sig_obs > 0))
-    low, high = task.obs_bounds()
-
-    def seen_obs(rows):
-        obs = b.obs.copy()
-        if noisy:
-            for i in rows:
-                obs[i] = np.clip(
-                    obs[i] + sig_obs * noise_rng[i].standard_normal(len(sig_obs)), low, high
-                )
-        return obs
-
-    def seen_z(i, z):
-        return z + sig_z * noise_rng[i].standard_normal(6) if noisy else z
-
-    on_apex = getattr(ctrl, "on_apex", None)
-    batched = callable(getattr(ctrl, "batch", None)) and on_apex is None
-    copies = None if batched else [copy.deepcopy(ctrl) for _ in range(n)]
-    live = b.s[:, S_STATUS] < FAIL_FIRST
-    out = {
-        "strides": [0] * n,
-        "fell": [0] * n,
-        "failure": [None] * n,
-        "settle": [None] * n,
-        "effort": [None] * n,
+        terrain = [seeding.np_random(int(s))[0] for s in terrain_seeds]
+    sig_obs = spec.obs_sigma(task.obs_names)
+    noise = None
+    if np.any(sig_obs > 0):
+        rngs = [np.random.default_rng(int(s)) for s in noise_seeds]
+        noise = SensorNoise(sig_obs, spec.obs_sigma(Z_NAMES), rngs, *task.obs_bounds())
+    r = interval_loop(
+        task,
+        loop.controller,
+        Z0,
+        max_strides,
+        restart=terrain is None,
+        aux=[make_aux(p.to_array()) for p in plants],
+        terrain=terrain,
+        noise=noise,
+        delay=spec.delay,
+        effort_strides=effort_strides,
+        plants=plants,
+    )
+    STRIDES[0] += int(r["strides"].sum())
+    return {
+        "strides": r["strides"].tolist(),
+        "fell": (r["status"] > 0).astype(np.int64).tolist(),
+        "failure": [FAILURE_NAMES[int(c)] if c else None for c in r["status"]],
+        "settle": r["settle"],
+        "effort": r["effort"],
     }
-    for i in np.flatnonzero(~live):
-        out["fell"][i], out["failure"][i] = 1, FAILURE_NAMES[int(b.s[i, S_STATUS])]
-    if copies is not None and on_apex is not None:
-        for i in range(n):
-            reset_controller(copies[i])  # a controller with memory starts each robot afresh
-            copies[i].on_apex(seen_z(i, Z0[i].copy()), 0.0)
-    queue = [np.zeros(n) for _ in range(spec.delay)]
-    restart = terrain_rng is None
-    dt = task.dt
-    n_max = max_intervals(dt)
-    done = np.zeros(n, dtype=np.int64)  # strides completed
-    steps_since = np.zeros(n, dtype=np.int64)  # intervals since the last apex
-    imp = np.zeros(n)  # integral of |tau| dt since the last apex [N m s]
-    t_start = np.zeros(n)  # time of the last apex [s]
-    per_stride = [[] for _ in range(n)]  # (impulse, duration) of each stride
-    last_z = [None] * n
-    while live.any():
-        rows = np.flatnonzero(live)
-        obs = seen_obs(rows)
-        decided = np.zeros(n)
-        if batched:
-            decided[:] = ctrl.batch(obs)
-        else:
-            for i in rows:
-                decided[i] = copies[i](obs[i])
-        if queue:
-            queue.append(decided)
-            decided = queue.pop(0)
-        b.actions[:] = decided
-        b.active[:] = live
-        task.step(b)
-        steps_since[live] += 1
-        s = b.s
-        tau = np.abs(s[:, S_TAU])
-        apex = live & (s[:, S_NAPEX] > 0)
-        failed = live & (s[:, S_STATUS] >= FAIL_FIRST)
-        timeout = live & ~apex & ~failed & (steps_since >= n_max)
-        imp[live & ~apex] += tau[live & ~apex] * dt
-        if terrain_rng is not None:
-            for i in np.flatnonzero(apex):
-                task.draw_slope_noise(b, i, terrain_rng[i])
-        for i in np.flatnonzero(failed | timeout):
-            out["fell"][i], out["strides"][i] = 1, int(done[i])
-            code = int(s[i, S_STATUS])
-            out["failure"][i] = FAILURE_NAMES[code] if failed[i] else "no_apex"
-        live &= ~(failed | timeout)
-        for i in np.flatnonzero(apex & live):
-            done[i] += 1
-            out["strides"][i] = int(done[i])
-            steps_since[i] = 0
-            t_apex, t_end = float(s[i, S_T_APEX]), float(s[i, S_T])
-            per_stride[i].append((imp[i] + tau[i] * (t_apex - (t_end - dt)), t_apex - t_start[i]))
-            napex = int(s[i, S_NAPEX])
-            z = np.array(b.apex[i, min(napex, b.apex.shape[1]) - 1][_Z_IDX], dtype=float)
-            if last_z[i] is not None:
-                out["settle"][i] = np.abs(z - last_z[i]).tolist()
-            last_z[i] = z
-            if done[i] >= max_strides:
-                live[i] = False
-                tail = per_stride[i][-effort_strides:]
-                if len(tail) == effort_strides:
-                    dur = sum(d for _, d in tail)
-                    out["effort"][i] = sum(m for m, _ in tail) / dur if dur > 0 else None
-                continue
-            if restart:  # the apex map: the next stride from z at t = 0, as the nominal loop
-                task.reset_robot(b, i, z)
-                b.aux[i] = plant_aux[i]
-                task.restart_robot(b, i)
-                imp[i], t_start[i], t_seen = 0.0, 0.0, 0.0
-            else:
-                imp[i], t_start[i] = tau[i] * (t_end - t_apex), t_apex
-                t_seen = float(b.obs[i, loop.i_since_apex])
-            if copies is not None and on_apex is not None:
-                copies[i].on_apex(seen_z(i, z), t_seen)
-    STRIDES[0] += int(sum(out["strides"]))
-    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -309,6 +221,7 @@ def task_mm_curve(setup: Setup, size: float) -> dict:
         mb.curve_strides,
         setup.mismatch,
         [base + i for i in range(mb.plants)],
+        effort_strides=None,
     )
     tol = settle_tol(setup.mismatch)
     outcomes = [
@@ -342,6 +255,7 @@ def task_mm_mfpt(setup: Setup, sigma: float) -> dict:
         setup.mismatch,
         [nbase + k for k in robots],
         terrain_seeds=[base + k for k in robots],
+        effort_strides=None,
     )
     return {
         "sigma_deg": sigma,
@@ -388,6 +302,7 @@ def median_interval(values, level: float = 0.95) -> list:
 
 def assemble_mismatch(setup: Setup, res: dict) -> dict:
     """The JSON ``mismatch`` block from the tasks' results (module docstring)."""
+    from .decision_times import summary as decision_summary
     from .stats import crossing_on_grid, mfpt_crossing, mfpt_estimate, wilson_interval
 
     mb, spec = setup.mismatch_budget, setup.mismatch
@@ -402,6 +317,7 @@ def assemble_mismatch(setup: Setup, res: dict) -> dict:
     ]
     out = {
         "spec": spec.to_dict(),
+        "privileged": getattr(setup.controller, "privileged", False) is True,
         "budget": asdict(mb),
         "seeds": mismatch_seeds(setup.seed),
         "plants": [
@@ -462,6 +378,8 @@ def assemble_mismatch(setup: Setup, res: dict) -> dict:
         )
     out["mfpt"] = mfpt
     out["mfpt_strides"] = mb.mfpt_strides
+    # every apex decision of the robots under error (an adaptive controller identifies here)
+    out["decision_times"] = decision_summary(res[j] for j in mismatch_jobs(mb))
     out["mfpt_sigma_100_deg"] = mfpt_crossing(
         [m["sigma_deg"] for m in mfpt],
         [m["mfpt"] for m in mfpt],

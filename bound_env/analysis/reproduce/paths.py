@@ -1,5 +1,5 @@
 """Paths along the fixed points: the paper's process and pseudo-arclength, on the one engine in
-`bound_env.analysis.continuation` (the fallback ladder is its on_stall hook)."""
+`bound_env.analysis.continuation_engine` (the fallback ladder is its on_stall hook)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...params import Params, z_to_si
-from ..continuation import CORRECTOR_MAX_ITER, FixedPointPath, StepControl, arclength, natural
+from ..continuation_engine import (
+    CORRECTOR_MAX_ITER,
+    FixedPointPath,
+    StepControl,
+    arclength,
+    natural,
+)
 from ..fixed_point import ladder
 from ..numerics import NEWTON_MAX_ITER, newton
 from ..poincare import StrideFailure
