@@ -171,7 +171,10 @@ class PassiveBoundRescueEnv(RescueBase, utils.EzPickle):
       bit: the same starts from the same seed and the same strides). Later hardened without
       a change to any valid episode: `dt` in [1e-4, 0.1] s, a start option inside the safe
       radius or an unknown option key refused, `step` after the episode's end refused.
-      v1 (`PassiveBoundRescue-v1`) pays for returns only.
+      v1 (`PassiveBoundRescue-v1`) pays for returns only. Deprecated: it warns
+      (`DeprecationWarning`) when made and goes in the next release; use v1. An offset-free
+      controller spec, `max_torque` above 1e4 N m, `r_max` above 1 and an `apex_state`
+      outside the apex-state bounds are refused (one line each).
     """
 
     def __init__(

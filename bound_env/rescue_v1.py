@@ -185,7 +185,12 @@ class PassiveBoundRescueV1Env(RescueBase, utils.EzPickle):
       observation scaled per component to O(1) by the spread of the starts (v0: by the apex
       scales, up to 12.7); `r_min` and `set_start_radius` for a curriculum; `action_mode`
       and `residual_scale` for a residual on the LQR's plan; `terminate_at_horizon`. Same
-      plant, starts (with `r_min` = 0), safe radius and episode ends as v0.
+      plant, starts (with `r_min` = 0), safe radius and episode ends as v0. Later hardened
+      without a change to any valid episode: `shaping` above 100 (1e308 made the first
+      reward inf), an offset-free controller spec, `max_torque` above 1e4 N m, `r_max` above
+      1 and an `apex_state` outside the apex-state bounds are refused in one line; under
+      `bound_env.randomized.RandomizedPlant`'s sensor noise, "lqr_residual" plans on the
+      observed apex state (`z_observed`).
     * v0: Initial version: `PassiveBoundRescue-v0`, still registered and unchanged.
     """
 

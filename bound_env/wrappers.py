@@ -33,10 +33,14 @@ def default_library(K: int, n_random: int = LIBRARY_N_RANDOM, seed: int = LIBRAR
 
 class LibraryActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """``Discrete(len(rows))`` actions for an env whose action is the coefficients of a stride
-    profile (`PassiveBoundRescue-v0`): action 0 plays the LQR's plan at the current apex
-    state (``env.unwrapped.lqr.coefficients(env.unwrapped.z)``), action j > 0 the row
-    ``rows[j]`` (row 0 of ``rows`` is not used). ``rows`` defaults to `default_library`;
-    rows must be finite, within [-1, 1], and have one column per coefficient.
+    profile (`PassiveBoundRescue-v0`, `PassiveBoundRescue-v1` with ``action_mode="direct"``):
+    action 0 plays the LQR's plan at the current apex state as observed
+    (``env.unwrapped.lqr.coefficients(env.unwrapped.z_observed)``: the true state, or under
+    `bound_env.randomized.RandomizedPlant`'s sensor noise the noisy one, in either order of
+    the two wrappers), action j > 0 the row ``rows[j]`` (row 0 of ``rows`` is not used).
+    ``rows`` defaults to `default_library`; rows must be finite, within [-1, 1], and have one
+    column per coefficient. An env whose action is a residual on the LQR's plan (v1's
+    ``action_mode="lqr_residual"``) is refused in one line: row 0 would play the plan twice.
 
     An action is one integer in [0, len(rows)) (a Python or numpy integer, or a numpy array
     holding one); a bool, a float (``1.5``, ``inf``, even ``2.0``) or a row out of range is
