@@ -1,19 +1,70 @@
-"""PPO spine controllers for PassiveBound and the stability margins they buy.
+"""PPO spine controllers for PassiveBound and the stability margins they buy, in rooms by job.
 
-- `agents.train`: training with Stable-Baselines3 PPO from rl-zoo3-style configs
-  (``configs/ppo.yaml``), ``bound-env train``; its callbacks (`agents.train_callbacks`),
-  checkpoints (`agents.checkpoints`) and a run folder's other files (`agents.run_files`);
-- `agents.policy`: a trained policy (or the zero action) as a fast NumPy controller;
-- `agents.margins`: ``bound-env margins``, the front that loads a policy for
-  `bound_env.analysis.margins` (basin, Floquet multipliers, slope and stiffness windows, push
-  recovery and effort of a closed loop);
-- `agents.compare`: the passive vs learned table in ``docs/MARGINS.md``, ``bound-env compare``.
+- `agents.cli`, `agents.multiseed`: the ``bound-env`` commands of this package; several seeds
+  of one recipe;
+- `agents.results`: the results page and the margins commands (``bound-env margins``,
+  ``compare``, ``basin-map``, ``demo``);
+- `agents.training`: PPO from rl-zoo3-style configs (``configs/ppo.yaml``), ``bound-env train``,
+  its callbacks, checkpoints and resume;
+- `agents.experts`: learning from an expert controller (``bound-env distill``, ``finetune``,
+  residual policies);
+- `agents.runtime`: what a ``--policy`` name loads, as a fast NumPy controller;
+- `agents.common`: what every room shares (run configs, policy files, networks, wrappers).
+
+Imports point down only: ``cli`` -> ``multiseed`` -> ``results`` -> ``training``, ``experts``
+-> ``runtime`` -> ``common`` (``tests/test_layers.py``).
+
+The modules' old flat names (``agents.policy``, ``agents.wrappers``, ...) stay importable as
+aliases of the same module objects (`MOVED`): users' scripts, run configs naming
+``agents.wrappers.PerturbedStarts`` and the shipped policies' pickled classes
+(``agents.stride.ZeroActionNet``) keep loading.
 
 ``PassiveBoundLiteral-v0`` (``PassiveBound-v0`` on the *literal* reading of Table II, started on
 that reading's periodic gait) is registered by `bound_env` itself, beside ``PassiveBound-v0``.
 """
 
+import importlib
+import importlib.abc
+import importlib.util
+import sys
+
 from bound_env import LITERAL_ENV_ID  # noqa: E402,F401 - kept here for older imports
+
+_ROOMS = {
+    "results": (
+        "basin_cli compare decisions demo formatting headline margins margins_cli page "
+        "page_inputs page_tables prose provenance table_split"
+    ),
+    "training": "checkpoints train train_callbacks warmstart",
+    "experts": "distill finetune learn_cli stride_validation",
+    "runtime": (
+        "controllers names policy policy_args policy_table residual rollout stride stride_policy"
+    ),
+    "common": "config learn_config mlp policy_files run_files schema wrappers",
+}
+# old flat module name -> its module now
+MOVED = {f"agents.{m}": f"agents.{room}.{m}" for room, ms in _ROOMS.items() for m in ms.split()}
+
+
+class _Alias(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Imports an old flat name (`MOVED`) as the module it moved to: the same module object."""
+
+    def find_spec(self, fullname, path=None, target=None):
+        if fullname in MOVED:
+            return importlib.util.spec_from_loader(fullname, self)
+        return None
+
+    def create_module(self, spec):
+        module = importlib.import_module(MOVED[spec.name])
+        spec.loader_state = module.__spec__  # the import sets the alias's spec on the module
+        return module
+
+    def exec_module(self, module):
+        module.__spec__ = module.__spec__.loader_state
+
+
+if not any(isinstance(f, _Alias) for f in sys.meta_path):
+    sys.meta_path.insert(0, _Alias())  # before an installed copy that still has the old files
 
 
 def register_envs() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import sys
 import time
@@ -17,7 +18,7 @@ from bound_env.cli_args import (
     strict_json,
 )
 
-from .policy_args import POLICY_HELP, policy_label
+from .runtime.policy_args import POLICY_HELP, policy_label
 
 SEED_MAX = 2**32 - 1  # NumPy's and Gymnasium's seeds are unsigned 32-bit integers
 BUDGET_HELP = (
@@ -25,14 +26,12 @@ BUDGET_HELP = (
     "directions), standard or full (256 directions, the finest curves); the time of one "
     "policy's margins is not measured per budget (a whole compare page: see compare --help)"
 )
-# compare's budgets with their measured times (a whole page of the default columns)
+# compare's budgets (the page's own run time is in docs/columns.json, quoted by the docs)
 COMPARE_BUDGET_HELP = (
-    "margins budget of every column (bound_env.analysis.margins.BUDGETS): test (a smoke test; "
-    "time not measured), quick (32 random directions; the default page took about 20 min in "
-    "the one timing reported, machine load not stated), standard (time not "
-    "measured) or full (256 directions, the finest curves: 12.2 min of wall time for the "
-    "default page from an empty cache on 2 idle cores, docs/MARGINS.md); with a warm cache "
-    "only the page is rewritten"
+    "margins budget of every column (bound_env.analysis.margins.BUDGETS): test (a smoke test), "
+    "quick (32 random directions), standard or full (256 directions, the finest curves: the "
+    "results page's; the run that made it records its wall time in docs/columns.json, "
+    "docs/yardsticks.md quotes it); with a warm cache only the page is rewritten"
 )
 # Files a shipped policy directory holds (copied from a run by ``train --export``).
 POLICY_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "run.json", "eval.csv", "eval.png")
@@ -54,7 +53,7 @@ def register(sub) -> None:
     from bound_env.cli_args import add_progress_args, name_type, number
     from bound_env.parallel import MAX_WORKERS, add_scheduler_args
 
-    from .config import DEFAULT_CONFIG, DEFAULT_ENV_ID
+    from .common.config import DEFAULT_CONFIG, DEFAULT_ENV_ID
 
     p = sub.add_parser("train", help="train a PPO spine controller (runs/<name>/)")
     p.add_argument(
@@ -75,7 +74,10 @@ def register(sub) -> None:
         help="run name: runs/<name>/ (default: <env-id>_s<seed>; letters, digits, . _ + -)",
     )
     p.add_argument(
-        "--seed", type=number(int, 0, SEED_MAX), default=0, help="training seed (default: 0)"
+        "--seed",
+        type=number(int, 0, SEED_MAX),
+        default=None,
+        help="training seed (default: 0; on --resume the run's)",
     )
     p.add_argument("--n-timesteps", type=number(float, 1, 1e10), help="override n_timesteps")
     p.add_argument(
@@ -102,7 +104,7 @@ def register(sub) -> None:
         "--init-from",
         metavar="POLICY",
         help="warm start (PassiveBound-v0): clone a stride controller's torques (a name, e.g. "
-        "default, or a policy folder) into the actor before PPO (agents/warmstart.py)",
+        "default, or a policy folder) into the actor before PPO (agents/training/warmstart.py)",
     )
     p.add_argument(
         "--out",
@@ -315,30 +317,30 @@ def register(sub) -> None:
     )
     p.set_defaults(func=cmd_compare)
 
-    from .basin_cli import register as register_basin_map
+    from .results.basin_cli import register as register_basin_map
 
     register_basin_map(sub)
 
-    from .learn_cli import register_distill, register_finetune
+    from .experts.learn_cli import register_distill, register_finetune
 
     register_distill(sub)
     register_finetune(sub)
 
-    # the main job's passive-vs-learned comparison (bound-env demo; agents/demo.py)
+    # the main job's passive-vs-learned comparison (bound-env demo; agents/results/demo.py)
     from bound_env.render_cli import register_demo_part
 
     register_demo_part("comparison", demo_comparison)
 
 
 def demo_comparison(**kwargs):
-    """`agents.demo.demo_comparison`, imported when ``bound-env demo`` runs it."""
-    from .demo import demo_comparison as run
+    """`agents.results.demo.demo_comparison`, imported when ``bound-env demo`` runs it."""
+    from .results.demo import demo_comparison as run
 
     return run(**kwargs)
 
 
 def cmd_rollout(args) -> int:
-    from .rollout import rollout, summary_text
+    from .runtime.rollout import rollout, summary_text
 
     r = rollout(
         args.policy,
@@ -368,14 +370,28 @@ def _write_json(path: Path, data) -> Path:
 
 
 def cmd_train(args) -> int:
-    from .train import train
+    from .training.train import train
 
     t0 = time.perf_counter()
     n = int(args.n_timesteps) if args.n_timesteps is not None else None
     if args.env_id is None:
-        from .config import default_env_id
+        from .common.config import default_env_id
 
         args.env_id = default_env_id(args.config)
+    from .common.config import load_hyperparams
+
+    if load_hyperparams(args.config, args.env_id).get("algo") == "adaptive-dagger":
+        from .experts.adaptive_recipe import train_recipe  # DAgger, no PPO
+
+        run, dest = train_recipe(args, train_sets(args))
+        say(
+            args,
+            f"run {run}  ({time.perf_counter() - t0:.0f} s)"
+            + (f", exported to {dest}" if dest else ""),
+        )
+        if args.json:
+            print(strict_json({"run": str(run), "export": str(dest) if dest else None}))
+        return 0
     if args.seeds is not None:
         return _train_seeds(args, n, t0)
     if args.export:  # refused before training, not after it
@@ -468,6 +484,10 @@ def _train_seeds(args, n, t0) -> int:
         save_freq=_default(args.save_freq, 200_000, args.resume),
     )
     budget = None if args.compare_budget == "none" else args.compare_budget
+    if args.name is None and args.env_id is None:
+        from .common.config import default_env_id
+
+        args.name = default_env_id(args.config)  # the seeds' runs: <env id>_s<seed>
     r = train_seeds(
         seeds,
         args.name or args.env_id,
@@ -501,8 +521,8 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
         raise FileNotFoundError(f"no model.zip in {run_dir}")
     best = run_dir / "best"
     src = best if source == "best" and (best / "model.zip").is_file() else run_dir
-    from .policy import write_policy_fingerprint
-    from .policy_files import check_policy_files, find_policy_files
+    from .common.policy_files import check_policy_files, find_policy_files
+    from .runtime.policy import write_policy_fingerprint
 
     files = find_policy_files(src)
     check_policy_files(files, {}, force=True)  # refuses statistics of another model
@@ -521,7 +541,7 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
         info.update(json.loads((src / "best.json").read_text()))
     (dest / "exported.json").write_text(json.dumps(info, indent=2) + "\n")
     if (dest / "eval.csv").is_file():  # the curve of what was exported: no best marker on a final
-        from .run_files import plot_eval
+        from .common.run_files import plot_eval
 
         try:
             plot_eval(dest / "eval.csv", dest / "eval.png", kept="best" if src == best else "final")
@@ -532,7 +552,7 @@ def export_policy(run_dir, dest, source: str = "final", force: bool = False) -> 
 
 
 def cmd_margins(args) -> int:
-    from .margins_cli import run_margins  # loaded when the command runs, not when parsing
+    from .results.margins_cli import run_margins  # loaded when the command runs, not when parsing
 
     return run_margins(args)
 
@@ -546,14 +566,14 @@ def _checked(path, flag: str) -> Path:
 
 
 def cmd_compare(args) -> int:
-    from .compare import chosen_entries, compare, parse_entry
+    from .results.compare import chosen_entries, compare, parse_entry
 
     parsed = [parse_entry(t) for t in args.entry or ()]
     mismatch = None
     if args.mismatch is not None:
-        from bound_env.mismatch import as_spec
+        from bound_env.mismatch import parse_specs
 
-        mismatch = [as_spec(t) for t in args.mismatch.split(",")]  # a bad spec: before any work
+        mismatch = parse_specs(args.mismatch)  # a bad spec: before any work
     entries = chosen_entries(parsed, keep_defaults=args.keep_defaults)
     path = compare(
         entries,
@@ -567,6 +587,7 @@ def cmd_compare(args) -> int:
         seed=args.seed,
         render_only=args.render_only,
         mismatch=mismatch,
+        command=shlex.join(["bound-env", *getattr(args, "argv", ["compare"])]),
     )
     say(args, f"wrote {path}")
     if args.json:

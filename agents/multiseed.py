@@ -1,9 +1,9 @@
 """Several trainings of one recipe, one per seed, as tasks of an executor; then ``compare``.
 
 ``bound-env train --seeds 0,1,2 [--scheduler local|tcp://HOST:PORT] [--workers N]`` runs
-`agents.train.train` once per seed, each as one task (`bound_env.parallel`), with
+`agents.training.train.train` once per seed, each as one task (`bound_env.parallel`), with
 ``torch.set_num_threads(1)`` in the task (one core per training), and ends with
-`agents.compare.compare` over the seeds (passive vs the recipe, mean and 95 % t interval).
+`agents.results.compare.compare` over the seeds (passive vs the recipe, mean and 95 % t interval).
 
 Where the runs go (``--runs-transfer``):
 
@@ -43,7 +43,7 @@ def train_task(kwargs: dict, transfer: str) -> dict:
     """One training (runs in a worker): ``train(**kwargs)`` with one torch thread."""
     import torch
 
-    from .train import train
+    from .training.train import train
 
     torch.set_num_threads(1)
     t0 = time.perf_counter()
@@ -115,8 +115,8 @@ def train_seeds(
         ordered = [runs[k] for k in tasks]
         page = None
         if compare_budget is not None:
-            from .compare import compare, default_entries
-            from .policy import load_controller
+            from .results.compare import compare, default_entries
+            from .runtime.policy import load_controller
 
             gait = load_controller(ordered[0]).env_kwargs.get("gait") or "default"
             passive = [e for e in default_entries() if e[1] == ["passive"] and e[2] == gait]

@@ -2,6 +2,7 @@
 
     python benchmarks/basin_map.py                 # 64x64 passive and shipped policy
     python benchmarks/basin_map.py --grid 32 --policy-grid 16   # quicker
+    python benchmarks/basin_map.py --no-dask --also lqr,default,mpc --json docs/timings.json
 
 Prints starts per second and ratios, all timed in this run on this machine:
 
@@ -13,15 +14,18 @@ Each executor is opened and warmed up first (one small chunk per worker, so that
 has loaded the compiled code), then the whole grid is timed without the chunk cache.
 Cluster start-up is timed separately. The machine's load average is printed beside: other
 jobs on the machine slow every row, and the ratios between rows are what to compare.
-Targets (issue 12): 64x64 passive <= 60 s on 2 cores; shipped policy <= 3 min; 2 workers
->= 1.6x one process; Dask within 10 % of the process pool.
+``--json PATH`` records each case's grid time in the ``basin_map`` section of PATH
+(`bound_env.cache.record_section`: with the load, the commit and the command); the docs quote
+``docs/timings.json``'s (`agents.results.numbers`, ``basinmap(NAME)``).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -97,7 +101,10 @@ def main() -> None:
     )
     ap.add_argument("--no-dask", action="store_true")
     ap.add_argument("--repeat", type=int, default=1, help="rounds of the passive cases")
+    ap.add_argument("--json", help="record the grid times in this file's basin_map section")
     args = ap.parse_args()
+    load0 = [round(v, 2) for v in os.getloadavg()]
+    times: dict = {}
     print(f"cores: {os.cpu_count()}, load average at start: {os.getloadavg()}")
     print("| case | starts | open+warm s | grid s | starts/s | vs first row | load |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
@@ -108,18 +115,21 @@ def main() -> None:
         row(f"passive {g}, 1 process", spec.n_starts, su, serial, None)
         su, pool = timed(spec, None, 2)
         row(f"passive {g}, process pool 2", spec.n_starts, su, pool, serial)
+        times["passive-serial"] = min(serial, times.get("passive-serial", serial))
+        times["passive"] = min(pool, times.get("passive", pool))
         if not args.no_dask:
             su, dask = timed(spec, "local:2", 2)
             row(f"passive {g}, Dask LocalCluster 2", spec.n_starts, su, dask, serial)
             print(f"Dask vs process pool: {pool / dask:.2f}x the pool's rate")
     if args.policy_grid:
-        from agents.policy import load_controller
+        from agents.runtime.policy import load_controller
 
         names = [args.policy] + [n for n in args.also.split(",") if n.strip()]
         for name in names:
             ctrl = load_controller(name.strip())
             pspec = spec_for(args.policy_grid, ctrl, ctrl.env_kwargs.get("gait") or "default")
             su, ptime = timed(pspec, None, 2)
+            times[Path(name.strip()).name] = ptime
             row(
                 f"policy {name} {args.policy_grid}x{args.policy_grid}, pool 2",
                 pspec.n_starts,
@@ -128,6 +138,24 @@ def main() -> None:
                 None,
             )
     print(f"load average at end: {os.getloadavg()}")
+    if args.json:
+        from bound_env.cache import record_section
+
+        record_section(
+            args.json,
+            "basin_map",
+            {
+                "seconds": times,
+                "grid": [args.grid, args.policy_grid],
+                "strides": 100,
+                "workers": 2,
+                "load_average_before": load0,
+                "what": "wall seconds of a basin map (xdot_g x y_g through z*), a process pool "
+                "of 2 warmed up first; passive also in one process",
+            },
+            "python benchmarks/basin_map.py " + " ".join(sys.argv[1:]),
+        )
+        print(f"recorded in {args.json}")
 
 
 if __name__ == "__main__":

@@ -8,12 +8,16 @@ resets. The single environments are measured alternately, round by round, in the
 so that machine load affects them alike; the medians are printed. The vector environments
 (sync, async, and the native ``vector_entry_point`` one with N = 8 and 64) are reported as
 environment-steps per second (N per call). Ratios are against Pendulum-v1's single-env rate.
+``--json PATH`` records the medians in the ``env_step`` section of PATH
+(`bound_env.cache.record_section`); the docs quote ``docs/timings.json``'s.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
+import sys
 import time
 
 import gymnasium as gym
@@ -52,7 +56,9 @@ def main():
     ap.add_argument("--steps", type=int, default=20000, help="steps per round (single envs)")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--vector-steps", type=int, default=2000, help="calls per vector env")
+    ap.add_argument("--json", help="record the rates in this file's env_step section")
     args = ap.parse_args()
+    load0 = [round(v, 2) for v in os.getloadavg()]
     rng = np.random.default_rng(0)
 
     singles = {
@@ -83,25 +89,44 @@ def main():
     for name, r in med.items():
         print(f"  {name:<42s} {r:>11,.0f} steps/s   x{r / ref:6.2f} Pendulum-v1")
 
+    vec = {}
     print(f"vector environments, {args.vector_steps} calls each (env-steps/s):")
-    cases = [
-        ("sync, N=8", dict(num_envs=8, vectorization_mode="sync")),
-        ("async, N=8", dict(num_envs=8, vectorization_mode="async")),
-        ("native (vector_entry_point), N=8", dict(num_envs=8)),
-        ("native, N=64, serial", dict(num_envs=64, parallel=False)),
-        ("native, N=64, threads", dict(num_envs=64, parallel=True)),
+    cases = [  # (label, key in --json, make_vec arguments)
+        ("sync, N=8", "sync_8", dict(num_envs=8, vectorization_mode="sync")),
+        ("async, N=8", "async_8", dict(num_envs=8, vectorization_mode="async")),
+        ("native (vector_entry_point), N=8", "native_8", dict(num_envs=8)),
+        ("native, N=64, serial", "native_64", dict(num_envs=64, parallel=False)),
+        ("native, N=64, threads", "native_64_threads", dict(num_envs=64, parallel=True)),
     ]
-    for label, kw in cases:
+    for label, key, kw in cases:
         envs = gym.make_vec("PassiveBound-v0", **kw)
         n = envs.num_envs
         acts = rng.uniform(-1, 1, (args.vector_steps, n, 1)).astype(np.float32)
         r = vector_rate(envs, acts)
+        vec[key] = r
         envs.close()
         print(
             f"  PassiveBound-v0 {label:<26s} {r:>11,.0f} env-steps/s   x{r / ref:6.2f} Pendulum-v1"
         )
     for env in singles.values():
         env.close()
+    if args.json:
+        from bound_env.cache import record_section
+
+        record_section(
+            args.json,
+            "env_step",
+            {
+                "steps_per_s": {**med, **vec},
+                "rounds": args.rounds,
+                "steps": args.steps,
+                "load_average_before": load0,
+                "what": "steps per second: gym.make(id), random actions, resets included, the "
+                "median of the rounds; vector envs of PassiveBound-v0 in env-steps per second",
+            },
+            "python benchmarks/env_step.py " + " ".join(sys.argv[1:]),
+        )
+        print(f"recorded in {args.json}")
 
 
 if __name__ == "__main__":

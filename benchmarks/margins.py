@@ -35,7 +35,7 @@ MEASURES = ("cycle", "basin", "ceiling", "curve", "terrain", "mfpt", "window", "
 
 
 def _api():
-    """The margins API of this checkout: the core package, or the old agents/margins.py."""
+    """The margins API of this checkout: the core package, or the old agents/results/margins.py."""
     try:
         from bound_env.analysis.margins import closed_loop as cl
         from bound_env.analysis.margins import run as core
@@ -45,7 +45,7 @@ def _api():
             core.MFPT_CHUNK,
         )  # fmt: skip
     except ImportError:  # a checkout from before the move (no stride counter)
-        from agents import margins as core
+        from agents.results import margins as core
 
         return (
             core.Setup, core.run_task, core.setup_key, core.BUDGETS.get, None, "agents",
@@ -53,7 +53,7 @@ def _api():
         )  # fmt: skip
 
 
-TIMINGS = ("seconds", "decision_seconds")
+TIMINGS = ("seconds", "decision_seconds", "decision_hist")  # wall times: not compared
 
 
 def _untimed(x):
@@ -74,8 +74,10 @@ def _merge_chunks(results: list) -> list:
         return results
     by_sigma: dict = {}
     for r in results:
-        m = by_sigma.setdefault(r["sigma_deg"], {"sigma_deg": r["sigma_deg"], "robots": 0,
-                                                 "strides": [], "fell": [], "failures": {}})
+        m = by_sigma.setdefault(
+            r["sigma_deg"],
+            {"sigma_deg": r["sigma_deg"], "robots": 0, "strides": [], "fell": [], "failures": {}},
+        )
         m["robots"] += r["robots"]
         m["strides"] += r["strides"]
         m["fell"] += r["fell"]
@@ -108,7 +110,9 @@ def jobs_of(budget, measures, chunk: int) -> list:
     """The (measure, args) tasks of one evaluation (as compute_margins lists them)."""
     jobs = []
     for m in measures:
-        if m == "basin" or m == "ceiling":
+        if m == "basin" and _basin_groups() is not None:  # bisections in lockstep
+            jobs += [("basins", g) for g in _basin_groups()]
+        elif m == "basin" or m == "ceiling":
             jobs += [(m, (i, s)) for i in range(6) for s in (1, -1)]
         elif m == "curve":
             jobs += [(m, (r,)) for r in budget.curve_sizes]
@@ -125,13 +129,36 @@ def jobs_of(budget, measures, chunk: int) -> list:
     return jobs
 
 
+def _basin_groups():
+    """The checkout's lockstep basin tasks' directions, None before they existed."""
+    try:
+        from bound_env.analysis.margins.basin import BASIN_GROUPS
+    except ImportError:
+        return None
+    return BASIN_GROUPS
+
+
+def _per_direction(jobs: list, results: list) -> list:
+    """The basin results per direction in the order (0, +), (0, -), (1, +), ..., whether the
+    checkout ran them one task per direction or in lockstep groups (``basins``)."""
+    by_dir = {}
+    for (name, args), r in zip(jobs, results, strict=True):
+        if name == "basins":
+            by_dir.update(
+                {(int(i), int(s)): b for (i, s), b in zip(args, r["basins"], strict=True)}
+            )
+        else:
+            by_dir[tuple(args)] = r
+    return [by_dir[(i, s)] for i in range(6) for s in (1, -1)]
+
+
 def measure(policy: str, budget_name: str, measures: list[str], gait: str) -> dict:
     """{measure: {"seconds", "strides", "tasks", "load"}} for this checkout, serially."""
     from dataclasses import replace
 
     import numpy as np
 
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
     from bound_env.params import load_gait
 
     Setup, run_task, setup_key, as_budget, strides, where, chunk = _api()
@@ -141,22 +168,24 @@ def measure(policy: str, budget_name: str, measures: list[str], gait: str) -> di
     setup = Setup(ctrl, gait, budget, z_star, key=setup_key(ctrl, gait, budget))
     out = {}
 
-    def timed(name, args_list):
+    def timed(name, jobs):
         n0 = strides[0] if strides is not None else 0
         t0 = time.perf_counter()
-        results = [run_task(setup, name, args) for args in args_list]
+        results = [run_task(setup, task, args) for task, args in jobs]
         dt = time.perf_counter() - t0
+        if name == "basin":
+            results = _per_direction(jobs, results)
         out[name] = {
             "seconds": dt,
             "strides": (strides[0] - n0) if strides is not None else None,
-            "tasks": len(args_list),
+            "tasks": len(jobs),
             "load": os.getloadavg()[0],
             "results": _merge_chunks([_untimed(r) for r in results]),
         }
         print(f"  {where}: {name:8s} {dt:8.1f} s", file=sys.stderr, flush=True)
         return results
 
-    cyc = timed("cycle", [()])[0]
+    cyc = timed("cycle", [("cycle", ())])[0]
     setup = replace(
         setup,
         z_cl=np.array(cyc["z_cl"]),
@@ -165,7 +194,7 @@ def measure(policy: str, budget_name: str, measures: list[str], gait: str) -> di
     )
     for m in measures:
         if m != "cycle":
-            timed(m, [args for name, args in jobs_of(budget, [m], chunk) if name == m])
+            timed(m, jobs_of(budget, [m], chunk))
     return out
 
 
@@ -234,10 +263,7 @@ def main(argv=None) -> int:
             }
             line += f" {b['seconds']:.1f} | {b['load']:.2f} | {b['seconds'] / v['seconds']:.2f}x |"
             if m != "total":
-                d = [
-                    max_difference(x, y)
-                    for x, y in zip(v["results"], b["results"], strict=True)
-                ]
+                d = [max_difference(x, y) for x, y in zip(v["results"], b["results"], strict=True)]
                 worst = max(d, default=0.0)
                 line += f" {sum(x == 0.0 for x in d)}/{len(d)} | {worst:.1e} |"
             else:

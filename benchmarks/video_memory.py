@@ -3,13 +3,13 @@
 Run by hand, through the slot lock (it keeps a core busy for several minutes):
 ``/work/heavy .venv/bin/python benchmarks/video_memory.py [--baseline /work/main]``.
 
-Each case is one ``agents.rollout.rollout(POLICY, strides=N, video=F.gif)`` in a fresh
+Each case is one ``agents.runtime.rollout.rollout(POLICY, strides=N, video=F.gif)`` in a fresh
 process, which reports its own peak resident set size (``resource.getrusage``'s
 ``ru_maxrss``), its wall time, the frames written and the file's size. The cases:
 
 - ``--strides`` (500 and 5000 by default) with the shipped frame cap
-  (`agents.rollout.MAX_VIDEO_FRAMES`): the acceptance ratio, peak RSS at the longest run over
-  the shortest (within 1.5x);
+  (`agents.runtime.rollout.MAX_VIDEO_FRAMES`): the acceptance ratio, peak RSS at the longest run
+  over the shortest (within 1.5x);
 - the shortest run with a 10x smaller frame cap: the frames' share of the memory (streamed
   frames add nothing, so the two peaks should be close);
 - with ``--baseline DIR``, the shortest run with ``DIR``'s code (e.g. main's, read-only), to
@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 CHILD = r"""
 import json, os, resource, sys, time
-from agents import rollout as ro
+from agents.runtime import rollout as ro
 policy, strides, cap, path = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
 if cap > 0:
     ro.MAX_VIDEO_FRAMES = cap
@@ -88,7 +88,7 @@ def main(argv=None) -> int:
     p.add_argument("--strides", type=int, nargs=2, default=[500, 5000], metavar=("SHORT", "LONG"))
     p.add_argument("--baseline", type=Path, help="another checkout to compare (e.g. /work/main)")
     args = p.parse_args(argv)
-    from agents.rollout import MAX_VIDEO_FRAMES
+    from agents.runtime.rollout import MAX_VIDEO_FRAMES
 
     short, long = args.strides
     print(f"rollout --video, policy {args.policy}, frame cap {MAX_VIDEO_FRAMES}")

@@ -12,7 +12,7 @@ Importing the package registers these Gymnasium environments:
   published task, the one every shipped policy and controller acts in and every published
   margin was measured in (`PUBLISHED_TASK`: ``max_torque`` 80 N m; dt 0.01 s, rtol 1e-10 and
   the full observation as in v0), so that ``gym.make("PassiveBound-v1")`` and a shipped
-  policy (`agents.rollout.load_policy`) fit as they are. v0 stays registered unchanged
+  policy (`agents.runtime.rollout.load_policy`) fit as they are. v0 stays registered unchanged
   (40 N m; code and configs name it with their kwargs);
 - ``PassiveBoundStride-v1``: the stride-level `bound_env.stride_env.PassiveBoundStrideEnv`
   (one step = one stride of the step env, through the one stride map `bound_env.stride_map`;
@@ -20,7 +20,8 @@ Importing the package registers these Gymnasium environments:
 - ``PassiveBoundRescue-v0``: `bound_env.rescue_env.PassiveBoundRescueEnv`, the rescue task
   (starts past the LQR's safe radius, a stride per step, a return ends the episode), with
   continuous profile actions; `bound_env.wrappers.LibraryActions` gives the profile
-  library's discrete actions;
+  library's discrete actions. Deprecated: it warns when made and goes in the next release
+  (use v1);
 - ``PassiveBoundRescue-v1``: `bound_env.rescue_env.PassiveBoundRescueV1Env`, the same task
   paying for a return only (optional potential-based shaping), with an O(1) observation, a
   start-radius curriculum and an optional residual on the LQR's plan: the one standard RL
@@ -90,9 +91,9 @@ def _register() -> None:
             max_episode_steps=MAX_STRIDE_EPISODE_STEPS,
         )
     if RESCUE_ENV_ID not in registry:
-        register(id=RESCUE_ENV_ID, entry_point="bound_env.rescue_env:PassiveBoundRescueEnv")
+        register(id=RESCUE_ENV_ID, entry_point="bound_env.rescue_v0:PassiveBoundRescueEnv")
     if RESCUE_ENV_ID_V1 not in registry:
-        register(id=RESCUE_ENV_ID_V1, entry_point="bound_env.rescue_env:PassiveBoundRescueV1Env")
+        register(id=RESCUE_ENV_ID_V1, entry_point="bound_env.rescue_v1:PassiveBoundRescueV1Env")
     # v0 is not out of date: it is the same env at 40 N m, which code, configs and published
     # commands name with their kwargs; Gymnasium's "consider upgrading to v1" would be noise.
     # PassiveBoundRescue-v0 stays the task of `bound-env finetune` (v1 is the one for RL)

@@ -11,6 +11,8 @@ lost and nothing corrupt:
 - `append_line` / `read_lines`: append-only logs; each append is flushed and fsynced, and a
   last line cut short by a kill is skipped with a warning on reading.
 - `TaskCache`: task results as JSON lines ``{"key": ..., "result": ...}`` on top of those.
+- `record_section`: one section of a JSON file of measurements (``docs/timings.json``), written
+  atomically beside the others, with when, where and on which commit it was measured.
 """
 
 from __future__ import annotations
@@ -68,6 +70,47 @@ def atomic_write(path, data: str | bytes) -> Path:
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(data.encode() if isinstance(data, str) else data)
     return path
+
+
+def record_section(path, section: str, data: dict, command: str = "") -> dict:
+    """Set ``section`` of the JSON object in ``path`` (created if absent) to ``data`` plus how
+    it was measured (``measured``: UTC time, cores, the load average after, the git commit of
+    the checkout, ``command``), leaving the other sections as they are; written atomically.
+    Returns the section. A file that is not a JSON object is a ValueError naming it."""
+    import datetime
+    import platform
+    import subprocess
+
+    path = Path(path)
+    body = {}
+    if path.is_file():
+        try:
+            body = json.loads(path.read_text())
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{path}: not JSON ({e})") from None
+        if not isinstance(body, dict):
+            raise ValueError(f"{path}: not a JSON object")
+    try:
+        commit = (
+            subprocess.run(
+                ["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10
+            ).stdout.strip()
+            or None
+        )
+    except (OSError, subprocess.SubprocessError):
+        commit = None
+    entry = dict(data)
+    entry["measured"] = {
+        "utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M"),
+        "cores": os.cpu_count(),
+        "machine": platform.machine(),
+        "load_average_after": [round(v, 2) for v in os.getloadavg()],
+        "commit": commit,
+        "command": command,
+    }
+    body[section] = entry
+    atomic_write(path, json.dumps(body, indent=2, sort_keys=True) + "\n")
+    return entry
 
 
 def append_line(path, line: str, end: str = "\n") -> None:

@@ -133,6 +133,7 @@ def main(argv=None) -> int:
             sub.error(f"unrecognized arguments: {' '.join(extra)}")
     except SystemExit as e:  # usage errors (2), --help and --version (0), as a return code
         return e.code if isinstance(e.code, int) else 2
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # what a run records it ran
     from .parallel import TasksFailed, Terminated, on_sigterm
 
     restore = on_sigterm()  # SIGTERM unwinds like Ctrl-C: pools shut down, caches are kept

@@ -14,6 +14,7 @@ import numpy as np
 from gymnasium import spaces, utils
 
 from .params import P_ALPHA, Params
+from .schema import integer
 from .task import (
     DEFAULT_ALIVE_REWARD,
     DEFAULT_CTRL_COST_WEIGHT,
@@ -33,6 +34,7 @@ from .task import (
 )
 
 RENDER_MODES = ("human", "rgb_array")
+MAX_FRAME = 4096  # frame width and height [pixels] at most
 
 
 def check_action(action, n: int = 1) -> np.ndarray:
@@ -138,7 +140,7 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
     angle, as the model assumes, so entries 9-12 are continuous at touchdown; at liftoff the
     leg angle jumps back to the touchdown angle (the massless leg snaps back), and entries 7-8
     jump at every contact change (a policy that must be continuous in the state can drop
-    them, as `agents.wrappers.ObservationFilter` does). Entries 13-14
+    them, as `agents.common.wrappers.ObservationFilter` does). Entries 13-14
     decide whether the next apex ends a stride (both legs must have touched down), entry 15
     when the episode ends for lack of an apex. The bounds are far outside anything a running
     robot reaches; the observation is clipped to them, which can only matter in the state a
@@ -289,11 +291,18 @@ class PassiveBoundEnv(gym.Env, utils.EzPickle):
             zip(self.task.obs_names, self.task.obs_units, strict=True)
         )
         self.render_mode = render_mode
-        self.width, self.height = int(width), int(height)
+        self.width = integer(width, "width", 1, MAX_FRAME)  # [pixels]; a bool or 1.5 refused
+        self.height = integer(height, "height", 1, MAX_FRAME)
         self._renderer = None
         self._b = self.task.new_batch(1)
 
     # -- the simulator's state, for analysis --------------------------------------------------
+    @property
+    def plant_task(self) -> PassiveBoundTask:
+        """The one holder of the robot's plant (`PassiveBoundTask.set_params` changes the
+        robot of the next reset: model error, `bound_env.randomized.RandomizedPlant`)."""
+        return self.task
+
     @property
     def params(self) -> Params:
         """Physical parameters in use (the gait's, with ``gait_overrides``)."""

@@ -8,16 +8,14 @@ crossings.
 
 Guards (a transition fires when its guard crosses zero in its direction):
 
-=============  ==================================================  =========  =========
-guard          value                                               direction  active in
-=============  ==================================================  =========  =========
-TD_B / TD_F    hip height - l_bar cos(gamma_td)  (III.B.2, 1 & 3)  falling    leg flight
-LO_B / LO_F    l - l_bar                          (III.B.2, 2 & 4) rising     leg stance
-SHORT_B / _F   l - min_leg_frac * l_bar           (failure)        falling    leg stance
-GROUND_*       height of back hip, spine joint, front hip (fail)   falling    always
-BACKWARD       xdot_g                             (failure)        falling    always
-APEX           ydot_g  (eq. 17)                                    falling    df, armed
-=============  ==================================================  =========  =========
+| guard | value | direction | active in |
+| --- | --- | --- | --- |
+| `TD_B`, `TD_F` | hip height − l_bar cos(gamma_td) (III.B.2, 1 and 3) | falling | leg flight |
+| `LO_B`, `LO_F` | l − l_bar (III.B.2, 2 and 4) | rising | leg stance |
+| `SHORT_B`, `SHORT_F` | l − min_leg_frac · l_bar (failure) | falling | leg stance |
+| `GROUND_*` | height of the back hip, the spine joint, the front hip (failure) | falling | always |
+| `BACKWARD` | xdot_g (failure) | falling | always |
+| `APEX` | ydot_g (eq. 17) | falling | double flight, armed |
 
 A leg whose hip is below its touchdown height when it lifts off (or at the start) stays in
 flight until its hip has risen above that height and falls through it again: the toe cannot

@@ -17,7 +17,8 @@ Presets (`PRESETS`; join several with ``+``, e.g. ``pm5+noise+delay1``):
 
 | name | what |
 | --- | --- |
-| ``pm5``, ``pm10``, ``pm20`` | m1, m2, I1, I2, kb, kf, kc, zeta (issue 31), +-5/10/20 % |
+| ``pm5``, ``pm10``, ``pm20`` | m1, m2, I1, I2, kb, kf, kc, zeta, +-5/10/20 % |
+| ``pm2.5``, ``pm7.5``, ``pm15`` | the same eight, +-2.5/7.5/15 % (hold against delta) |
 | ``all5``, ``all10``, ``all20`` | every key of `PLANT_KEYS` (legs' rest lengths, slope too) |
 | ``noise`` | sensor noise of 1 % of the scale on every noised component |
 | ``noise5`` | the same at 5 % |
@@ -26,19 +27,30 @@ Presets (`PRESETS`; join several with ``+``, e.g. ``pm5+noise+delay1``):
 
 A YAML file (``--mismatch path.yaml``) has the keys ``params`` (a mapping of `PLANT_KEYS` to
 delta), ``noise`` (a mapping of `NOISE_SCALES` names to sigma, or one number for all of
-them), ``delay`` (an integer) and optionally ``name``; every key is optional.
+them), ``delay`` (an integer) and optionally ``name`` (default: the file's stem); every key
+is optional, none may appear twice. A name is 1 to 64 letters, digits, ``. _ + - ( )`` and
+single spaces (`bound_env.cli_args.check_name`): it heads a column of the results page.
+Ranges lie in [0, 1), noise in [0, `MAX_NOISE`] (one scale: more buries the signal, and
+the observation sits at its bounds), the delay in [0, `MAX_DELAY`].
 
-Every bad spec is a one-line ValueError naming the key.
+Several specs (``--mismatch pm5,pm10``: `parse_specs`) are split at the commas that do not
+belong to an existing file's name, and must have different names (`check_distinct` names
+the two sources that share one).
+
+Every bad spec is a one-line ValueError naming the key (and the file).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from . import schema
+from .cli_args import check_name
 from .params import Params
 
 # Plant parameters that may vary (gait-file names) and the `Params` field each scales.
@@ -63,6 +75,8 @@ NOISE_SCALES = {
     "leg_angle_front": 0.1,
 }
 MAX_DELAY = 20  # control intervals (half a stride at dt = 0.01 s)
+MAX_NOISE = 1.0  # sigma in units of the scale: one apex scale of error on every reading
+MAX_PLANTS = 1_000_000  # plants one call of `sample_plants` may draw
 
 
 @dataclass(frozen=True)
@@ -73,14 +87,16 @@ class MismatchSpec:
     noise: tuple = ()  # ((component, sigma in units of its scale), ...)
     delay: int = 0  # control intervals
     name: str = "custom"
+    # where the spec came from (a preset's name, a file's path): named in errors, not compared
+    source: str = field(default="", compare=False, repr=False)
 
     def __post_init__(self):
         put = object.__setattr__
-        put(self, "ranges", _check_ranges(dict(self.ranges)))
-        put(self, "noise", _check_noise(dict(self.noise)))
+        put(self, "ranges", _check_ranges(_pairs(self.ranges, "ranges")))
+        put(self, "noise", _check_noise(_pairs(self.noise, "noise")))
         put(self, "delay", _check_delay(self.delay))
-        if not isinstance(self.name, str) or not self.name:
-            raise ValueError(f"mismatch name must be a non-empty string, got {self.name!r}")
+        put(self, "name", _check_name(self.name))
+        put(self, "source", str(self.source or self.name))
 
     @property
     def is_nominal(self) -> bool:
@@ -106,10 +122,46 @@ class MismatchSpec:
         return np.array([noise.get(n, 0.0) * NOISE_SCALES.get(n, 0.0) for n in names])
 
 
+def _pairs(value, key: str) -> dict:
+    """{name: value} from a mapping or from (name, value) pairs; a name given twice, or anything
+    else, is a ValueError naming ``key``."""
+    what = f"mismatch {key} must be a mapping {{name: number}} or (name, number) pairs"
+    if isinstance(value, Mapping):
+        items = list(value.items())
+    elif isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+        raise ValueError(f"{what}, got {_show(value)}")
+    else:
+        items = list(value)
+        if not all(isinstance(x, (tuple, list)) and len(x) == 2 for x in items):
+            raise ValueError(f"{what}, got {_show(value)}")
+    out = {}
+    for k, v in items:
+        if not isinstance(k, str):
+            raise ValueError(f"mismatch {key}: a name must be a string, got {_show(k)}")
+        if k in out:
+            raise ValueError(f"mismatch {key}: {k!r} is given twice")
+        out[k] = v
+    return out
+
+
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _check_name(name) -> str:
+    if not isinstance(name, str):
+        raise ValueError(f"mismatch name must be a string (quote it in YAML), got {_show(name)}")
+    return check_name(name, "mismatch name", spaces=True)
+
+
 def _real(key: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"mismatch {key} must be a number, got {value!r}")
-    v = float(value)
+        raise ValueError(f"mismatch {key} must be a number, got {_show(value)}")
+    try:
+        v = float(value)
+    except OverflowError:  # an integer beyond float's range
+        v = math.inf
     if not math.isfinite(v):
         raise ValueError(f"mismatch {key} must be finite, got {value!r}")
     return v
@@ -147,6 +199,12 @@ def _check_noise(noise: dict) -> tuple:
         s = _real(f"noise.{k}", noise[k])
         if s < 0:
             raise ValueError(f"mismatch noise.{k}: a standard deviation must be >= 0, got {s}")
+        if s > MAX_NOISE:
+            raise ValueError(
+                f"mismatch noise.{k}: sigma {s:g} is beyond {MAX_NOISE:g} (in units of the "
+                f"component's scale {NOISE_SCALES[k]:g}): the reading would be noise only, "
+                "clipped at the observation's bounds"
+            )
         out.append((k, s))
     return tuple(out)
 
@@ -154,7 +212,7 @@ def _check_noise(noise: dict) -> tuple:
 def _check_delay(delay) -> int:
     if isinstance(delay, bool) or not isinstance(delay, (int, np.integer)):
         raise ValueError(
-            f"mismatch delay must be a whole number of control intervals, got {delay!r}"
+            f"mismatch delay must be a whole number of control intervals, got {_show(delay)}"
         )
     if not 0 <= delay <= MAX_DELAY:
         raise ValueError(f"mismatch delay must lie in [0, {MAX_DELAY}] intervals, got {delay}")
@@ -171,6 +229,9 @@ PRESETS = {
     "pm5": {"params": _all(EIGHT, 0.05)},
     "pm10": {"params": _all(EIGHT, 0.10)},
     "pm20": {"params": _all(EIGHT, 0.20)},
+    "pm2.5": {"params": _all(EIGHT, 0.025)},
+    "pm7.5": {"params": _all(EIGHT, 0.075)},
+    "pm15": {"params": _all(EIGHT, 0.15)},
     "all5": {"params": _all(PLANT_KEYS, 0.05)},
     "all10": {"params": _all(PLANT_KEYS, 0.10)},
     "all20": {"params": _all(PLANT_KEYS, 0.20)},
@@ -182,7 +243,38 @@ PRESETS = {
 _KEYS = ("params", "noise", "delay", "name")
 
 
-def from_dict(data, where: str = "mismatch") -> MismatchSpec:
+def presets_markdown() -> str:
+    """`PRESETS` as a Markdown table: each preset's varied parameters with their relative
+    range, its sensor noise (in units of each component's `NOISE_SCALES`) and its delay, as
+    the code defines them (docs/yardsticks.md and docs/model-error.md print it)."""
+    rows = [
+        "| preset | parameters × U(1 − δ, 1 + δ) | sensor noise σ | delay |",
+        "| --- | --- | --- | --- |",
+    ]
+    for name, p in PRESETS.items():
+        params = p.get("params", {})
+        deltas = sorted(set(params.values()))
+        if not params:
+            ptext = "none"
+        elif len(deltas) == 1:
+            ptext = f"{', '.join(params)}: δ = {deltas[0]:g}"
+        else:
+            ptext = ", ".join(f"{k}: δ = {v:g}" for k, v in params.items())
+        noise = p.get("noise", {})
+        sig = sorted(set(noise.values()))
+        ntext = (
+            "none"
+            if not noise
+            else f"{sig[0]:g} of the scale on {len(noise)} components"
+            if len(sig) == 1
+            else ", ".join(f"{k}: {v:g}" for k, v in noise.items())
+        )
+        dtext = f"{p['delay']} interval(s)" if p.get("delay") else "none"
+        rows.append(f"| `{name}` | {ptext} | {ntext} | {dtext} |")
+    return "\n".join(rows)
+
+
+def from_dict(data, where: str = "mismatch", source: str = "") -> MismatchSpec:
     """A spec from the YAML form (module docstring); ``where`` names the source in errors."""
     if not isinstance(data, dict):
         raise ValueError(
@@ -191,21 +283,34 @@ def from_dict(data, where: str = "mismatch") -> MismatchSpec:
     unknown = sorted(set(map(str, data)) - set(_KEYS))
     if unknown:
         raise ValueError(f"{where}: unknown key(s) {unknown}; known: {_KEYS}")
-    params = data.get("params") or {}
-    if not isinstance(params, dict):
-        raise ValueError(f"{where}: params must be a mapping of parameter to range, got {params!r}")
-    noise = data.get("noise") or {}
-    if not isinstance(noise, dict):
-        noise = _all(_ALL_NOISE, _real("noise", noise))
     try:
+        params = data.get("params")
+        params = {} if params is None else params  # ``params:`` with nothing after it
+        if not isinstance(params, dict):
+            raise ValueError(
+                f"mismatch params must be a mapping of parameter to range, got {_show(params)}"
+            )
+        noise = data.get("noise")
+        if noise is None:
+            noise = {}
+        elif not isinstance(noise, dict):
+            if isinstance(noise, bool) or not isinstance(noise, (int, float)):
+                raise ValueError(
+                    "mismatch noise must be a mapping of observation component to sigma, or "
+                    f"one number for all of them, got {_show(noise)}"
+                )
+            noise = _all(_ALL_NOISE, _real("noise", noise))
         return MismatchSpec(
-            ranges=tuple(params.items()),
-            noise=tuple(noise.items()),
+            ranges=params,
+            noise=noise,
             delay=data.get("delay", 0),
-            name=str(data.get("name", "custom")),
+            name=data.get("name", "custom"),
+            source=source or where,
         )
     except ValueError as e:
-        raise ValueError(f"{where}: {e}") from None
+        if where == "mismatch":
+            raise
+        raise ValueError(f"{where}: {str(e).removeprefix('mismatch ')}") from None
 
 
 def combine(specs, name: str) -> MismatchSpec:
@@ -216,7 +321,7 @@ def combine(specs, name: str) -> MismatchSpec:
         ranges.update(dict(s.ranges))
         noise.update(dict(s.noise))
         delay = max(delay, s.delay)
-    return MismatchSpec(tuple(ranges.items()), tuple(noise.items()), delay, name)
+    return MismatchSpec(tuple(ranges.items()), tuple(noise.items()), delay, name, name)
 
 
 def as_spec(spec) -> MismatchSpec:
@@ -229,37 +334,101 @@ def as_spec(spec) -> MismatchSpec:
     if isinstance(spec, dict):
         return from_dict(spec)
     if not isinstance(spec, (str, Path)):
-        raise ValueError(f"mismatch must be a preset name or a YAML file, got {spec!r}")
+        raise ValueError(f"mismatch must be a preset name or a YAML file, got {_show(spec)}")
     text = str(spec)
     path = Path(text)
-    if path.suffix in (".yaml", ".yml") or path.is_file():
+    if _is_path(text):
         return load_spec(path)
     parts = [p.strip() for p in text.split("+")]
     for p in parts:
         if p not in PRESETS:
             raise ValueError(
-                f"unknown mismatch preset {p!r}; known: {sorted(PRESETS)} (or a .yaml file)"
+                f"unknown mismatch preset {_show(p)}; known: {sorted(PRESETS)} (or a .yaml file)"
             )
-    return combine([from_dict(PRESETS[p], f"preset {p}") for p in parts], text)
+    return combine([from_dict(PRESETS[p], f"preset {p}") for p in parts], "+".join(parts))
+
+
+def _is_path(text: str) -> bool:
+    """Whether a spec's text names a file rather than presets: a .yaml/.yml name, something
+    that exists (a folder too: `load_spec` says it is one) or anything with a path separator."""
+    p = Path(text)
+    return p.suffix in (".yaml", ".yml") or _on_disk(p, "exists") or "/" in text or "\\" in text
+
+
+def _on_disk(p: Path, test: str) -> bool:
+    """``p.exists()`` / ``p.is_file()``, False for a name the OS refuses (too long, a NUL)."""
+    try:
+        return bool(getattr(p, test)())
+    except (OSError, ValueError):
+        return False
+
+
+def split_specs(text: str, flag: str = "--mismatch") -> list[str]:
+    """The specs of a comma-separated list: split at every comma, except that the pieces
+    whose join names an existing file stay together (``x,y.yaml`` is one file); an empty
+    piece is a one-line ValueError naming ``flag``."""
+    if not isinstance(text, str):
+        raise ValueError(f"{flag} must be text, got {_show(text)}")
+    pieces = text.split(",")
+    out, i = [], 0
+    while i < len(pieces):
+        longest = range(len(pieces), i + 1, -1)
+        j = next((j for j in longest if _on_disk(Path(",".join(pieces[i:j])), "is_file")), i + 1)
+        part = ",".join(pieces[i:j]).strip()
+        if not part:
+            raise ValueError(
+                f"{flag} {text!r}: an empty spec (give presets or YAML files separated by "
+                "commas, e.g. pm5,pm10)"
+            )
+        out.append(part)
+        i = j
+    return out
+
+
+def parse_specs(text: str, flag: str = "--mismatch") -> list[MismatchSpec]:
+    """The specs of ``--mismatch A,B,...`` (`split_specs`, `as_spec`), checked distinct
+    (`check_distinct`); a one-line ValueError naming ``flag`` otherwise."""
+    try:
+        specs = [as_spec(t) for t in split_specs(text, flag)]
+    except ValueError as e:
+        msg = str(e)
+        raise ValueError(msg if msg.startswith(flag) else f"{flag}: {msg}") from None
+    return check_distinct(specs, flag)
+
+
+def check_distinct(specs, flag: str = "--mismatch") -> list[MismatchSpec]:
+    """``specs`` if their names differ (results are keyed by name); else a one-line
+    ValueError naming the two sources that share a name."""
+    seen: dict[str, MismatchSpec] = {}
+    for s in specs:
+        other = seen.get(s.name)
+        if other is not None:
+            if other.source == s.source:
+                raise ValueError(f"{flag} names the spec {s.source!r} twice")
+            raise ValueError(
+                f"{flag}: {other.source} and {s.source} are both named {s.name!r} (results "
+                "are keyed by name): give one a name: key of its own"
+            )
+        seen[s.name] = s
+    return list(specs)
 
 
 def load_spec(path) -> MismatchSpec:
     """A spec from a YAML file; a one-line ValueError naming the file otherwise."""
-    import yaml
-
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ValueError(f"mismatch file {path} does not exist") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ValueError(f"mismatch file {path}: cannot read it ({type(e).__name__})") from None
-    except yaml.YAMLError:
-        raise ValueError(f"mismatch file {path}: not valid YAML") from None
+    data = schema.read_yaml(path, "mismatch file")
     data = {} if data is None else data
+    where = f"mismatch file {path}"
     if isinstance(data, dict) and "name" not in data:
+        try:
+            check_name(path.stem, "name", spaces=True)
+        except ValueError:
+            raise ValueError(
+                f"{where}: the file's stem {path.stem!r} is not a spec name (1 to 64 letters, "
+                "digits, . _ + - ( ) and single spaces); give the spec a name: key"
+            ) from None
         data = {**data, "name": path.stem}
-    return from_dict(data, f"mismatch file {path}")
+    return from_dict(data, where, source=str(path))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -292,6 +461,13 @@ def plant_values(params: Params) -> dict:
     }
 
 
+def _count_and_seed(n, seed) -> tuple[int, int]:
+    return (
+        schema.integer(n, "sample_plants: n", 0, MAX_PLANTS),
+        schema.integer(seed, "sample_plants: seed", 0),
+    )
+
+
 def sample_plants(spec, n: int, seed: int, gait="default") -> list[dict]:
     """Gait overrides (gait-file keys, the varied ones) of ``n`` robots' plants, robot i the
     i-th draw of ``numpy.random.default_rng(seed)`` (`sample_factors`): usable as the
@@ -299,10 +475,11 @@ def sample_plants(spec, n: int, seed: int, gait="default") -> list[dict]:
     from .params import load_gait
 
     spec = as_spec(spec)
+    n, seed = _count_and_seed(n, seed)
     nominal = load_gait(gait).params
     rng = np.random.default_rng(seed)
     out = []
-    for _ in range(int(n)):
+    for _ in range(n):
         values = plant_values(plant_params(nominal, sample_factors(spec, rng)))
         out.append({k: values[k] for k, d in spec.ranges if d > 0})
     return out
@@ -312,5 +489,6 @@ def sample_plant_params(spec, n: int, seed: int, nominal: Params) -> list[Params
     """The `Params` of the plants of `sample_plants` (the same draws), without a round trip
     through gait-file units."""
     spec = as_spec(spec)
+    n, seed = _count_and_seed(n, seed)
     rng = np.random.default_rng(seed)
-    return [plant_params(nominal, sample_factors(spec, rng)) for _ in range(int(n))]
+    return [plant_params(nominal, sample_factors(spec, rng)) for _ in range(n)]

@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 
 from .layout import Layout
-from .resources import gaits_dir
+from .resources import gaits_dir, parse_yaml
 
 GAIT_KEYS = (
     "g",
@@ -290,11 +290,22 @@ class Gait:
 
 
 def resolve_gait_path(gait: str | Path) -> Path:
-    """A path, or a name under ``configs/gaits/`` such as ``"paper"`` or ``"paper-literal"``."""
+    """A path, or a name under ``configs/gaits/`` such as ``"paper"`` or ``"paper-literal"``;
+    TypeError for anything else (None, a number), ValueError for an empty one or a folder."""
+    if not isinstance(gait, (str, Path)):
+        raise TypeError(
+            f"gait must be a gait name or a gait file's path, got {gait!r} ({type(gait).__name__})"
+        )
+    if not str(gait).strip():
+        raise ValueError("gait must be a gait name or a gait file's path, got ''")
     p = Path(gait)
-    if p.is_file():
-        return p
-    if p.is_dir():
+    try:
+        if p.is_file():
+            return p
+        folder = p.is_dir()
+    except (OSError, ValueError):  # a name the OS refuses (too long, a NUL byte)
+        folder = False
+    if folder:
         raise ValueError(f"gait {str(gait)!r} is a folder, not a gait file")
     for cand in (GAITS_DIR / f"{gait}.yaml", GAITS_DIR / str(gait)):
         if cand.is_file():
@@ -343,7 +354,7 @@ def read_gait_file(path: Path) -> dict:
     except IsADirectoryError:
         raise ValueError(f"gait file {path} is a folder, not a file") from None
     try:
-        data = yaml.safe_load(text)
+        data = parse_yaml(text)
     except yaml.YAMLError as e:
         where = getattr(e, "problem_mark", None)
         at = f" at line {where.line + 1}" if where is not None else ""

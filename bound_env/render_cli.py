@@ -9,7 +9,7 @@ so the animation shows exactly the passive model; frames are taken from the envi
 then every registered *demo part* (`register_demo_part`). The core registers none: a part
 that needs more than the core lives above it and registers itself when its commands are
 registered (the ``bound_env.commands`` entry point, `bound_env.cli`); ``agents`` adds the
-passive-vs-learned comparison from a perturbed start (agents/demo.py, ``comparison`` in
+passive-vs-learned comparison from a perturbed start (agents/results/demo.py, ``comparison`` in
 ``summary.json``, ``compare.gif``). bound_env never imports agents (tests/test_layers.py).
 """
 

@@ -13,6 +13,8 @@ choose the Numba cache location before any compiled module is imported.
 
 from __future__ import annotations
 
+import copy
+import functools
 import os
 import sys
 from importlib import resources
@@ -85,3 +87,22 @@ def configure_numba_cache() -> str | None:
     if numba is not None:  # imported already: its config was read from the old environment
         numba.config.CACHE_DIR = folder
     return folder
+
+
+def parse_yaml(text: str):
+    """``yaml.safe_load(text)`` refusing a key twice (`bound_env.schema.yaml_load`), parsed
+    once per distinct text: each call gets its own copy.
+
+    Every environment, task and controller reads its gait file or spec, and pure-Python YAML
+    took a tenth of the test suite's time; a changed file is new text, so it is parsed anew.
+    Raises what ``yaml.safe_load`` raises (a key twice: a ``yaml.YAMLError`` naming it).
+    """
+    return copy.deepcopy(_parsed_yaml(text))
+
+
+@functools.lru_cache(maxsize=64)
+def _parsed_yaml(text: str):
+    from .schema import yaml_load
+
+    return yaml_load(text)
+

@@ -4,7 +4,7 @@ Each checker takes the value and ``where``, the file and the field it came from
 (``"policies/x/config.json: expert.settings.safe"``), and returns the value in its checked
 type, or raises a one-line ValueError that starts with ``where``. The schema of each kind of
 file lives in one place and is written with these: controller specs in
-`bound_env.control.spec`, the policy folders in `agents.schema`.
+`bound_env.control.spec`, the policy folders in `agents.common.schema`.
 
 Strings are never read as numbers (``horizon: "12"`` is an error, not 12), booleans are never
 read as integers, and numbers must be finite.
@@ -122,6 +122,70 @@ def real_array(
         got = f"[{float(a.min())!r}, {float(a.max())!r}]"
         raise ValueError(f"{where} must lie in [{lo}, {hi}], got {got}")
     return a
+
+
+def yaml_load(text: str):
+    """``yaml.safe_load`` of ``text``, except that a mapping with a key twice is refused
+    (a ``yaml.YAMLError`` naming the key and its line, as a parse error is): PyYAML keeps the
+    last one silently, so ``params: {m1: 0.1}`` then ``params: {m2: 0.2}`` would drop m1."""
+    import yaml
+
+    class _Unique(yaml.SafeLoader):
+        pass
+
+    def mapping(loader, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = loader.construct_object(key_node, deep=deep)
+            try:
+                twice = key in seen
+                seen.add(key)
+            except TypeError:  # an unhashable key: safe_load's own error follows
+                continue
+            if twice:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"found duplicate key {key!r}", key_node.start_mark
+                )
+        return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
+
+    _Unique.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, mapping)
+    return yaml.load(text, Loader=_Unique)  # noqa: S506 - a SafeLoader subclass
+
+
+def yaml_error(e) -> str:
+    """One line for a ``yaml.YAMLError``: its problem and line (``duplicate key 'params' at
+    line 2``)."""
+    mark = getattr(e, "problem_mark", None)
+    at = f" at line {mark.line + 1}" if mark is not None else ""
+    problem = getattr(e, "problem", None) or type(e).__name__
+    return f"{problem}{at}"
+
+
+def read_yaml(path, what: str = "YAML file"):
+    """A YAML file's value (`yaml_load`: no key twice); a one-line ValueError naming the file
+    (``{what} {path}: ...``) for a missing file, a folder, a non-UTF-8 file or invalid YAML."""
+    import yaml
+
+    p = Path(path)
+    try:
+        if p.is_dir():
+            raise ValueError(f"{what} {p} is a folder, not a file")
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ValueError(f"{what} {p} does not exist") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{what} {p}: not a text (UTF-8) file") from None
+    except (OSError, ValueError) as e:  # a name the OS refuses (too long, a NUL byte) too
+        if isinstance(e, ValueError) and str(e).startswith(what):
+            raise
+        why = getattr(e, "strerror", None) or type(e).__name__
+        raise ValueError(f"{what} {p}: cannot read it ({why})") from None
+    try:
+        return yaml_load(text)
+    except yaml.YAMLError as e:
+        raise ValueError(f"{what} {p}: not valid YAML ({yaml_error(e)})") from None
+    except RecursionError:
+        raise ValueError(f"{what} {p}: nested too deeply") from None
 
 
 def regular_file(path, what: str = "file") -> Path:

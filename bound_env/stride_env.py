@@ -240,7 +240,16 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
         self._alpha = self.task.params.alpha  # slope under the robot [rad] (rough terrain)
 
     @property
+    def plant_task(self):
+        """The one holder of the robot's plant (a `bound_env.task.PassiveBoundTask`, on which
+        every stride runs: ``set_params`` changes the next start check, slope draw and
+        stride; model error, `bound_env.randomized.RandomizedPlant`)."""
+        return self.task.step_task
+
+    @property
     def params(self) -> Params:
+        """The plant's parameters (the gait's, with ``gait_overrides``; a drawn plant under
+        `bound_env.randomized.RandomizedPlant`)."""
         return self.task.params
 
     @property
@@ -265,6 +274,11 @@ class PassiveBoundStrideEnv(gym.Env, utils.EzPickle):
 
     def _obs(self, z) -> np.ndarray:
         return np.clip(np.nan_to_num(z, nan=-1.0), Z_LOW, Z_HIGH).astype(np.float32)
+
+    def apex_observation(self, z) -> np.ndarray:
+        """The observation of the apex state z (SI): z itself, float32, clipped to the
+        bounds (sensor noise, `bound_env.randomized.RandomizedPlant`, adds to z first)."""
+        return self._obs(np.asarray(z, dtype=float))
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

@@ -38,7 +38,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from .dynamics import jit, make_aux
+from .dynamics import jit
 from .events import APEX, CONTINUE, F_NO_APEX, F_NON_FINITE, FAIL_FIRST, TIME_UP, phase_index
 from .fast import Options, advance, event_log, recorder
 from .params import P_TAU, Z_IN_Y
@@ -48,6 +48,7 @@ from .task import (
     C_MAX_TORQUE,
     C_NO_APEX,
     C_RTOL,
+    C_SLOPE_NOISE,
     DEFAULT_DT,
     DEFAULT_MAX_TORQUE,
     FAILURE_NAMES,
@@ -332,7 +333,13 @@ class StrideMap:
     settings of the same name (``rtol`` defaults to `EVAL_RTOL`). ``segments``: a planning
     map, each run of equal interval actions integrated as one segment, stopping at the apex
     (`stride_segments`: the same strides to the integrator tolerance, not bit for bit; no
-    kicks, no slopes)."""
+    kicks, no slopes).
+
+    ``task``: a `bound_env.task.PassiveBoundTask` (without slope noise) to run on instead of
+    building one from the settings above (which are then ignored): an env's own task, so
+    that the env's plant has one holder. The map keeps no copy of the plant: every run reads
+    its task's parameters (``task.aux0``), so `PassiveBoundTask.set_params` (model error,
+    `bound_env.randomized.RandomizedPlant`) reaches the next stride."""
 
     def __init__(
         self,
@@ -342,22 +349,36 @@ class StrideMap:
         max_torque: float = DEFAULT_MAX_TORQUE,
         rtol: float = EVAL_RTOL,
         segments: bool | int = False,
+        task: PassiveBoundTask | None = None,
     ):
-        self.task = PassiveBoundTask(
-            gait=gait,
-            gait_overrides=gait_overrides,
-            dt=dt,
-            max_torque=max_torque,
-            rtol=rtol,
-            reset_noise_scale=0.0,
-        )
+        if task is None:
+            task = PassiveBoundTask(
+                gait=gait,
+                gait_overrides=gait_overrides,
+                dt=dt,
+                max_torque=max_torque,
+                rtol=rtol,
+                reset_noise_scale=0.0,
+            )
+        elif not isinstance(task, PassiveBoundTask):
+            raise ValueError(f"task must be a PassiveBoundTask, got {type(task).__name__}")
+        else:
+            rtol = float(task.cfg[C_RTOL])
+        self.task = task
+        # the task's constants as the stride kernels read them: a stride map draws no slopes
+        # of its own (rough terrain comes per stride, ``run(slopes=...)``), so a task with
+        # slope noise (the stride env's) runs here on smooth ground. Not the plant: that is
+        # read from the task at every run.
+        self.cfg = task.cfg
+        if task.cfg[C_SLOPE_NOISE] != 0.0:
+            self.cfg = task.cfg.copy()
+            self.cfg[C_SLOPE_NOISE] = 0.0
         self.dt = self.task.dt
         self.max_torque = self.task.max_torque
         self.rtol = float(rtol)
         self.n_max = max_intervals(self.dt)
         # intervals per segment at most (0: off; True: `MAX_SEGMENT`)
         self.segments = MAX_SEGMENT if segments is True else int(segments)
-        self._aux0 = make_aux(self.task.params.to_array())
         self._batches: dict = {}
 
     @property
@@ -402,7 +423,7 @@ class StrideMap:
         if self.segments and (kicks is not None or slopes is not None):
             raise ValueError("a StrideMap with segments=True (planning) takes no kicks or slopes")
         b = self._batch(n)
-        reset_rows(b.y, b.aux, b.flags, b.s, b.obs, self._aux0, Z, self.task.cfg)
+        reset_rows(b.y, b.aux, b.flags, b.s, b.obs, self.task.aux0, Z, self.cfg)
         for i in range(n) if aux is not None or slopes is not None else ():
             if aux is not None:
                 b.aux[i] = aux[i]
@@ -421,12 +442,12 @@ class StrideMap:
         out = np.zeros((n, 6))
         if self.segments:
             strides_segments(
-                b.y, b.aux, b.flags, b.s, b.apex, self.task.cfg, np.ascontiguousarray(A),
+                b.y, b.aux, b.flags, b.s, b.apex, self.cfg, np.ascontiguousarray(A),
                 self.n_max, self.segments, out,
             )  # fmt: skip
         else:
             strides(
-                b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.task.cfg,
+                b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.cfg,
                 np.ascontiguousarray(A), ks, ki, kd, self.n_max, out,
             )  # fmt: skip
         status = out[:, 0].astype(np.int64)
@@ -456,18 +477,18 @@ class StrideMap:
         same strides as `run`'s."""
         n = Z.shape[0]
         b = self._batch(n)
-        reset_rows(b.y, b.aux, b.flags, b.s, b.obs, self._aux0, Z, self.task.cfg)
+        reset_rows(b.y, b.aux, b.flags, b.s, b.obs, self.task.aux0, Z, self.cfg)
         out = np.zeros((n, 6))
         A = np.ascontiguousarray(A)
         if self.segments:
             strides_segments(
-                b.y, b.aux, b.flags, b.s, b.apex, self.task.cfg, A, self.n_max, self.segments,
+                b.y, b.aux, b.flags, b.s, b.apex, self.cfg, A, self.n_max, self.segments,
                 out,
             )  # fmt: skip
         else:
             ks, zero = np.full(n, NO_KICK, dtype=np.int64), np.zeros(n, dtype=np.int64)
             strides(
-                b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.task.cfg, A, ks, zero,
+                b.y, b.aux, b.flags, b.s, b.apex, b.obs, self.cfg, A, ks, zero,
                 np.zeros(n), self.n_max, out,
             )  # fmt: skip
         status = out[:, 0].astype(np.int64)
@@ -484,7 +505,7 @@ class StrideMap:
         if s[S.STATUS] >= FAIL_FIRST:
             return -2, 0, 0.0, 0.0, 0.0, int(s[S.STATUS]), 0
         code, n, t_step, t_apex, t = open_loop(
-            b.y[0], b.aux[0], b.flags[0], s, b.apex[0], b.obs[0], self.task.cfg,
+            b.y[0], b.aux[0], b.flags[0], s, b.apex[0], b.obs[0], self.cfg,
             np.asarray(actions, dtype=float), int(seg), self.n_max * max_strides, max_strides,
         )  # fmt: skip
         return code, n, t_step, t_apex, t, int(s[S.STATUS]), int(s[S.PHASE])

@@ -119,6 +119,22 @@ def notify_apex(controller, obs, info) -> None:
     if on_apex is None:
         return
     if "apex_z" in info:
-        on_apex(np.asarray(info["apex_z"], dtype=float), float(obs[OBS_TIME]))
+        on_apex(_apex_state(info, "apex_z"), float(obs[OBS_TIME]))
     elif "start_z" in info:
-        on_apex(np.asarray(info["start_z"], dtype=float), 0.0)
+        on_apex(_apex_state(info, "start_z"), 0.0)
+
+
+def _apex_state(info, key: str) -> np.ndarray:
+    """``info[key]`` as six finite numbers (a stride controller plans from it); ValueError
+    naming the key otherwise (a NaN apex state would become a NaN torque)."""
+    try:
+        z = np.asarray(info[key], dtype=float)
+    except (TypeError, ValueError):
+        z = None
+    if z is None or z.shape != (6,) or not np.all(np.isfinite(z)):
+        got = " ".join(repr(info[key]).split())  # one line
+        raise ValueError(
+            f"info[{key!r}] must be the apex state, six finite numbers, got {got[:160]}; "
+            "pass the info the env returned"
+        )
+    return z

@@ -177,12 +177,16 @@ class StrideSimulator:
     def __init__(self, stride_map: StrideMap, basis: TorqueBasis):
         self.stride_map = stride_map
         self.basis = basis
-        self.params = stride_map.params
         self.max_torque = stride_map.max_torque
         self.rtol = stride_map.rtol
         self.dt = stride_map.dt
         self.W = interval_weights(basis.edges, basis.phi, self.dt)  # a = W u
         self.W_sub = interval_weights(basis.edges, np.eye(len(basis.edges) - 1), self.dt)
+
+    @property
+    def params(self):
+        """The plant's parameters: its stride map's task's, read now (no copy)."""
+        return self.stride_map.params
 
     def actions(self, U) -> np.ndarray:
         """Interval actions (n, n_intervals) of coefficient rows U (clipped to [-1, 1])."""
@@ -275,10 +279,11 @@ class StrideTask:
         elif settings:
             config = replace(config, **settings)
         self.config = config
+        # the one holder of the plant: the start check, the slope draws and every stride read
+        # its parameters (`set_params` changes them all)
         self.step_task = PassiveBoundTask(config.plant())  # (validates every number)
         self.slope_noise_deg = self.step_task.slope_noise_deg
         self.gait = self.step_task.gait
-        self.params = self.step_task.params
         self.z_ref = self.step_task.z_ref
         self.apex_scales = self.step_task.apex_scales
         self.max_torque = self.step_task.max_torque
@@ -293,10 +298,19 @@ class StrideTask:
         nominal = nominal_stride(load_gait(config.gait), rtol=self.rtol)
         self.basis = make_basis(config.basis, config.K, nominal.t_end, nominal.durations)
         self.dt = self.step_task.dt
-        stride_map = StrideMap(
-            config.gait, config.gait_overrides, self.dt, self.max_torque, self.rtol
-        )
-        self.sim = StrideSimulator(stride_map, self.basis)
+        # the strides run on the step task itself (its plant, dt, max_torque and rtol; the
+        # stride env draws the slopes of rough terrain per stride)
+        self.sim = StrideSimulator(StrideMap(task=self.step_task), self.basis)
+
+    @property
+    def params(self):
+        """The plant's parameters (the step task's, read now: `set_params` reaches them)."""
+        return self.step_task.params
+
+    def set_params(self, params) -> None:
+        """Run from now on on the plant ``params`` (`bound_env.task.PassiveBoundTask.set_params`
+        of the one task that holds it): the next start check, slope draw and stride."""
+        self.step_task.set_params(params)
 
     @property
     def K(self) -> int:

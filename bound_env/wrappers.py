@@ -48,10 +48,21 @@ class LibraryActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env, rows=None):
         gym.utils.RecordConstructorArgs.__init__(self, rows=rows)
         gym.ActionWrapper.__init__(self, env)
+        if not isinstance(env.action_space, gym.spaces.Box) or env.action_space.shape is None:
+            raise ValueError(  # e.g. a LibraryActions already: its actions are rows, not a profile
+                f"LibraryActions needs an env whose action is a profile's coefficients (a Box), "
+                f"got {env.action_space}: wrap the env once"
+            )
         base = env.unwrapped
         if not (hasattr(base, "lqr") and hasattr(base, "z")):
             raise ValueError("LibraryActions needs an env with an LQR and an apex state z "
                              "(PassiveBoundRescue-v0)")  # fmt: skip
+        if getattr(base, "action_mode", "direct") != "direct":
+            raise ValueError(
+                f"LibraryActions plays whole profiles; this env's action_mode="
+                f"{base.action_mode!r} takes a residual on the LQR's plan (row 0 would play "
+                "it twice): make the env with action_mode='direct'"
+            )
         K = int(env.action_space.shape[0])
         if rows is None:
             rows = default_library(K)
@@ -65,8 +76,10 @@ class LibraryActions(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         a = integer(a, "LibraryActions action")
         if not 0 <= a < len(self.rows):
             raise ValueError(f"LibraryActions action must be in [0, {len(self.rows)}), got {a}")
-        base = self.env.unwrapped
-        return base.lqr.coefficients(base.z) if a == 0 else self.rows[a].copy()
+        if a:
+            return self.rows[a].copy()
+        base = self.env.unwrapped  # the LQR plans on the apex state as observed (sensor noise)
+        return base.lqr.coefficients(getattr(base, "z_observed", base.z))
 
 
 def __getattr__(name: str):

@@ -8,6 +8,9 @@ time-averaged |tau| over the first `STRIDES` strides after a perturbation z_cl +
 for `N_DIRS` random directions u (`bound_env.analysis.margins.random_directions`, scaled to
 max |u_i| = 1) at each relative size r in `SIZES`, with the fraction of those runs that
 returned (max-abs apex error < 1e-4 within 100 strides). Writes ``effort.csv`` and ``effort.json``.
+
+Bad input (an empty or unknown policy, an ``--out`` that cannot be written) is a one-line
+error and exit 2 before any policy is measured.
 """
 
 from __future__ import annotations
@@ -21,10 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.policy import load_controller
+from agents.runtime.policy import load_controller
 from bound_env.analysis.margins import RETURN_TOL, ClosedLoop, fd_steps, random_directions
 from bound_env.analysis.numerics import map_fixed_point
 from bound_env.cache import atomic_write
+from bound_env.cli_args import check_writable
 from bound_env.params import load_gait
 
 SIZES = (0.02, 0.05)  # relative perturbation sizes (the passive basin_min is ~0.02)
@@ -49,17 +53,38 @@ def recovery(loop: ClosedLoop, z0, z_cl) -> tuple[float, bool]:
     return impulse / time_total, False
 
 
-def main(argv=None) -> int:
+def policy_arg(text: str) -> str:
+    """An argparse ``type``: a policy's name or path, not empty."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("a policy must be a name or a path, got ''")
+    return text
+
+
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--policy", action="append", help="policies (default: %(default)s)")
-    ap.add_argument("--out", default="out/control_effort")
+    ap.add_argument(
+        "--policy",
+        action="append",
+        type=policy_arg,
+        help=f"a policy, repeatable (default: {', '.join(DEFAULT_POLICIES)})",
+    )
+    ap.add_argument("--out", default="out/control_effort", help="folder (default: %(default)s)")
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = parser()
     args = ap.parse_args(argv)
+    try:  # every policy and the folder checked before the first is measured
+        check_writable(args.out, "--out")
+        ctrls = {p: load_controller(p, gait="default") for p in args.policy or DEFAULT_POLICIES}
+    except (OSError, ValueError, TypeError) as e:
+        ap.error(" ".join(str(e).split()))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     z_star = load_gait("default").z0
     rows = []
-    for policy in args.policy or DEFAULT_POLICIES:
-        ctrl = load_controller(policy, gait="default")
+    for policy, ctrl in ctrls.items():
         loop = ClosedLoop(ctrl)
         z_cl, res, _ = map_fixed_point(loop.map, z_star, fd_steps(z_star))
         cyc = loop.stride(z_cl)

@@ -2,14 +2,15 @@
 
     PYTHONPATH=. .venv/bin/python scripts/control_table.py [--budget quick] [--seed S] [--out DIR]
 
-Each setting is a `bound_env.control.ControllerSpec` measured by `agents.margins.compute_margins`
-in the step env (PassiveBound-v0, the same yardsticks as every policy) on the random samples
-of ``--seed``: by default the validation seed (777, `agents.distill.VALIDATION_SEED`), on which
-the shipped designs are chosen; ``--seed 12345`` is the test set
-(`bound_env.analysis.margins.DEFAULT_SEED`, the table's old behaviour). Results are cached per
-setting under ``DIR/seed-<S>/<label>/`` (the test set: ``DIR/<label>/``, as before; an
+Each setting is a `bound_env.control.ControllerSpec` measured by
+`agents.results.margins.compute_margins` in the step env (PassiveBound-v0, the same yardsticks as
+every policy) on the random samples of ``--seed``: by default the validation seed (777,
+`agents.common.seeds.VALIDATION_SEED`), on which the shipped designs are chosen; ``--seed 12345`` is
+the test set (`bound_env.analysis.margins.DEFAULT_SEED`, the table's old behaviour). Results are
+cached per setting under ``DIR/seed-<S>/<label>/`` (the test set: ``DIR/<label>/``, as before; an
 interrupted run resumes), and the table is written to ``table.csv`` and ``table.md`` in that
-seed's directory (atomically).
+seed's directory (atomically). Options are typed and range-checked as ``bound-env``'s are
+(a bad one: a one-line usage error, exit 2).
 """
 
 from __future__ import annotations
@@ -20,11 +21,13 @@ import io
 import sys
 from pathlib import Path
 
-from agents.distill import VALIDATION_SEED
-from agents.margins import compute_margins
+from agents.common.seeds import VALIDATION_SEED
+from agents.results.margins import compute_margins
 from bound_env.analysis.margins import DEFAULT_SEED, check_seed
 from bound_env.cache import atomic_write
+from bound_env.cli_args import check_writable, number
 from bound_env.control import ControllerSpec, load_controller
+from bound_env.parallel import MAX_WORKERS
 
 XD = [1.0, 1.0, 1.0, 10.0, 1.0, 1.0]  # Q weighting forward speed 10x
 SETTINGS = [  # (label, spec keyword arguments)
@@ -58,19 +61,28 @@ COLUMNS = (
 )
 
 
-def main(argv=None) -> int:
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--budget", default="quick", choices=("test", "quick", "full"))
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--workers", type=number(int, 1, MAX_WORKERS), default=2)
     ap.add_argument("--out", default="out/control_table")
     ap.add_argument(
         "--seed",
-        type=int,
+        type=number(int, 0, 2**32 - 1),
         default=VALIDATION_SEED,
         help=f"margins' --seed (default {VALIDATION_SEED}: validation; {DEFAULT_SEED}: test set)",
     )
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = parser()
     args = ap.parse_args(argv)
     seed = check_seed(args.seed)
+    try:
+        check_writable(args.out, "--out")
+    except ValueError as e:
+        ap.error(str(e))
     # the test set keeps its old directory; any other seed its own, so neither overwrites
     out = Path(args.out) if seed == DEFAULT_SEED else Path(args.out) / f"seed-{seed}"
     out.mkdir(parents=True, exist_ok=True)

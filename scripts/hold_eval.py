@@ -137,34 +137,13 @@ def table(path: Path, seeds: list[int]) -> str:
 
 
 def load(name: str, gait: str):
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     return load_controller(name, gait=gait)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--policy", nargs="+", default=["lqr", "lqr+of"])
-    ap.add_argument("--delta", nargs="+", type=float, default=[0.05, 0.1, 0.2])
-    ap.add_argument("--seed", type=int, default=777)
-    ap.add_argument("--robots", type=int, default=32)
-    ap.add_argument("--strides", type=int, default=100)
-    ap.add_argument("--gait", default="default")
-    ap.add_argument("--out", type=Path, default=None)
-    ap.add_argument(
-        "--set",
-        nargs="*",
-        default=[],
-        metavar="KEY=VALUE",
-        help="OffsetFree settings of the '+of' policies (estimator, gain, deadband, max_shift)",
-    )
-    ap.add_argument(
-        "--table",
-        type=int,
-        nargs="+",
-        metavar="SEED",
-        help="print the Markdown table of --out on these seeds (pooled) and exit",
-    )
+    ap = parser()  # typed, range-checked options (end of the file)
     args = ap.parse_args(argv)
     if args.table:
         if args.out is None or not args.out.is_file():
@@ -235,5 +214,77 @@ def main(argv=None) -> int:
     return 0
 
 
+def parser() -> argparse.ArgumentParser:
+    """The options, typed and range-checked with the command line's own argparse types
+    (`bound_env.cli_args.number`): a bad one is a usage error, exit 2."""
+    from bound_env.cli_args import number
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--policy", nargs="+", type=_policy, default=["lqr", "lqr+of"])
+    ap.add_argument("--delta", nargs="+", type=number(float, 0.0, 0.99), default=[0.05, 0.1, 0.2])
+    ap.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=777)
+    ap.add_argument("--robots", type=number(int, 1, 100_000), default=32)
+    ap.add_argument("--strides", type=number(int, TAIL, 100_000), default=100)
+    ap.add_argument("--gait", default="default")
+    ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument(
+        "--set",
+        nargs="*",
+        type=_of_setting,
+        default=[],
+        metavar="KEY=VALUE",
+        help="OffsetFree settings of the '+of' policies (estimator, gain, deadband, max_shift)",
+    )
+    ap.add_argument(
+        "--table",
+        type=number(int, 0, 2**32 - 1),
+        nargs="+",
+        metavar="SEED",
+        help="print the Markdown table of --out on these seeds (pooled) and exit",
+    )
+    return ap
+
+
+def _policy(text: str) -> str:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("a policy must be a name or a path, got ''")
+    return text
+
+
+def _of_setting(text: str) -> str:
+    """``KEY=VALUE`` of an `OffsetFree` setting, its value checked (`OF_LIMITS`)."""
+    from bound_env.control.offset_free import ESTIMATORS, OF_LIMITS
+
+    key, eq, value = text.partition("=")
+    if not eq or key not in ("estimator", *OF_LIMITS):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: give KEY=VALUE with KEY one of estimator, {', '.join(OF_LIMITS)}"
+        )
+    if key == "estimator":
+        if value not in ESTIMATORS:
+            raise argparse.ArgumentTypeError(
+                f"estimator must be one of {ESTIMATORS}, got {value!r}"
+            )
+        return text
+    from bound_env.cli_args import number
+
+    lo, hi = OF_LIMITS[key]
+    try:
+        number(float, lo, hi, lo_open=key == "gain")(value)
+    except argparse.ArgumentTypeError as e:
+        raise argparse.ArgumentTypeError(f"{key}: {e}") from None  # names the setting
+    return text
+
+
+def run(argv=None) -> int:
+    """`main`, with what fails after the options parsed (an unknown policy or gait, an --out
+    that is a folder) as one line and exit 2."""
+    try:
+        return main(argv)
+    except (ValueError, OSError, TypeError) as e:
+        print(f"hold_eval.py: error: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run())

@@ -2,14 +2,26 @@
 
 Test tiers: ``pytest -m "not slow"`` is the fast tier (physics, environment, command line;
 under a minute); ``pytest`` runs everything, as ``.ci/run`` does. A test that takes more than
-a few seconds is marked ``@pytest.mark.slow``.
+a few seconds is marked ``@pytest.mark.slow``. Property tests (Hypothesis) run the "fast"
+profile's few examples by default and the "ci" profile's many under ``CI=1``.
 """
 
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 from bound_env.params import load_gait
+
+# Hypothesis: a few examples per property in the fast tier, many in CI (.ci/run sets CI=1);
+# HYPOTHESIS_PROFILE picks one by name. Tests that set max_examples themselves keep theirs.
+_HEALTH = [HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+settings.register_profile("fast", max_examples=12, deadline=None, suppress_health_check=_HEALTH)
+settings.register_profile("ci", max_examples=150, deadline=None, suppress_health_check=_HEALTH)
+settings.load_profile(
+    os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "fast")
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "PassiveBound-v0"

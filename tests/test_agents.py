@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.config import DEFAULT_CONFIG, apply_sets, load_hyperparams, parse_set, preprocess
-from agents.controllers import MLPController, ZeroController
-from agents.margins import compute_margins
-from agents.policy import load_controller
+from agents.common.config import DEFAULT_CONFIG, apply_sets, load_hyperparams, parse_set, preprocess
+from agents.results.margins import compute_margins
+from agents.runtime.controllers import MLPController, ZeroController
+from agents.runtime.policy import load_controller
 from bound_env.analysis.margins import BUDGETS, random_directions
 from bound_env.analysis.numerics import (
     bisect_threshold,
@@ -154,7 +154,7 @@ def test_random_directions_are_reproducible_and_scaled():
 
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory):
-    from agents.train import train
+    from agents.training.train import train
 
     runs = tmp_path_factory.mktemp("runs")
     sets = [
@@ -163,7 +163,7 @@ def smoke_run(tmp_path_factory):
         "batch_size=128",
         "n_epochs=2",
         "policy_kwargs=dict(net_arch=dict(pi=[16], vf=[16]))",
-        "callback=[{agents.train.BasinValidationCallback: {eval_freq: 1024, iters: 2}}]",
+        "callback=[{agents.training.train.BasinValidationCallback: {eval_freq: 1024, iters: 2}}]",
     ]
     run = train(
         name="smoke",
@@ -242,7 +242,7 @@ def _dummy_venv(obs_space):
     import gymnasium as gym
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from agents.wrappers import ObservationFilter
+    from agents.common.wrappers import ObservationFilter
 
     def make():
         env = gym.make("PassiveBound-v0")
@@ -257,8 +257,8 @@ def _dummy_venv(obs_space):
 def test_resume_continues_from_the_last_checkpoint(smoke_run, tmp_path):
     import shutil
 
-    from agents.checkpoints import last_checkpoint
-    from agents.train import train
+    from agents.training.checkpoints import last_checkpoint
+    from agents.training.train import train
 
     run = tmp_path / "runs" / "smoke"
     shutil.copytree(smoke_run, run)
@@ -286,7 +286,7 @@ def test_observation_filter_drops_the_flags():
     import gymnasium as gym
 
     import bound_env
-    from agents.wrappers import ObservationFilter, observation_index
+    from agents.common.wrappers import ObservationFilter, observation_index
 
     gym.register_envs(bound_env)
     base = gym.make("PassiveBound-v0")
@@ -295,29 +295,29 @@ def test_observation_filter_drops_the_flags():
     names = list(base.unwrapped.task.obs_names)
     assert obs.shape == (len(names) - 6,) == env.observation_space.shape
     assert not {"contact_back", "touched_front", "leg_angle_back"} & set(env.names)
-    idx = observation_index([{"agents.wrappers.ObservationFilter": {}}], names)
+    idx = observation_index([{"agents.common.wrappers.ObservationFilter": {}}], names)
     assert np.array_equal(idx, env.index)
-    assert observation_index(["agents.wrappers.PerturbedStarts"], names) is None
+    assert observation_index(["agents.common.wrappers.PerturbedStarts"], names) is None
     with pytest.raises(ValueError, match="unknown observation"):
         ObservationFilter(base, drop=("nope",))
 
 
 def test_configs_name_the_callbacks_through_agents_train():
     """configs/ppo.yaml and the saved runs' config.yaml name the callbacks
-    ``agents.train.<name>``: still the classes of `agents.train_callbacks`."""
-    import agents.train_callbacks as callbacks
-    from agents.config import get_class_by_name
+    ``agents.training.train.<name>``: still the classes of `agents.training.train_callbacks`."""
+    import agents.training.train_callbacks as callbacks
+    from agents.common.config import get_class_by_name
 
     for name in ("NoiseCurriculumCallback", "BasinValidationCallback"):
-        assert get_class_by_name(f"agents.train.{name}") is getattr(callbacks, name)
+        assert get_class_by_name(f"agents.training.train.{name}") is getattr(callbacks, name)
 
 
 def test_curriculum_raises_the_start_noise():
     import gymnasium as gym
 
     import bound_env
-    from agents.train_callbacks import NoiseCurriculumCallback
-    from agents.wrappers import PerturbedStarts
+    from agents.common.wrappers import PerturbedStarts
+    from agents.training.train_callbacks import NoiseCurriculumCallback
 
     gym.register_envs(bound_env)
     env = PerturbedStarts(gym.make("PassiveBound-v0"), noise_scale=0.0)
@@ -460,6 +460,8 @@ def test_cli_margins_json_and_compare(tmp_path, capsys):
                 "compare",
                 "--budget",
                 "test",
+                "--entry",  # passive and lqr: the curated columns are test_install's
+                "lqr",
                 "--workers",
                 "1",
                 "--out",
@@ -471,5 +473,5 @@ def test_cli_margins_json_and_compare(tmp_path, capsys):
         == 0
     )
     page = (docs / "MARGINS.md").read_text()
-    assert "basin_min" in page and "passive" in page
+    assert "basin_min" in page and "passive" in page and "lqr" in page
     assert (docs / "margins_basin.png").is_file()

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.policy import load_controller
+from agents.runtime.policy import load_controller
 from bound_env.analysis.apex_loop import CLOCK, FELL, RETURNED, UNDECIDED, apex_loop
 from bound_env.analysis.basin import controller_batch
 from bound_env.analysis.margins import ClosedLoop, random_directions

@@ -105,7 +105,21 @@ def test_commands_in_a_checkout_change_no_tracked_file(tmp_path):
         ["animate", "--strides", "1", "--json"],  # the default --out: out/animate/
         ["margins", "--policy", "passive", "--budget", "test", "--workers", "1", "--json"],
         ["rollout", "--policy", "default", "--strides", "2", "--json"],
-        ["compare", "--budget", "test", "--workers", "1", "--no-progress", "--json"],
+        # passive, lqr and a shipped policy with a training curve (copied beside the page);
+        # the curated columns at the test budget are test_install's
+        [
+            "compare",
+            "--budget",
+            "test",
+            "--workers",
+            "1",
+            "--no-progress",
+            "--entry",
+            "lqr",
+            "--entry",
+            "step-ppo=agents/policies/step-ppo/s0",
+            "--json",
+        ],
         [
             "train",
             "--name",
@@ -150,6 +164,7 @@ def test_commands_in_a_checkout_change_no_tracked_file(tmp_path):
         ).stdout
         assert status == "", (cmd, status)
     assert (repo / "out" / "margins" / "MARGINS.md").is_file()  # compare wrote into --out
+    assert (repo / "out" / "margins" / "training_step-ppo.png").is_file()
 
 
 def test_animate_out_is_a_folder_and_a_gif_path_still_works(tmp_path, monkeypatch, cli):
@@ -170,8 +185,8 @@ def test_animate_out_is_a_folder_and_a_gif_path_still_works(tmp_path, monkeypatc
 
 def test_train_grammar_hp_set_gait_out_and_old_spellings(capsys):
     from agents.cli import train_sets
-    from agents.config import DEFAULT_CONFIG
-    from agents.train import resolve_section
+    from agents.common.config import DEFAULT_CONFIG
+    from agents.training.train import resolve_section
     from bound_env.cli import build_parser
 
     parser = build_parser()

@@ -2,11 +2,13 @@
 
 The page is rewritten from a fixture (tests/data/render_only: a test-budget ``margins.json``
 of passive and of lqr, as `compute_margins` wrote them, and a ``paired.json`` with decision
-times) and must equal, byte for byte, what the code before the split of agents/compare.py made
-from the same files (``MARGINS.md``, ``headline.json`` and ``paired.expected.json`` beside
-them; two later, deliberate changes of the page applied to ``MARGINS.md``: the
-reproducibility paragraph quotes differences, not an older page's numbers, and the full table
-is split with the headline columns first, `agents.table_split`). A malformed
+times) and must equal, byte for byte, what the code before the split of agents/results/compare.py
+made from the same files (``MARGINS.md``, ``headline.json`` and ``paired.expected.json`` beside
+them; four later, deliberate changes of the page applied to ``MARGINS.md``: the
+reproducibility paragraph quotes differences, not an older page's numbers, the full table
+is split with the headline columns first, `agents.results.table_split`, a table inside
+``<details markdown="1">`` so that it renders, and a provenance that names the test set, not
+"this page", which a user's page of another budget is not). A malformed
 ``margins.json``, ``paired.json`` or ``headline.json`` is one line naming the file and the key,
 exit 2, never a traceback.
 """
@@ -15,13 +17,11 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from agents.compare import chosen_entries, default_entries, parse_entry
+from agents.results.compare import chosen_entries, default_entries, parse_entry
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data" / "render_only"
@@ -54,7 +54,7 @@ def test_keep_defaults_keeps_every_default_column():
 
 
 def test_keep_defaults_on_the_command_line(monkeypatch):
-    import agents.compare as compare_mod
+    import agents.results.compare as compare_mod
     from bound_env.cli import main
 
     seen = {}
@@ -79,19 +79,9 @@ def _fixture(tmp_path):
     return out, docs
 
 
-def _render(out, docs):
-    argv = ["compare", "--budget", "test", "--render-only", "--no-progress", "--entry", "lqr"]
-    return subprocess.run(
-        [sys.executable, "-m", "bound_env.cli", *argv, "--out", str(out), "--docs", str(docs)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-
-
 def _render_here(out, docs, capsys):
-    """`_render` in this process (the malformed-input cases: no interpreter start each)."""
+    """``bound-env compare --render-only --entry lqr`` in this process (no interpreter start
+    each)."""
     from types import SimpleNamespace
 
     from bound_env.cli import main
@@ -102,14 +92,41 @@ def _render_here(out, docs, capsys):
     return SimpleNamespace(returncode=code, stdout=cap.out, stderr=cap.err)
 
 
-def test_render_only_reproduces_the_page_byte_for_byte(tmp_path):
-    """The renderer split into agents/page.py & co. writes what the old compare.py wrote."""
+def test_render_only_reproduces_the_page_byte_for_byte(tmp_path, capsys):
+    """The renderer split into agents/results/page.py & co. writes what the old compare.py wrote."""
     out, docs = _fixture(tmp_path)
-    r = _render(out, docs)
+    r = _render_here(out, docs, capsys)
     assert r.returncode == 0, r.stderr
     assert (docs / "MARGINS.md").read_bytes() == (DATA / "MARGINS.md").read_bytes()
     assert (docs / "headline.json").read_bytes() == (DATA / "headline.json").read_bytes()
     assert (docs / "paired.json").read_bytes() == (DATA / "paired.expected.json").read_bytes()
+
+
+def test_a_users_columns_sit_in_the_headline_and_their_page_is_theirs(tmp_path, capsys):
+    """``--entry mine=...``: a headline row of its own beside passive and lqr, and a page that
+    says nothing about the project's own page (its measured reproducibility, the literal
+    reading's columns, its basin maps); columns.json has every column, with its
+    fingerprints (none in this fixture, made before them)."""
+    from bound_env.cli import main
+
+    out, docs = _fixture(tmp_path)
+    shutil.copytree(out / "lqr", out / "mine")
+    argv = ["compare", "--budget", "test", "--render-only", "--no-progress", "--entry", "lqr"]
+    argv += ["--entry", "mine=lqr", "--out", str(out), "--docs", str(docs)]
+    assert main(argv) == 0, capsys.readouterr().err
+    head = json.loads((docs / "headline.json").read_text())
+    assert [r["label"] for r in head["rows"]] == ["passive", "lqr", "mine"]
+    assert head["rows"][-1]["what"] == "your column: `lqr`"
+    page = (docs / "MARGINS.md").read_text()
+    table = page.split("## Headline", 1)[1].split("##", 1)[0]
+    assert "| **mine** | your column: `lqr` |" in table
+    for project in ("**Reproducibility.**", "The literal reading of Table II", "## Basin maps"):
+        assert project not in page, project
+    cols = json.loads((docs / "columns.json").read_text())
+    assert [c["label"] for c in cols["columns"]] == ["passive", "lqr", "mine"]
+    assert cols["run"] is None  # a rewrite of columns no recorded run computed
+    # the project's own page (its default columns) keeps them: the byte-for-byte fixture
+    assert "**Reproducibility.**" in (DATA / "MARGINS.md").read_text()
 
 
 def _edit(path: Path, change):
@@ -170,7 +187,7 @@ def test_render_only_refuses_a_paired_json_that_is_not_an_object(tmp_path, capsy
     ],
 )
 def test_a_malformed_headline_json_is_one_line(tmp_path, capsys, change, key):
-    from agents.headline import main
+    from agents.results.headline import main
 
     bad = tmp_path / "headline.json"
     shutil.copyfile(DATA / "headline.json", bad)
@@ -186,7 +203,7 @@ def test_a_malformed_headline_json_is_one_line(tmp_path, capsys, change, key):
 def test_no_top_level_key_of_margins_json_can_crash_the_page(tmp_path):
     """Without any one of its top-level keys, a margins.json renders or is one ValueError
     naming the file: never a KeyError, TypeError or AttributeError."""
-    from agents.compare import compare
+    from agents.results.compare import compare
 
     keys = list(json.loads((DATA / "out" / "lqr" / "margins.json").read_text()))
     for k, key in enumerate(keys):

@@ -258,7 +258,7 @@ def test_a_long_step_env_episode_with_notify_apex_follows_the_stride_env():
 def test_rollout_runs_the_controllers_by_name():
     """``bound-env rollout --policy lqr``: the stride-level controller is told every apex and
     brings a start the passive gait falls from back to the cycle."""
-    from agents.rollout import rollout
+    from agents.runtime.rollout import rollout
 
     lqr = rollout("lqr", strides=40, seed=3, noise=1.0)
     passive = rollout("passive", strides=40, seed=3, noise=1.0)

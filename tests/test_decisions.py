@@ -1,4 +1,4 @@
-"""Who decides at the apex, and what a decision costs (agents/decisions.py, margins'
+"""Who decides at the apex, and what a decision costs (agents/results/decisions.py, margins'
 decision_shares)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from agents.decisions import (
+from agents.results.decisions import (
     FAIR_SAFE,
     decisions_text,
     planner_of,
@@ -16,7 +16,7 @@ from agents.decisions import (
     time_decisions,
     timing_states,
 )
-from agents.policy import load_controller
+from agents.runtime.policy import load_controller
 from bound_env.analysis.margins.curve import Decisions, decision_shares
 from bound_env.task import APEX_SCALES
 

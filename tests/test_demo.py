@@ -1,4 +1,4 @@
-"""The main job's comparison (``bound-env demo``, agents/demo.py): a start chosen on the
+"""The main job's comparison (``bound-env demo``, agents/results/demo.py): a start chosen on the
 validation directions from which the passive gait falls, ``lqr`` falls and the shipped
 ``default`` controller returns; the ``comparison`` object of summary.json, compare.gif and
 the table; and bound_env's demo without the agents part (the core does not need agents)."""
@@ -10,8 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from agents.controllers import ZeroController
-from agents.demo import (
+from agents.results.demo import (
     DEMO_BASELINE,
     DEMO_DIRECTIONS,
     DEMO_INDEX,
@@ -23,7 +22,8 @@ from agents.demo import (
     demo_start,
     table_lines,
 )
-from agents.policy import load_controller
+from agents.runtime.controllers import ZeroController
+from agents.runtime.policy import load_controller
 from bound_env.analysis.margins import DEFAULT_SEED, ClosedLoop, random_directions
 
 
@@ -103,7 +103,7 @@ def test_the_core_demo_runs_without_the_agents_part(tmp_path, monkeypatch, capsy
 
 @pytest.mark.parametrize("gait", ["literal-cycle"])
 def test_the_comparison_is_skipped_on_another_gait(gait):
-    from agents.demo import demo_comparison
+    from agents.results.demo import demo_comparison
 
     c, lines = demo_comparison(gait=gait, out=None)
     assert "skipped" in c and gait in c["skipped"] and len(lines) == 1

@@ -1,5 +1,5 @@
-"""Tests of the distilled stride controller (agents/distill.py): the expert's labels, a small
-DAgger run end to end, resuming it, loading the policy by path without torch, the gate that
+"""Tests of the distilled stride controller (agents/experts/distill.py): the expert's labels, a
+small DAgger run end to end, resuming it, loading the policy by path without torch, the gate that
 keeps zero torque on the cycle, and bad input."""
 
 import json
@@ -9,12 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from agents.distill import (
-    DistillConfig,
-    distill,
-    good_rows,
-    load_choice_policy,
-)
+from agents.experts.distill import DistillConfig, distill, good_rows
+from agents.runtime.choice_policy import load_choice_policy
 from bound_env.control.mpc import FELL, RETURNED, SURVIVED
 
 SMALL = {"rounds": 2, "starts_first": 40, "starts_round": 20, "epochs": 5, "n_random": 8}
@@ -61,7 +57,7 @@ def test_a_small_run_makes_a_policy(run):
         assert np.array_equal(fixed.plan(z), want)
         assert np.array_equal(fixed.plan(pol.z_ref), np.zeros(8))  # within safe: the LQR
     # by path, through the loader every command uses
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     same = load_controller(out / "policy")
     assert same.fingerprint() == pol.fingerprint()
@@ -70,7 +66,7 @@ def test_a_small_run_makes_a_policy(run):
 
 def test_a_rerun_resumes_from_the_saved_rounds(run, monkeypatch):
     out, summary = run
-    import agents.distill as d
+    import agents.experts.distill as d
 
     def no_labels(*a, **k):
         raise AssertionError("a saved round was labelled again")
@@ -85,7 +81,7 @@ def test_a_rerun_resumes_from_the_saved_rounds(run, monkeypatch):
 def test_the_policy_acts_without_torch(run):
     out, _ = run
     code = (
-        "import sys, numpy as np; from agents.policy import load_controller; "
+        "import sys, numpy as np; from agents.runtime.policy import load_controller; "
         f"p = load_controller({str(out / 'policy')!r}); "
         "p.plan(p.z_ref * 1.2); print('torch' in sys.modules)"
     )
@@ -119,8 +115,8 @@ def test_the_shipped_default_is_a_fingerprinted_choice_policy(tmp_path, capsys):
     one-line error unless --force (then a warning)."""
     import shutil
 
-    from agents.distill import ChoicePolicyController
-    from agents.policy import load_controller, shipped_policies
+    from agents.runtime.choice_policy import ChoicePolicyController
+    from agents.runtime.policy import load_controller, shipped_policies
     from bound_env.cli import main
 
     src = shipped_policies()["default"]
@@ -146,7 +142,7 @@ def test_the_shipped_default_is_a_fingerprinted_choice_policy(tmp_path, capsys):
 
 
 def test_a_saved_policy_carries_its_fingerprint(run):
-    from agents.distill import check_choice_fingerprint
+    from agents.runtime.choice_policy import check_choice_fingerprint
 
     out, _ = run
     fp = json.loads((out / "policy" / "fingerprint.json").read_text())
@@ -164,7 +160,7 @@ def test_cli_distill_refuses_an_existing_export(tmp_path):
 
 
 def test_finetune_env_rewards_survival_and_rescues(run):
-    from agents.finetune import rescue_env
+    from agents.experts.finetune import rescue_env
 
     out, _ = run
     pol = load_choice_policy(out / "policy")
@@ -190,7 +186,7 @@ def test_finetune_starts_exactly_as_the_student(run, tmp_path):
     import torch
     from stable_baselines3 import PPO
 
-    from agents.finetune import _actor_layers, _copy_actor, rescue_env
+    from agents.experts.finetune import _actor_layers, _copy_actor, rescue_env
 
     out, _ = run
     pol = load_choice_policy(out / "policy")
@@ -234,14 +230,14 @@ def test_the_default_controller_runs_in_margins_and_basin_map(tmp_path, capsys):
 
 def test_default_returns_from_more_validation_starts_than_the_lqr():
     """The regression test of the shipped learned controller: from 16 validation starts at
-    r = 0.22 (directions of seed 777, `agents.distill.VALIDATION_SEED`; never the test set's),
+    r = 0.22 (directions of seed 777, `agents.common.seeds.VALIDATION_SEED`; never the test set's),
     `default` returns (margins' closed loop, within 100 strides) from more than the LQR, and
     the same library and gate with random network weights return from fewer than `default`:
     its weights are what wins."""
     import dataclasses
 
-    from agents.distill import VALIDATION_SEED
-    from agents.policy import load_controller
+    from agents.common.seeds import VALIDATION_SEED
+    from agents.runtime.policy import load_controller
     from bound_env.analysis.margins import ClosedLoop, random_directions
 
     dirs = random_directions(16, VALIDATION_SEED)
@@ -264,14 +260,14 @@ def test_default_returns_from_more_validation_starts_than_the_lqr():
 
 
 def test_the_finetuning_loop_resumes_exports_and_fingerprints(tmp_path, monkeypatch, capsys):
-    """`agents.finetune.finetune` with tiny settings from the shipped `default`: killed right
-    after its first checkpoint, a rerun continues from that checkpoint (no second warm start)
+    """`agents.experts.finetune.finetune` with tiny settings from the shipped `default`: killed
+    right after its first checkpoint, a rerun continues from that checkpoint (no second warm start)
     to the asked timesteps; the exported policy loads through its fingerprint, keeps the
     student's library and LQR, and a changed weight file is refused."""
     import stable_baselines3.common.callbacks as cbs
 
-    import agents.finetune as ft
-    from agents.policy import resolve_policy
+    import agents.experts.finetune as ft
+    from agents.runtime.policy import resolve_policy
 
     student_dir = resolve_policy("default")
     student = load_choice_policy(student_dir)
@@ -311,7 +307,7 @@ def test_the_finetuning_loop_resumes_exports_and_fingerprints(tmp_path, monkeypa
     assert pol.fingerprint() != student.fingerprint()  # PPO moved the weights
     cfg_json = json.loads((out / "policy" / "config.json").read_text())
     assert cfg_json["finetune"]["timesteps"] == 192
-    from agents.distill import export_folder  # what `bound-env finetune --export` does
+    from agents.experts.distill import export_folder  # what `bound-env finetune --export` does
 
     exported = load_choice_policy(export_folder(out / "policy", tmp_path / "exported"))
     assert exported.fingerprint() == pol.fingerprint()

@@ -86,8 +86,8 @@ def _produced(path: str) -> bool:
 def check_names(args) -> None:
     """What the parsed command names exists: a config file and its env id section, a policy,
     controller or spec, a student."""
-    from agents.config import default_env_id, load_hyperparams, resolve_config_path
-    from agents.policy import resolve_policy, unwrapped_name
+    from agents.common.config import default_env_id, load_hyperparams, resolve_config_path
+    from agents.runtime.policy import resolve_policy, unwrapped_name
 
     cmd = args.command
     if cmd == "train" and not args.resume:
@@ -100,7 +100,7 @@ def check_names(args) -> None:
         if isinstance(value, str) and not _produced(value) and cmd != "compare":
             resolve_policy(unwrapped_name(value))  # NAME+of: NAME
     for entry in getattr(args, "entry", None) or []:
-        from agents.compare import parse_entry
+        from agents.results.compare import parse_entry
 
         _, policies, _ = parse_entry(entry)
         for p in policies:
@@ -153,7 +153,7 @@ def test_placeholders_are_filled():
 def test_train_takes_the_published_id_and_each_config_by_name():
     """`train --env-id PassiveBound-v1` has its section; a config with one section trains
     on that section's env without --env-id."""
-    from agents.config import config_names, default_env_id, load_hyperparams
+    from agents.common.config import config_names, default_env_id, load_hyperparams
 
     v0 = load_hyperparams("ppo", "PassiveBound-v0")
     assert load_hyperparams("ppo", "PassiveBound-v1") == v0
@@ -224,7 +224,7 @@ def test_plain_sb3_model_is_measured_with_an_env_id(tmp_path, cli):
     from stable_baselines3 import PPO
 
     import bound_env
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     gym.register_envs(bound_env)
     (tmp_path / "plain").mkdir()

@@ -4,6 +4,7 @@ and the README's and the results page's headline tables are the numbers of docs/
 
 from __future__ import annotations
 
+import html as html_text
 import importlib.util
 import json
 import os
@@ -15,14 +16,14 @@ from pathlib import Path
 
 import pytest
 
-from agents.compare import (
+from agents.results.compare import (
     HEADLINE,
     headline_numbers,
     headline_table,
     load_result,
     mfpt_sigma_100_interval,
 )
-from agents.headline import END, START, load_headline, main, render_block, update_readme
+from agents.results.headline import END, START, load_headline, main, render_block, update_readme
 from bound_env.analysis.margins import column_styles
 from bound_env.analysis.margins.stats import t_interval
 
@@ -33,7 +34,9 @@ DOCS = ROOT / "docs"
 @pytest.mark.slow  # 5-9 s on the shared 2-core machine
 def test_mkdocs_build_strict(tmp_path):
     """`mkdocs build --strict`: a broken link, a page missing from the nav's files or a bad
-    API reference fails. Skipped only where MkDocs is absent outside CI (CI=1 in .ci/run)."""
+    API reference fails, and so does a page whose HTML shows a table as raw text, an italic
+    that ran away or a list run into a paragraph (`rendered_problems`). Skipped only where
+    MkDocs is absent outside CI (CI=1 in .ci/run)."""
     if importlib.util.find_spec("mkdocs") is None:
         if os.environ.get("CI"):
             pytest.fail("mkdocs is not installed but CI is set: install the [docs] extra")
@@ -105,7 +108,59 @@ def rendered_problems(site: Path) -> list[str]:
         words = len(re.sub(r"<[^>]+>", " ", article).split())
         if words > 600 and _toc_entries(html) < 3:
             out.append(f"{page}: {words} words but {_toc_entries(html)} contents entries")
+        out += page_problems(html, page)
     return out
+
+
+CODE = re.compile(r"<(pre|code)\b.*?</\1>", re.S)
+TAG = re.compile(r"<[^>]+>")
+EM = re.compile(r"<em>(.*?)</em>", re.S)
+RAW_ROW = re.compile(r"^\s*\|[^|\n]+\|[^|\n]*\|", re.M)
+RAW_BULLET = re.compile(r"^[ \t]*[*+] [A-Za-z`]", re.M)  # a * or + item run into a paragraph
+RST_TABLE = re.compile(r"^\s*={3,}(?:[ \t]+={3,})+\s*$", re.M)  # reStructuredText's table rules
+MAX_EM_WORDS = 12  # an emphasis longer than this is an underscore or star taken for one
+# what an emphasis that ran away holds or touches: the star or underscore of a name or a
+# formula (``a * b``, ``_F``), or a table's rule
+RUNAWAY = re.compile(r"\s[*_]|[*_]\s|={3,}")
+
+
+def page_problems(page: str, name: str = "page") -> list[str]:
+    """Raw table rows (Markdown or reStructuredText) and runaway italics in one page's HTML
+    (code left out)."""
+    body = CODE.sub("§", page)  # code stands for a word: a formula around it is text
+    text = html_text.unescape(TAG.sub("", re.sub(r"<(p|li|td|th|div|h\d|br)\b", "\n<\\1", body)))
+    found = [
+        f"{name}: a raw table row: {m.group(0).strip()[:100]!r}" for m in RAW_ROW.finditer(text)
+    ]
+    found += [
+        f"{name}: a reStructuredText table: {m.group(0).strip()[:60]!r}"
+        for m in RST_TABLE.finditer(text)
+    ]
+    found += [
+        f"{name}: a bullet in a paragraph: {m.group(0).strip()!r}…"
+        for m in RAW_BULLET.finditer(text)
+    ]
+    for m in EM.finditer(body):
+        inner = html_text.unescape(TAG.sub(" ", m.group(1)))
+        words = inner.split()
+        after = body[m.end() : m.end() + 1]
+        if len(words) > MAX_EM_WORDS or RUNAWAY.search(inner) or after in ("*", "_"):
+            found.append(f"{name}: a runaway italic: {' '.join(words[:10])}…")
+    return found
+
+
+def test_the_checker_finds_raw_rows_and_runaway_italics():
+    bad = (
+        "<p>| guard | value |\n| --- | --- |</p>"
+        "<p>SHORT<em>B / _F l - min_leg_frac * l_bar (failure) falling leg stance GROUND "
+        "height of back hip, spine joint, front hip</em></p>"
+        "<p>=====  =====\nguard  value\nSHORT_B / <em>F   l - min_leg_frac * l_bar "
+        "GROUND</em>*  height</p>"
+        "<p>Liftoff: R = identity, a row of dR.\n* The stride ends on S_apex</p>"
+    )
+    assert len(page_problems(bad)) == 6  # 2 raw rows, an RST rule, 2 runaway italics, a bullet
+    good = "<table><tr><td>a</td></tr></table><p><em>a word</em></p><pre>| a | b |</pre>"
+    assert page_problems(good) == []
 
 
 def test_rendered_problems_finds_the_known_shapes(tmp_path):
@@ -395,7 +450,7 @@ def test_load_result_refuses(tmp_path):
 
 
 def test_column_styles_unique_and_fixed():
-    from agents.compare import COLUMN_STYLES, default_entries
+    from agents.results.compare import COLUMN_STYLES, default_entries
 
     labels = [e[0] for e in default_entries()] + ["extra one", "extra two"]
     st = column_styles(labels, COLUMN_STYLES)

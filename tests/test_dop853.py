@@ -10,13 +10,13 @@ from bound_env import _dop853 as d
 NO_AUX = np.zeros(0)
 
 
-@numba.njit
+@numba.njit(cache=True)
 def oscillator(t, y, aux, out):
     out[0] = y[1]
     out[1] = -y[0]
 
 
-@numba.njit
+@numba.njit(cache=True)
 def kepler(t, y, aux, out):
     r3 = (y[0] * y[0] + y[1] * y[1]) ** 1.5
     out[0] = y[2]
@@ -25,13 +25,13 @@ def kepler(t, y, aux, out):
     out[3] = -aux[0] * y[1] / r3
 
 
-@numba.njit
+@numba.njit(cache=True)
 def van_der_pol(t, y, aux, out):
     out[0] = y[1]
     out[1] = aux[0] * (1.0 - y[0] * y[0]) * y[1] - y[0]
 
 
-@numba.njit
+@numba.njit(cache=True)
 def nan_rhs(t, y, aux, out):
     out[0] = np.nan if t > 0.5 else 1.0
 
@@ -63,7 +63,7 @@ PROBLEMS = [
 ]
 
 
-@pytest.mark.slow  # each right-hand side compiles its own integrator (~5-10 s)
+@pytest.mark.slow  # each right-hand side compiles its own integrator (~5-10 s on a first run)
 @pytest.mark.parametrize(
     "name,rhs,y0,t_end,aux,exact,exact_tol", PROBLEMS, ids=[p[0] for p in PROBLEMS]
 )
@@ -215,7 +215,7 @@ def test_dense_output_order():
 _osc_rk_step = d.make_dop853(oscillator).rk_step
 
 
-@numba.njit
+@numba.njit(cache=True)
 def _fixed_step_oscillator(n_steps, t_end):
     y = np.array([1.0, 0.0])
     fy = np.empty(2)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.table_split import HEADLINE_LABELS, base_label, split_table
+from agents.results.table_split import HEADLINE_LABELS, base_label, split_table
 from bound_env.analysis.basin import return_scale
 from bound_env.analysis.margins.stats import bounded_t_interval, t_interval
 
@@ -101,7 +101,7 @@ def test_comparison_plots_are_wide_with_legends_outside(tmp_path, monkeypatch):
 
 
 def test_headline_columns_have_distinct_colours():
-    from agents.compare import COLUMN_STYLES, default_entries
+    from agents.results.compare import COLUMN_STYLES, default_entries
     from bound_env.analysis.margins import column_styles
 
     labels = [e[0] for e in default_entries()]
@@ -135,7 +135,7 @@ def _plot_texts(monkeypatch, **kwargs) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from agents.run_files import plot_eval
+    from agents.common.run_files import plot_eval
 
     figs = []
     close = plt.close
@@ -164,7 +164,7 @@ def test_training_plot_titles_and_markers(tmp_path, monkeypatch):
 
 def _wide_table() -> tuple[list[str], list[tuple[str, list[str]]]]:
     """The default page's columns (labels as the page writes them) and a few rows."""
-    from agents.compare import default_entries
+    from agents.results.compare import default_entries
 
     labels = [
         f"{e[0]} (3 seeds)" if len(e[1]) > 1 else e[0] for e in default_entries()
@@ -201,3 +201,44 @@ def test_split_table_small_and_wrong_inputs():
         split_table(["a", "b"], [("x", ["1"])])
     with pytest.raises(ValueError, match="per_table"):
         split_table(["a"], [], per_table=0)
+
+
+# ------------------------------------------------------------------ the images of docs/
+def test_every_image_in_docs_is_shown_and_none_is_a_copy():
+    """No PNG in docs/ that no page (or the site's config) shows, and no two that are the same
+    bytes (compare removes the training curves of columns it no longer has)."""
+    import hashlib
+
+    docs = ROOT / "docs"
+    text = "\n".join(p.read_text() for p in [*docs.rglob("*.md"), ROOT / "mkdocs.yml"])
+    pngs = sorted(docs.rglob("*.png"))
+    assert pngs
+    unused = [str(p.relative_to(docs)) for p in pngs if p.name not in text]
+    assert unused == []
+    seen: dict = {}
+    for p in pngs:
+        seen.setdefault(hashlib.sha256(p.read_bytes()).hexdigest(), []).append(p.name)
+    assert [names for names in seen.values() if len(names) > 1] == []
+
+
+def test_a_training_plot_with_no_evaluation_reward_shows_episode_lengths(tmp_path, monkeypatch):
+    """A task whose evaluation env's own reward is 0 (step-ppo's) is drawn as the evaluation
+    episodes' lengths, not as a flat line at zero."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from agents.common.run_files import plot_eval
+
+    csv = tmp_path / "eval.csv"
+    csv.write_text(
+        "timesteps,mean_reward,std_reward,mean_length,mean_strides,fall_rate,noise_scale,"
+        "wall_time_s\n1000,0.0,0.0,10,2.5,0.4,nan,1\n2000,0.0,0.0,20,4.0,0.3,nan,2\n"
+    )
+    drawn = {}
+    monkeypatch.setattr(plt.Figure, "savefig", lambda self, *a, **k: drawn.setdefault("f", self))
+    plot_eval(csv, tmp_path / "eval.png", kept="final")
+    ax = drawn["f"].axes[0]
+    assert list(ax.lines[0].get_ydata()) == [2.5, 4.0]
+    assert "strides" in ax.get_ylabel()

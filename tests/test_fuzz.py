@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.policy_table import ARCHIVE_DIR
+from agents.runtime.policy_table import ARCHIVE_DIR
 from bound_env.cli import main
 
 BAD_GAITS = {
@@ -44,7 +44,7 @@ def files(tmp_path):
     out["dir"] = str(tmp_path)
     # a PPO policy whose config.yaml was cut at a line boundary before env_kwargs: it parses
     # and matches the observation shape, but would run at the env's default max_torque
-    from agents.policy import shipped_policies
+    from agents.runtime.policy import shipped_policies
 
     cut = tmp_path / "cut-policy"
     shutil.copytree(ARCHIVE_DIR / "ppo-v1", cut)
@@ -62,7 +62,7 @@ def files(tmp_path):
     # the shipped default with dt 1e-7 (ran until killed) and its fingerprint rewritten
     import json
 
-    from agents.distill import write_choice_fingerprint
+    from agents.runtime.choice_policy import write_choice_fingerprint
 
     slow = tmp_path / "dt-choice"
     shutil.copytree(shipped_policies()["default"], slow)
@@ -551,8 +551,8 @@ CHOICE_CASES = {  # name: (change to a copy of the shipped default, words the er
 
 @pytest.mark.parametrize("case", list(CHOICE_CASES))
 def test_bad_choice_policy_files_are_refused_by_file_and_field(case, tmp_path):
-    from agents.distill import write_choice_fingerprint
-    from agents.policy import load_controller, shipped_policies
+    from agents.runtime.choice_policy import write_choice_fingerprint
+    from agents.runtime.policy import load_controller, shipped_policies
 
     change, words = CHOICE_CASES[case]
     d = tmp_path / "pol"
@@ -567,7 +567,7 @@ def test_bad_choice_policy_files_are_refused_by_file_and_field(case, tmp_path):
 
 
 def test_a_ppo_folder_with_a_choice_npz_dropped_in_is_refused(tmp_path):
-    from agents.policy import load_controller, shipped_policies
+    from agents.runtime.policy import load_controller, shipped_policies
 
     d = tmp_path / "ppo"
     shutil.copytree(ARCHIVE_DIR / "ppo-v1", d)

@@ -46,6 +46,7 @@ def test_a_row_is_the_margins_hold(tmp_path, capsys):
     """A row of ``--delta 0.1 --seed 777 --robots 8 --strides 20`` is the hold of ``bound-env
     margins --policy lqr --budget test --mismatch pm10 --seed 777`` (its task, run here)."""
     from agents.policy import load_controller
+
     from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
     from bound_env.analysis.margins.run import run_task
 

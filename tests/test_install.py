@@ -169,9 +169,11 @@ def test_installed_package_runs_outside_the_checkout(installed):
     )
     assert stride["failure"] is None and stride["z1"] is not None
 
+    # the test budget, in the default folder: compare below finds this column (and deadbeat's)
+    # computed, as it finds any column of the same budget and code
     margins = json.loads(
         _run(
-            [installed["exe"], "margins", "--policy", "passive", "--budget", "quick", "--json"],
+            [installed["exe"], "margins", "--policy", "passive", "--budget", "test", "--json"],
             cwd=cwd,
             env=env,
         )
@@ -198,9 +200,9 @@ def test_installed_package_runs_outside_the_checkout(installed):
             [
                 py,
                 "-c",
-                "import json\nfrom agents.policy import policy_names\n"
+                "import json\nfrom agents.runtime.policy import policy_names\n"
                 "from bound_env.control import controller_names\n"
-                "from agents.config import resolve_config_path\n"
+                "from agents.common.config import resolve_config_path\n"
                 "print(json.dumps([policy_names(), controller_names(), "
                 "str(resolve_config_path('ppo-stride'))]))",
             ],

@@ -5,8 +5,8 @@ Every import counts, also those inside functions (deferred imports), those of a 
 imports from above would hide a circle), and imports by name at run time: through
 ``importlib.import_module`` / ``__import__`` with a literal, with an f-string whose literal
 prefix and one of the module's string constants name a module (``f"agents.{module}"``), and
-through `agents.config.get_class_by_name` / `agents.config.preprocess`, which import the
-classes the run configs name (``env_wrapper``, ``callback``, ``policy`` in configs/ and in the
+through `agents.common.config.get_class_by_name` / `agents.common.config.preprocess`, which import
+the classes the run configs name (``env_wrapper``, ``callback``, ``policy`` in configs/ and in the
 shipped policies' config.yaml): the module that calls them imports those modules. Neither
 `bound_env` nor `agents` has an import cycle, `bound_env` never imports `agents`,
 `bound_env.analysis` never imports `bound_env.control` (the stride protocol they share is
@@ -16,20 +16,24 @@ imports: the classical margins path (``bound-env margins --policy lqr``) never l
 """
 
 import ast
+import functools
+import json
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from agents import MOVED
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("bound_env", "agents")
-# Where the run configs live whose class paths `agents.config` imports by name
+# Where the run configs live whose class paths `agents.common.config` imports by name
 CONFIG_GLOBS = ("configs/**/*.yaml", "agents/policies/**/config.yaml")
-# Functions of agents.config that import classes by name: the caller imports those modules
-# (env_wrapper entries only for get_class_by_name's callers outside agents.config, which
+# Functions of agents.common.config that import classes by name: the caller imports those modules
+# (env_wrapper entries only for get_class_by_name's callers outside agents.common.config, which
 # resolve a run's wrappers; every kind for preprocess, which builds a whole training run).
-# agents.config itself is the resolver, not a user: its own calls count for its callers.
+# agents.common.config itself is the resolver, not a user: its own calls count for its callers.
 BY_NAME = {
     "get_class_by_name": ("env_wrapper",),
     "preprocess": ("env_wrapper", "callback", "policy"),
@@ -57,6 +61,7 @@ def _from_module(mod: str, is_pkg: bool, node: ast.ImportFrom) -> str:
     return ".".join(base + ([node.module] if node.module else []))
 
 
+@functools.cache  # each file is parsed once per session (the checks walk the same trees)
 def _tree(path: Path) -> ast.AST:
     return ast.parse(path.read_text(), filename=str(path))
 
@@ -76,7 +81,8 @@ def _script_blocks(tree: ast.Module) -> list[ast.If]:
     ]
 
 
-def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
+@functools.cache
+def _imported_names(mod: str, path: Path, is_pkg: bool) -> frozenset[str]:
     """Every dotted name ``mod`` imports, absolute, including ``from X import submodule``,
     its script block's and its imports by name (module docstring)."""
     tree = _tree(path)
@@ -102,9 +108,9 @@ def _imported_names(mod: str, path: Path, is_pkg: bool) -> set[str]:
                     first = arg.values[0]
                     if isinstance(first, ast.Constant) and isinstance(first.value, str):
                         names.update(first.value + c for c in constants)  # f"agents.{x}"
-            if fname in BY_NAME and mod != "agents.config":
+            if fname in BY_NAME and mod != "agents.common.config":
                 names.update(_config_modules(BY_NAME[fname]))
-    return names
+    return frozenset(names)
 
 
 def _config_entries(value, key=None):
@@ -126,7 +132,8 @@ def _config_entries(value, key=None):
             yield from _config_entries(v, key)
 
 
-def _config_modules(keys) -> set[str]:
+@functools.cache
+def _config_modules(keys: tuple[str, ...]) -> frozenset[str]:
     """The modules of the classes the run configs name under ``keys``."""
     import yaml
 
@@ -135,8 +142,9 @@ def _config_modules(keys) -> set[str]:
         for f in sorted(ROOT.glob(pattern)):
             for k, name in _config_entries(yaml.safe_load(f.read_text())):
                 if k in keys:
-                    out.add(name.rsplit(".", 1)[0])
-    return out
+                    module = name.rsplit(".", 1)[0]
+                    out.add(MOVED.get(module, module))  # an old flat name: its module now
+    return frozenset(out)
 
 
 def _private_imports(mod: str, tree: ast.AST, is_pkg: bool, mods) -> list[str]:
@@ -209,17 +217,21 @@ def test_the_walker_sees_deferred_and_string_imports():
     assert _cycles({"a": ["b"], "b": []}) == []
     # agents: deferred imports, script blocks and imports by name
     _, _, edges = _graph("agents")
-    assert "agents.stride_policy" in edges["agents.names"]  # inside load_apex_controller
-    assert "agents.config" in edges["agents.stride_policy"]  # inside wrapper_kwargs
-    assert "agents.policy" in edges["agents.stride_validation"]
-    assert {"agents.distill", "agents.finetune"} <= set(edges["agents.learn_cli"])  # f-string
-    # the controller wrapper agents.residual.ResidualOver, named in configs/ppo-residual.yaml
-    assert "agents.residual" in edges["agents.policy"]  # get_class_by_name in controller_wrapper
-    assert {"agents.stride", "agents.train", "agents.residual"} <= set(
-        edges["agents.train"] + ["agents.train"]
+    # inside load_apex_controller
+    assert "agents.runtime.stride_policy" in edges["agents.runtime.names"]
+    assert "agents.common.config" in edges["agents.runtime.stride_policy"]  # inside wrapper_kwargs
+    assert "agents.runtime.policy" in edges["agents.experts.stride_validation"]
+    learned = {"agents.experts.distill", "agents.experts.finetune"}
+    assert learned <= set(edges["agents.experts.learn_cli"])  # f-string
+    # the controller wrapper agents.runtime.residual.ResidualOver, named in
+    # configs/ppo-residual.yaml: get_class_by_name in controller_wrapper
+    assert "agents.runtime.residual" in edges["agents.runtime.policy"]
+    assert {"agents.runtime.stride", "agents.training.train", "agents.runtime.residual"} <= set(
+        edges["agents.training.train"] + ["agents.training.train"]
     )
-    assert "agents.residual" not in edges["agents.config"]  # the resolver: counted for callers
-    tree = ast.parse("if __name__ == '__main__':\n    import agents.policy\n")
+    # the resolver: counted for its callers
+    assert "agents.runtime.residual" not in edges["agents.common.config"]
+    tree = ast.parse("if __name__ == '__main__':\n    import agents.runtime.policy\n")
     assert _script_blocks(tree)  # and such a block's imports are the module's own
 
 
@@ -291,41 +303,56 @@ def test_no_private_name_is_imported_across_modules():
     assert _all_private_imports() == {}
 
 
-# Runs ``bound-env margins`` in a fresh interpreter up to the point where the work starts (the
-# first batch of tasks, `run_tasks`), then reports which heavy modules are loaded.
+# Runs each ``bound-env margins`` command line (JSON, argv[1]) in one fresh interpreter up to
+# the point where the work starts (the first batch of tasks, `run_tasks`), and reports after
+# each which heavy modules are loaded.
 _UP_TO_THE_TASKS = """
+import json
 import sys
 
 from bound_env.analysis.margins import run
 
 
+class Reached(BaseException):  # not an Exception: nothing on the way catches it
+    pass
+
+
 def stop(*args, **kwargs):
-    heavy = sorted(m for m in ("torch", "stable_baselines3") if m in sys.modules)
-    print("reached the tasks; heavy modules:", heavy)
-    raise SystemExit(0)
+    raise Reached
 
 
 run.run_tasks = stop
 from bound_env.cli import main
 
-sys.exit(main(sys.argv[1:]))
+for argv in json.loads(sys.argv[1]):
+    try:
+        main(argv)
+    except Reached:
+        heavy = sorted(m for m in ("torch", "stable_baselines3") if m in sys.modules)
+        print(argv[2], "reached the tasks; heavy modules:", heavy)
 """
 
 
-@pytest.mark.parametrize("policy", ["lqr", "passive"])
-def test_classical_margins_never_import_torch(policy, tmp_path):
+def test_classical_margins_never_import_torch(tmp_path):
     """The command line, the agents front, the controller (`bound_env.control` for lqr), the
-    cycle scale and the cache key: everything ``margins`` loads before its first task."""
-    argv = ["margins", "--policy", policy, "--budget", "test", "--workers", "1", "--no-cache"]
+    cycle scale and the cache key: everything ``margins`` loads before its first task, for lqr
+    and then passive (one interpreter: the report after lqr is lqr's alone)."""
+    runs = [
+        ["margins", "--policy", policy, "--budget", "test", "--workers", "1", "--no-cache"]
+        + ["--out", str(tmp_path / policy)]
+        for policy in ("lqr", "passive")
+    ]
     res = subprocess.run(
-        [sys.executable, "-c", _UP_TO_THE_TASKS, *argv, "--out", str(tmp_path / "m")],
+        [sys.executable, "-c", _UP_TO_THE_TASKS, json.dumps(runs)],
         cwd=ROOT,
         capture_output=True,
         text=True,
         timeout=300,
     )
     assert res.returncode == 0, res.stderr
-    assert "reached the tasks; heavy modules: []" in res.stdout, res.stdout + res.stderr
+    for policy in ("lqr", "passive"):
+        want = f"{policy} reached the tasks; heavy modules: []"
+        assert want in res.stdout.splitlines(), res.stdout + res.stderr
 
 
 @pytest.mark.parametrize(
@@ -397,3 +424,95 @@ def test_no_module_is_too_long(package):
     }
     long = {f: n for f, n in lines.items() if n > MAX_LINES[package]}
     assert long == {}, f"over {MAX_LINES[package]} lines: split them along their concepts"
+
+
+# agents/ in rooms by job, lowest first: a module imports its own room's modules and the rooms
+# below it, never one above nor a sibling of its rank (training and experts are independent).
+# The package itself (`agents/__init__.py`: `register_envs`, the old names' aliases) is below all.
+ROOMS = {
+    "agents": 0,
+    "agents.common": 1,
+    "agents.runtime": 2,
+    "agents.training": 3,
+    "agents.experts": 3,
+    "agents.results": 4,
+    "agents.multiseed": 5,
+    "agents.cli": 6,
+}
+MAX_MODULES = 15  # per folder of agents/
+
+
+def _room(module: str) -> str:
+    """The room of an agents module: its subpackage, or the top-level module itself."""
+    parts = module.split(".")
+    return ".".join(parts[:2])
+
+
+def _arrows_up(edges: dict[str, list[str]]) -> list[str]:
+    """Every import of ``edges`` from a room to another room not below it."""
+    bad = []
+    for m, targets in edges.items():
+        for n in targets:
+            a, b = _room(m), _room(n)
+            if a != b and ROOMS[b] >= ROOMS[a]:
+                bad.append(f"{m} -> {n}")
+    return bad
+
+
+def test_the_room_check_sees_an_arrow_up():
+    edges = {
+        "agents.runtime.names": ["agents.experts.distill", "agents.common.schema"],
+        "agents.training.train": ["agents.experts.distill", "agents.results.page"],
+        "agents.results.page": ["agents.runtime.policy", "agents.results.prose"],
+        "agents.common.schema": ["agents"],
+    }
+    assert _arrows_up(edges) == [
+        "agents.runtime.names -> agents.experts.distill",
+        "agents.training.train -> agents.experts.distill",  # siblings
+        "agents.training.train -> agents.results.page",
+    ]
+
+
+def test_agents_rooms_point_down():
+    """results -> training, experts -> runtime -> common (and the package root): training never
+    imports the results page, runtime neither training nor experts; no circle (above)."""
+    mods, _, edges = _graph("agents")
+    assert {_room(m) for m in mods} == set(ROOMS)  # every module lives in a room
+    assert _arrows_up(edges) == []
+
+
+def test_agents_rooms_are_small_and_say_their_job():
+    """No folder of agents/ with more than `MAX_MODULES` modules; each room's ``__init__`` says
+    its job in one sentence."""
+    for folder in [
+        ROOT / "agents",
+        *sorted(p.parent for p in (ROOT / "agents").glob("*/__init__.py")),
+    ]:
+        modules = [f for f in folder.glob("*.py") if f.name != "__init__.py"]
+        assert len(modules) <= MAX_MODULES, folder
+    for room in (r for r in ROOMS if r.count(".") == 1 and (ROOT / r.replace(".", "/")).is_dir()):
+        doc = ast.get_docstring(_tree(ROOT / room.replace(".", "/") / "__init__.py"))
+        assert doc and doc.count(". ") == 0 and doc.endswith("."), room
+
+
+def test_old_flat_names_are_aliases_of_the_moved_modules():
+    """``agents.policy`` & co. (run configs, shipped policies' pickled classes, users' scripts)
+    name the module that moved, the same object; every alias points at a module that exists."""
+    import importlib
+    import importlib.util
+
+    mods = _modules("agents")
+    assert set(MOVED.values()) <= set(mods)
+    assert all(not (ROOT / (old.replace(".", "/") + ".py")).exists() for old in MOVED)
+    import agents.policy_files
+
+    import agents.common.schema as schema
+
+    assert importlib.import_module("agents.schema") is schema
+    assert agents.policy_files is importlib.import_module("agents.common.policy_files")
+    assert agents.policy_files.__spec__.name == "agents.common.policy_files"
+    # the class paths of every run config (also the shipped ones, which are fingerprinted):
+    # modules of agents, or of bound_env (an env wrapper of the simulator's, RandomizedPlant)
+    named = _config_modules(("env_wrapper", "callback", "policy"))
+    assert {m for m in named if not m.startswith("bound_env.")} <= set(mods)
+    assert all(importlib.util.find_spec(m) for m in named if m.startswith("bound_env."))

@@ -9,10 +9,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agents.compare import parse_entry
-from agents.controllers import ZeroController
-from agents.margins import as_controller
-from agents.train_callbacks import VALIDATION_SEED, BasinValidationCallback
+from agents.results.compare import parse_entry
+from agents.results.margins import as_controller
+from agents.runtime.controllers import ZeroController
+from agents.training.train_callbacks import VALIDATION_SEED, BasinValidationCallback
 from bound_env.analysis import margins
 from bound_env.analysis.margins import (
     BUDGETS,
@@ -177,7 +177,7 @@ def test_compare_default_columns_are_the_pages():
     PPO (step-ppo), plain PPO (ppo-v1's final-model seeds) and the literal-cycle pair; the
     archived policies (distilled, stride-residual, warm-started, the ppo-v1 checkpoint) and
     damping are added by --entry only."""
-    from agents.compare import CLASSICAL, EXTRA_GROUPS, default_entries, seed_group
+    from agents.results.compare import CLASSICAL, EXTRA_GROUPS, default_entries, seed_group
 
     entries = {label: (policies, gait) for label, policies, gait in default_entries()}
     assert [p.split("/")[-1] for p in entries["fine-tuned"][0]] == ["s0", "s1", "s2"]
@@ -193,7 +193,7 @@ def test_compare_default_columns_are_the_pages():
 
 
 def test_the_page_shows_the_basin_maps_in_its_folder(tmp_path):
-    from agents.compare import basin_maps
+    from agents.results.compare import basin_maps
 
     assert basin_maps(tmp_path) == ""
     (tmp_path / "basin_mpc_xdot_y.png").write_bytes(b"png")

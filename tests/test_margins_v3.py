@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, chi2, lognorm
 
-from agents.controllers import MLPController, ZeroController
-from agents.margins import POLICY_SOURCES, as_controller, policy_sources
+from agents.results.margins import POLICY_SOURCES, as_controller, policy_sources
+from agents.runtime.controllers import MLPController, ZeroController
 from bound_env.analysis import margins
 from bound_env.analysis.margins import (
     BUDGETS,
@@ -284,7 +284,7 @@ def test_seeds_are_resampled_too():
 
 
 def test_compare_pairs_each_column_with_lqr_and_trained_ones_with_mpc(tmp_path):
-    from agents.compare import _provenance, paired_comparisons, paired_text
+    from agents.results.compare import _provenance, paired_comparisons, paired_text
 
     sizes = [0.02, 0.05, 0.1, 0.2, 0.4]
     rng = np.random.default_rng(8)
@@ -373,9 +373,9 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
     k0 = setup_key(c, "default", q)
     # the files of a controller's code outside bound_env/ (the agents front names them)
     extra = policy_sources(c)
-    assert {f.name for f in extra} == set(POLICY_SOURCES)
-    assert {"policy.py", "controllers.py", "mlp.py", "distill.py"} <= set(POLICY_SOURCES)
-    assert all(f.is_file() and f.parent.name == "agents" for f in extra)
+    assert {f"{f.parent.name}/{f.name}" for f in extra} == set(POLICY_SOURCES)
+    assert {"runtime/policy.py", "runtime/controllers.py", "common/mlp.py"} <= set(POLICY_SOURCES)
+    assert all(f.is_file() and f.parent.parent.name == "agents" for f in extra)
     own = tmp_path / "own.py"
     own.write_text("GAIN = 1\n")
     k_own = setup_key(c, "default", q, extra_sources=[own])
@@ -432,8 +432,8 @@ def test_selected_shipped_policies_state_their_validation_directions():
 
     import yaml
 
-    from agents.policy import SHIPPED_DIR
-    from agents.policy_table import ARCHIVE_DIR
+    from agents.runtime.policy import SHIPPED_DIR
+    from agents.runtime.policy_table import ARCHIVE_DIR
 
     checked = 0  # the selected checkpoint ppo-v1 is archived now: its folder is checked there
     for folder in sorted([*SHIPPED_DIR.iterdir(), *ARCHIVE_DIR.iterdir()]):
@@ -446,7 +446,7 @@ def test_selected_shipped_policies_state_their_validation_directions():
         kwargs = next(iter(entry.values()))
         assert "directions" in kwargs or "direction_seed" in kwargs, folder.name
         # the stated directions build (as the callback builds them) ...
-        from agents.train_callbacks import BasinValidationCallback
+        from agents.training.train_callbacks import BasinValidationCallback
 
         dirs = BasinValidationCallback(**kwargs).validation_directions()
         assert dirs.shape[1] == 6 and np.allclose(np.max(np.abs(dirs), axis=1), 1.0)

@@ -183,7 +183,7 @@ def _setup(policy, spec="pm5", seed=12345):
 
     ctrl = load_controller(policy) if policy != "passive" else None
     if ctrl is None:
-        from agents.controllers import ZeroController
+        from agents.runtime.controllers import ZeroController
 
         ctrl = ZeroController()
     g = load_gait("default")
@@ -257,7 +257,7 @@ def test_markdown_pairs_shared_plants():
     b = _block("pm5", [1, 0, 0, 0], [[1, 1, 0, 0], [0, 0, 0, 0]])
     c = _block("pm10", [0, 0, 0, 0], [[0, 0, 0, 0], [0, 0, 0, 0]])
     md = mismatch_markdown({"passive": [b], "lqr": {"pm5": a, "pm10": c}})
-    assert "#### pm5" in md and "#### pm10" in md
+    assert "### pm5" in md and "### pm10" in md and "#### " not in md
     assert "| lqr | 4/4" in md and "3/0, p = 0.25" in md  # McNemar: 3 discordant pairs
     assert "| passive | 1/4" in md
 
@@ -319,7 +319,7 @@ def test_noise_and_delay_reach_the_controller():
 
 
 def test_compute_margins_refuses_a_spec_twice():
-    from agents.controllers import ZeroController
+    from agents.runtime.controllers import ZeroController
     from bound_env.analysis.margins import compute_margins
 
     with pytest.raises(ValueError, match="names a spec twice"):

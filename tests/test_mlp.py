@@ -1,11 +1,11 @@
-"""`agents.mlp.mlp_forward`, the one NumPy forward pass of the learned controllers."""
+"""`agents.common.mlp.mlp_forward`, the one NumPy forward pass of the learned controllers."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from agents.mlp import ACTIVATIONS, mlp_forward
+from agents.common.mlp import ACTIVATIONS, mlp_forward
 
 
 def _layers(rng, sizes=(6, 16, 16, 3)):

@@ -232,3 +232,88 @@ def test_margins_reports_the_mpcs_decision_times(tmp_path):
     every = out["decision_times"]
     assert every["n"] > d["n"] and every["p50"] <= every["p99"]
     assert out["effort"] < 1e-6  # zero torque on the cycle
+
+
+def _rollout_strides(ctrl, Z) -> int:
+    """Strides the controller's planning map advances to decide every state of Z."""
+    n, apexes = [0], ctrl.model.apexes
+
+    def counted(Zb, A):
+        n[0] += len(Zb)
+        return apexes(Zb, A)
+
+    ctrl.model.apexes = counted
+    try:
+        for z in Z:
+            ctrl.plan(z)
+    finally:
+        del ctrl.model.apexes
+    return n[0]
+
+
+def test_the_search_shortcuts_keep_the_returns_and_do_less():
+    """The shipped mpc searches with its shortcuts (a return ends the search; a state whose
+    screened profiles all fall within their first stride is given up): from validation starts
+    around its r50 its plans return (on the planning model) wherever the full search's do,
+    it gives some states up, and it advances far fewer planning strides."""
+    from dataclasses import replace
+
+    fast = load_controller("mpc")
+    assert fast.early_exit and fast.screen > 0
+    full = replace(fast, early_exit=False, screen=0)
+    Z = np.concatenate([starts(fast, r, 8, seed=780) for r in (0.2, 0.3, 0.4)])
+    returned = {}
+    for name, ctrl in (("fast", fast), ("full", full)):
+        U = np.array([ctrl.plan(z) for z in Z])
+        returned[name] = [
+            ctrl.rollouts(z, u[None])[0][0] == RETURNED for z, u in zip(Z, U, strict=True)
+        ]
+    assert sum(returned["full"]) > 0
+    assert all(f or not g for f, g in zip(returned["fast"], returned["full"], strict=True))
+    assert fast.given_up > 0 and full.given_up == 0
+    assert _rollout_strides(fast, Z) < 0.7 * _rollout_strides(full, Z)
+
+
+def test_a_given_up_state_falls_whatever_the_screen_tried():
+    """A given-up state: the LQR's plan and every screened library row fall within their
+    first stride, and the plan is the one of them that falls latest."""
+    from bound_env.control.mpc import library
+
+    mpc = load_controller("mpc")
+    for z in starts(mpc, 0.4, 12, seed=781):
+        n = mpc.given_up
+        u = mpc.plan(z)
+        if mpc.given_up == n:
+            continue
+        rng = np.random.default_rng([mpc.seed, *np.frombuffer(z.tobytes(), np.uint32).tolist()])
+        u_lqr = mpc.lqr.coefficients(z)
+        U = library(mpc.basis.K, u_lqr, rng, mpc.n_random, mpc.n_noise, mpc.noise)
+        s, outcome, strides = mpc.evaluate(z, U[: mpc.screen])
+        assert np.all((outcome == FELL) & (strides == 0))
+        assert np.array_equal(u, U[int(np.argmax(s))])
+        return
+    pytest.fail("no state of these was given up")
+
+
+def test_the_full_search_is_named_as_before():
+    """With the shortcuts off (a spec without them) the settings, hence the fingerprint, do
+    not name them; on, they do, and the fingerprint differs."""
+    from dataclasses import replace
+
+    fast = load_controller("mpc")
+    full = replace(fast, early_exit=False, screen=0)
+    assert "early_exit" not in full.settings() and "screen" not in full.settings()
+    assert fast.settings()["early_exit"] is True and fast.settings()["screen"] == fast.screen
+    assert fast.fingerprint() != full.fingerprint()
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [("early_exit: 1", "early_exit"), ("early_exit: maybe", "early_exit"),
+     ("screen: -1", "screen"), ("screen: 2.5", "screen")],
+)  # fmt: skip
+def test_bad_search_shortcuts_are_refused(tmp_path, text, message):
+    p = tmp_path / "m.yaml"
+    p.write_text(f"controller: mpc\nK: 8\n{text}\n")
+    with pytest.raises(ValueError, match=message):
+        load_spec(p)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.policy_table import ARCHIVE_DIR
+from agents.runtime.policy_table import ARCHIVE_DIR
 from bound_env.cli import main
 from bound_env.cli_args import check_name, check_writable, name_key
 
@@ -106,14 +106,14 @@ def test_train_name_cannot_leave_the_runs_folder(tmp_path, capsys):
     argv = ["train", "--name", "../x", "--out", str(tmp_path / "runs"), "--n-timesteps", "64"]
     assert "--name" in _run(argv, capsys)
     assert list(tmp_path.iterdir()) == []
-    from agents.train import train
+    from agents.training.train import train
 
     with pytest.raises(ValueError, match="--name"):
         train(name="../x", runs_dir=tmp_path / "runs", n_timesteps=64)
 
 
 def test_finetune_refuses_to_resume_another_run(tmp_path):
-    from agents.finetune import SETTINGS_FILE, FinetuneConfig, check_settings, run_settings
+    from agents.experts.finetune import SETTINGS_FILE, FinetuneConfig, check_settings, run_settings
 
     s0, s1 = ARCHIVE_DIR / "distilled" / "s0", ARCHIVE_DIR / "distilled" / "s1"
     out = tmp_path / "ft"
@@ -158,7 +158,7 @@ def test_scheduler_and_workers_are_bounded_and_named(tmp_path, capsys, argv, wor
 
 
 def test_rollout_video_streams_its_frames_and_thins_long_runs(tmp_path, monkeypatch):
-    from agents import rollout as ro
+    from agents.runtime import rollout as ro
 
     class Sink:  # stands for bound_env.render.VideoWriter: counts what reaches the file
         def __init__(self, path, fps):
@@ -190,7 +190,7 @@ def test_rollout_video_streams_its_frames_and_thins_long_runs(tmp_path, monkeypa
 def test_rollout_video_file_has_every_streamed_frame(tmp_path):
     from PIL import Image
 
-    from agents import rollout as ro
+    from agents.runtime import rollout as ro
 
     r = ro.rollout("passive", strides=1, video=tmp_path / "v.gif")
     with Image.open(tmp_path / "v.gif") as im:

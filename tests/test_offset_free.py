@@ -144,7 +144,7 @@ def test_step_protocol_holds_the_same_cycle_as_the_batched_one(lqr, nominal):
 
 
 def test_loading_by_name_and_spec(lqr):
-    from agents.policy import load_controller as load_policy
+    from agents.runtime.policy import load_controller as load_policy
 
     for name in ("lqr+of", "lqr-of"):
         c = load_controller(name)
@@ -157,7 +157,7 @@ def test_loading_by_name_and_spec(lqr):
     assert isinstance(learned, OffsetFree) and learned.name == "default+of"
     state = learned.start(2)
     assert np.all(learned.plan_actions(state, np.tile(Z_STAR, (2, 1))) == 0.0)
-    from agents.rollout import load_policy as rollout_policy
+    from agents.runtime.rollout import load_policy as rollout_policy
 
     make, act = rollout_policy("default+of")  # the plain loop, through the base's env
     env = make()

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.policy_table import ARCHIVE_DIR
+from agents.runtime.policy_table import ARCHIVE_DIR
 from bound_env.cli import main
 from bound_env.parallel import (
     MAX_RESTARTS,
@@ -300,7 +300,7 @@ def test_zero_action_through_the_vector_kernel_matches_the_passive_map():
     """Physics cross-check: the closed loop with zero action (interval-by-interval, kernel of
     the vector env) and the compiled passive strides give the same outcomes away from the
     basin's edge."""
-    from agents.controllers import ZeroController
+    from agents.runtime.controllers import ZeroController
     from bound_env.analysis.basin import BasinSpec, run_chunk
     from bound_env.params import load_gait
 
@@ -614,7 +614,7 @@ def test_multi_seed_training_on_a_local_cluster_ends_with_compare(tmp_path):
 def test_per_observation_controllers_run_one_copy_per_robot():
     """A controller without batch() (the margins protocol, with on_apex) gives the same map
     as the same law with batch()."""
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
     from bound_env.analysis.basin import BasinSpec, run_chunk
     from bound_env.params import load_gait
 

@@ -1,8 +1,8 @@
 """Every shipped policy and controller in the plain Gymnasium loop (issue 26, §1).
 
 ``obs, info = env.reset(...); while ...: obs, r, term, trunc, info = env.step(act(obs, info))``
-with ``env = gym.make("PassiveBound-v1")`` and ``act`` from `agents.rollout.load_policy` gives
-the trajectory of the protocol loop (a bare controller told every apex by ``notify_apex``, as
+with ``env = gym.make("PassiveBound-v1")`` and ``act`` from `agents.runtime.rollout.load_policy`
+gives the trajectory of the protocol loop (a bare controller told every apex by ``notify_apex``, as
 the margins' closed loop and the CLI ran it before) and of ``bound-env rollout``, bit for bit;
 and ``act`` refuses the loops that would silently go wrong.
 """
@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 import bound_env
-from agents.policy import load_controller, policy_names
-from agents.policy_table import ARCHIVE_DIR
-from agents.rollout import load_policy, rollout
+from agents.runtime.policy import load_controller, policy_names
+from agents.runtime.policy_table import ARCHIVE_DIR
+from agents.runtime.rollout import load_policy, rollout
 from bound_env.control import PlainPolicy, notify_apex
 
 gym.register_envs(bound_env)

@@ -1,17 +1,15 @@
-"""The curated set of shipped policies (issue 30): one name table (`agents.policy_table`) for
-the loader, ``--policy``'s help and docs/learned.md; ``default`` a name for ``finetuned/s0``,
+"""The curated set of shipped policies (issue 30): one name table (`agents.runtime.policy_table`)
+for the loader, ``--policy``'s help and docs/learned.md; ``default`` a name for ``finetuned/s0``,
 not a copy; the superseded policies archived, their old names saying where they went."""
 
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from agents.policy_table import (
+from agents.runtime.policy_table import (
     ALIASES,
     ARCHIVE_DIR,
     ARCHIVED,
@@ -23,7 +21,16 @@ from agents.policy_table import (
 
 ROOT = Path(__file__).resolve().parent.parent
 CURATED = {"default", "literal-cycle"} | {
-    f"{g}/s{k}" for g in ("finetuned", "step-ppo", "ppo-v1-final") for k in range(3)
+    f"{g}/s{k}"
+    for g in (
+        "finetuned",
+        "step-ppo",
+        "ppo-v1-final",
+        "adaptive",
+        "adaptive-nohist",
+        "adaptive-nominal",
+    )
+    for k in range(3)
 }
 
 
@@ -38,8 +45,8 @@ def test_the_shipped_set_is_the_curated_one():
 
 
 def test_default_loads_everywhere_it_did():
-    from agents.policy import load_controller, policy_names, resolve_policy
-    from agents.rollout import load_policy
+    from agents.runtime.policy import load_controller, policy_names, resolve_policy
+    from agents.runtime.rollout import load_policy
 
     assert "default" in policy_names()
     assert resolve_policy("default") == SHIPPED_DIR / "finetuned" / "s0"
@@ -51,7 +58,7 @@ def test_default_loads_everywhere_it_did():
 
 @pytest.mark.parametrize("name", ["ppo-v1", "warm-started/s1", "distilled/s0", "stride-residual"])
 def test_an_archived_name_says_where_it_went(name):
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     with pytest.raises(FileNotFoundError) as e:
         load_controller(name)
@@ -60,21 +67,15 @@ def test_an_archived_name_says_where_it_went(name):
     assert str(ARCHIVE_DIR / name) in msg and "archived" in msg
 
 
-def test_an_archived_name_on_the_command_line_is_one_line():
-    r = subprocess.run(
-        [sys.executable, "-m", "bound_env.cli", "rollout", "--policy", "ppo-v1", "--strides", "1"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and "archive" in lines[0] and "ppo-v1" in lines[0], r.stderr
+def test_an_archived_name_on_the_command_line_is_one_line(cli):
+    code, _, err = cli("rollout", "--policy", "ppo-v1", "--strides", "1")
+    assert code == 2 and "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "archive" in lines[0] and "ppo-v1" in lines[0], err
 
 
 def test_an_archived_policy_still_loads_by_its_path():
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     ctrl = load_controller(ARCHIVE_DIR / "distilled" / "s0")
     assert callable(getattr(ctrl, "on_apex", None))
@@ -107,7 +108,7 @@ def test_help_and_docs_list_the_same_names():
 
 def test_an_archived_name_in_an_installed_package(monkeypatch, tmp_path):
     """A wheel has no archive: the message points at the repository."""
-    import agents.policy_table as table
+    import agents.runtime.policy_table as table
 
     monkeypatch.setattr(table, "ARCHIVE_DIR", tmp_path / "none")
     msg = table.archived_message("stride-residual/s0")

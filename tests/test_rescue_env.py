@@ -1,4 +1,4 @@
-"""Tests of the rescue task PassiveBoundRescue-v0/-v1 (bound_env/rescue_env.py) and its discrete
+"""Tests of the rescue task PassiveBoundRescue-v0/-v1 (bound_env/rescue_*.py) and its discrete
 wrapper (bound_env.wrappers.LibraryActions): the env checkers, the task's rules, the same
 strides as the stride env, bad input, and plain SB3 PPO learning on it."""
 
@@ -17,14 +17,14 @@ gym.register_envs(bound_env)
 
 @pytest.fixture(scope="module")
 def student():
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     return load_controller("default")
 
 
 def student_env(student, **kw):
     """The rescue env + wrapper on the student's own LQR and library (as `bound-env finetune`)."""
-    from agents.finetune import rescue_env_kwargs
+    from agents.experts.finetune import rescue_env_kwargs
 
     env = gym.make(RESCUE_ENV_ID, **rescue_env_kwargs(student), **kw)
     return LibraryActions(env, student.rows)
@@ -160,12 +160,26 @@ def test_gymnasium_and_sb3_env_checkers_pass_without_warnings(discrete):
     if discrete:
         env = LibraryActions(env)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
+        warnings.simplefilter("error")  # but v0's own deprecation (the checkers remake it)
+        warnings.filterwarnings("ignore", "PassiveBoundRescue-v0 is deprecated", DeprecationWarning)
         if not discrete:
             check_env(env.unwrapped)
             sb3_check_env(env.unwrapped)
         sb3_check_env(env)
     env.close()
+
+
+def test_v0_is_deprecated_on_make_and_points_to_v1():
+    with pytest.warns(DeprecationWarning, match="PassiveBoundRescue-v0 is deprecated.*use Pas"):
+        gym.make(RESCUE_ENV_ID)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gym.make(RESCUE_ENV_ID_V1)  # v1: no warning
+    from bound_env.rescue_env import PassiveBoundRescueEnv, PassiveBoundRescueV1Env, sample_starts
+    from bound_env.rescue_v0 import PassiveBoundRescueEnv as V0
+    from bound_env.rescue_v1 import PassiveBoundRescueV1Env as V1
+
+    assert (PassiveBoundRescueEnv, PassiveBoundRescueV1Env) == (V0, V1) and callable(sample_starts)
 
 
 def test_defaults_are_the_shipped_mpc_spec_and_the_students_library(student):
@@ -237,6 +251,10 @@ BAD_ARGUMENTS = [
     ({"gain": "abc"}, "^gain must hold real numbers"),
     ({"gain": [1.0] * 6}, "^gain must have shape"),
     ({"max_torque": -1}, "max_torque"),
+    # issue 40: an error about the linearization, an AttributeError, a start at 1e300 |z*|
+    ({"max_torque": 1e12}, "^max_torque must be in"),
+    ({"controller": "lqr-of"}, "^controller 'lqr-of' is held offset-free"),
+    ({"r_max": 1e300}, "^r_max must be in"),
     # no start out to r_max can pass the safe radius: refused, not an endless redraw
     ({"safe": 13}, "r_max=0.45 gives no start past the safe radius safe=13"),
     ({"r_max": 1e-9}, "r_max=1e-09 gives no start past the safe radius"),
@@ -249,6 +267,7 @@ BAD_V1_ARGUMENTS = [
     ({"r_min": 0.5}, "r_min must be below r_max"),
     ({"r_min": -0.1}, "r_min"),
     ({"shaping": -1}, "shaping"),
+    ({"shaping": 1e308}, "^shaping must be in"),  # issue 40: the first reward was inf
     ({"gamma": 0}, "gamma"),
     ({"gamma": 1.5}, "gamma"),
     ({"action_mode": "residual"}, "action_mode must be one of direct, lqr_residual"),
@@ -284,6 +303,7 @@ def test_bad_reset_options_and_starts_inside_the_safe_radius_are_refused(env_id)
         ({"apex_stat": far}, "unknown reset option 'apex_stat'"),  # a typo: not a random start
         ([1, 2], "options must be a dict"),
         ({"apex_state": z_ref}, "options\\['apex_state'\\] lies inside the safe radius"),
+        ({"apex_state": z_ref + 1e6 * np.eye(6)[0]}, "apex_state'\\]: y_g=1000000.2.* outside"),
     ]:
         with pytest.raises(ValueError, match=message) as e:
             env.reset(options=options)
@@ -315,28 +335,20 @@ def test_a_step_after_a_fall_or_past_truncation_is_refused(env_id):
     env.step(np.zeros(8, dtype=np.float32))
 
 
-def test_train_with_a_bad_rescue_kwarg_leaves_no_run_folder(tmp_path):
+def test_train_with_a_bad_rescue_kwarg_leaves_no_run_folder(tmp_path, cli):
     """`train` makes one env before its run folder: a `safe` no start can pass (it hung in
     reset and left the folder behind) is a one-line error, and the CLI exits 2."""
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    from agents.train import train
+    from agents.training.train import train
 
     with pytest.raises(ValueError, match="safe=13"):
         train("ppo-rescue", RESCUE_ENV_ID_V1, name="bad", runs_dir=tmp_path,
               sets=["env_kwargs.safe=13"], progress_bar=False)  # fmt: skip
     assert not (tmp_path / "bad").exists()
-    root = Path(__file__).resolve().parent.parent
-    env = dict(os.environ, PYTHONPATH=str(root))
-    cmd = [sys.executable, "-m", "bound_env.cli", "train", "--config", "ppo-rescue",
-           "--env-id", RESCUE_ENV_ID, "--hp", "env_kwargs.r_max=1e-9", "--name", "bad",
-           "--out", str(tmp_path), "--no-progress"]  # fmt: skip
-    r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode != 0 and "r_max=1e-09" in r.stderr, r.stderr
-    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    code, _, err = cli("train", "--config", "ppo-rescue", "--env-id", RESCUE_ENV_ID,
+                       "--hp", "env_kwargs.r_max=1e-9", "--name", "bad", "--out", tmp_path,
+                       "--no-progress")  # fmt: skip
+    assert code == 2 and "r_max=1e-09" in err, err
+    assert len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "bad").exists()
 
 
@@ -428,8 +440,8 @@ def test_the_shipped_config_section_makes_the_env():
     env with continuous actions."""
     from stable_baselines3 import PPO
 
-    from agents.config import preprocess
-    from agents.train import check_algo_kwargs, check_env_spec, resolve_section
+    from agents.common.config import preprocess
+    from agents.training.train import check_algo_kwargs, check_env_spec, resolve_section
 
     spec = preprocess(resolve_section("ppo-rescue", RESCUE_ENV_ID, None, None))
     check_algo_kwargs(spec.algo_kwargs, PPO)

@@ -1,4 +1,4 @@
-"""Step-level residual PPO over a stride controller (agents/residual.py)."""
+"""Step-level residual PPO over a stride controller (agents/runtime/residual.py)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import bound_env
-from agents.controllers import MLPController
-from agents.policy import load_controller
-from agents.residual import ResidualController, ResidualOver, validation_curve
+from agents.runtime.controllers import MLPController
+from agents.runtime.policy import load_controller
+from agents.runtime.residual import ResidualController, ResidualOver, validation_curve
 from bound_env.analysis.margins.closed_loop import ClosedLoop
 from bound_env.control import notify_apex
 
@@ -158,7 +158,7 @@ def test_validation_curve_of_default_beats_lqr_at_a_large_size(base):
 @pytest.mark.slow
 def test_train_config_runs_and_loads_as_a_residual_controller(tmp_path):
     """`bound-env train --config ppo-residual` end to end (tiny), then load and act."""
-    from agents.train import train
+    from agents.training.train import train
 
     run = train(
         "ppo-residual", "PassiveBound-v0", name="r", n_timesteps=1024, runs_dir=tmp_path,
@@ -173,7 +173,7 @@ def test_train_config_runs_and_loads_as_a_residual_controller(tmp_path):
 
 
 def test_the_gate_ramps_from_the_safe_radius(base):
-    from agents.residual import _Gate
+    from agents.runtime.residual import _Gate
 
     g = _Gate(base, ramp=0.2)
     s = base.scales

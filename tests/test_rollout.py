@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.policy import find_policy_files, load_controller, shipped_policies
-from agents.policy_table import ARCHIVE_DIR
-from agents.rollout import load_policy, rollout
+from agents.runtime.policy import find_policy_files, load_controller, shipped_policies
+from agents.runtime.policy_table import ARCHIVE_DIR
+from agents.runtime.rollout import load_policy, rollout
 from bound_env.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -109,7 +109,7 @@ def test_refuses_corrupt_statistics(policy_copy):
     (policy_copy / "fingerprint.json").unlink()
     (policy_copy / "vecnormalize.pkl").write_bytes(b"\x80\x04garbage")
     with pytest.raises(ValueError, match="cannot read"):
-        load_controller(policy_copy)
+        load_controller(policy_copy, force=True)  # no fingerprint: --force (issue 40)
 
 
 def test_refuses_missing_config(policy_copy):
@@ -156,6 +156,9 @@ def test_fingerprint_covers_the_config_and_old_fingerprints_still_load(policy_co
         fp = json.loads((folder / "fingerprint.json").read_text())
         if (folder / "choice.npz").is_file():  # a distilled choice policy (test_distill)
             assert set(fp) == {"choice.npz", "config.json"}, name
+            continue
+        if (folder / "adaptive.npz").is_file():  # a learned adaptive policy (test_adaptive)
+            assert set(fp) == {"adaptive.npz", "config.json"}, name
             continue
         assert "config.yaml" in fp, name
         assert ("base.json" in fp) == (folder / "base.json").is_file(), name

@@ -111,9 +111,9 @@ def test_every_user_of_a_stride_lands_on_the_same_apex(lqr):
     starts, agree to 1e-9; the MPC's own planning path (`MPCController.rollouts`, the call of
     every decision: its planning map at the planning tolerance, segments) to `PLAN_ATOL` x
     that tolerance."""
-    from agents.distill import plant_of, stride_of
-    from agents.finetune import rescue_env
-    from agents.policy import load_controller as load_policy
+    from agents.experts.distill import plant_of, stride_of
+    from agents.experts.finetune import rescue_env
+    from agents.runtime.policy import load_controller as load_policy
 
     mpc = load_controller("mpc")
     student = load_policy("default")
@@ -203,7 +203,7 @@ class Fixed:
 
 
 def test_stride_controllers_plan_for_n_apex_states_at_once(lqr):
-    from agents.policy import load_controller as load_policy
+    from agents.runtime.policy import load_controller as load_policy
 
     Z = np.concatenate([starts(lqr.z_ref, 6, r=0.02), starts(lqr.z_ref, 6, r=0.3)])
     U = lqr.plan(Z)

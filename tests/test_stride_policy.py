@@ -1,5 +1,5 @@
-"""Learned stride-level control (agents/stride.py): the residual starts as the LQR exactly, the
-NumPy controller matches the trained network, the training wrappers do what they say."""
+"""Learned stride-level control (agents/runtime/stride.py): the residual starts as the LQR exactly,
+the NumPy controller matches the trained network, the training wrappers do what they say."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.config import load_hyperparams, preprocess
-from agents.stride import (
+from agents.common.config import load_hyperparams, preprocess
+from agents.runtime.stride import (
     BASE_FILE,
     STRIDE_ENV_ID,
     DirectionStarts,
@@ -18,7 +18,7 @@ from agents.stride import (
     YardstickReward,
     ZeroActionNet,
 )
-from agents.stride_policy import StridePolicyController, load_stride_policy
+from agents.runtime.stride_policy import StridePolicyController, load_stride_policy
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "ppo-stride.yaml"
 TINY = ["n_envs=2", "n_steps=64", "batch_size=64", "n_epochs=1"]
@@ -30,9 +30,9 @@ def _zero_residual_policy(tmp_path) -> Path:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from agents.run_files import write_config
-    from agents.stride_policy import write_base
-    from agents.train import make_vec, resolve_section
+    from agents.common.run_files import write_config
+    from agents.runtime.stride_policy import write_base
+    from agents.training.train import make_vec, resolve_section
 
     hp = resolve_section(CONFIG, STRIDE_ENV_ID, TINY, None)
     spec = preprocess(hp)
@@ -128,7 +128,7 @@ def test_numpy_controller_matches_the_network_and_the_wrapper(zero_run, tmp_path
 
 
 def test_margins_loads_a_stride_policy_by_path(zero_run):
-    from agents.policy import load_controller
+    from agents.runtime.policy import load_controller
 
     ctrl = load_controller(zero_run)
     assert isinstance(ctrl, StridePolicyController)
@@ -175,7 +175,7 @@ def test_yardstick_reward_contraction_and_early_falls_cost_more():
 @pytest.mark.slow
 def test_training_smoke_run_exports_a_policy_that_acts(tmp_path):
     from agents.cli import export_policy
-    from agents.train import train
+    from agents.training.train import train
     from bound_env.analysis.margins import ClosedLoop
 
     run = train(
@@ -230,8 +230,8 @@ def test_anchored_policy_keeps_the_cycle_whatever_the_weights(zero_run, tmp_path
 @pytest.mark.slow
 def test_checkpoint_without_observation_normalization(tmp_path):
     """norm_obs=False (the stride configs): a checkpoint is written and the run resumes."""
-    from agents.checkpoints import last_checkpoint
-    from agents.train import train
+    from agents.training.checkpoints import last_checkpoint
+    from agents.training.train import train
 
     run = train(
         config=CONFIG,

@@ -1,4 +1,4 @@
-"""Tests of the warm start of step-level PPO by behaviour cloning (agents/warmstart.py)."""
+"""Tests of the warm start of step-level PPO by behaviour cloning (agents/training/warmstart.py)."""
 
 import numpy as np
 import pytest
@@ -9,9 +9,9 @@ def setup():
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from agents.config import DEFAULT_CONFIG
-    from agents.policy import load_controller
-    from agents.train import make_env, preprocess, resolve_section
+    from agents.common.config import DEFAULT_CONFIG
+    from agents.runtime.policy import load_controller
+    from agents.training.train import make_env, preprocess, resolve_section
 
     hp = resolve_section(DEFAULT_CONFIG, "PassiveBound-v0", ["n_envs=1"], 1000)
     spec = preprocess(hp)
@@ -24,7 +24,7 @@ def setup():
 
 
 def test_the_teacher_data_are_the_teachers_torques(setup):
-    from agents.warmstart import collect
+    from agents.training.warmstart import collect
 
     _, _, env, teacher = setup
     X, A = collect(env, teacher, seed=0, n_steps=600, progress=False)
@@ -36,7 +36,7 @@ def test_the_teacher_data_are_the_teachers_torques(setup):
 def test_the_clone_fits_the_teacher_and_sets_the_statistics(setup):
     import torch as th
 
-    from agents.warmstart import clone, collect
+    from agents.training.warmstart import clone, collect
 
     model, venv, env, teacher = setup
     X, A = collect(env, teacher, seed=1, n_steps=1500, progress=False)

@@ -18,8 +18,8 @@ def test_rl_zoo3_preprocessing_takes_env_kwargs_from_the_config(env_id, tmp_path
     from rl_zoo3.exp_manager import ExperimentManager
 
     import bound_env  # noqa: F401 - registers both env ids, as --gym-packages bound_env does
-    from agents.config import DEFAULT_CONFIG, load_hyperparams
-    from agents.train_callbacks import BasinValidationCallback, NoiseCurriculumCallback
+    from agents.common.config import DEFAULT_CONFIG, load_hyperparams
+    from agents.training.train_callbacks import BasinValidationCallback, NoiseCurriculumCallback
 
     ours = load_hyperparams(DEFAULT_CONFIG, env_id)
     em = ExperimentManager(

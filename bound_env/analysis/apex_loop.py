@@ -241,10 +241,13 @@ class _Controllers:
     Every ``on_apex`` is timed into `CLOCK`; the copies' ``decision_kinds`` go, robot by
     robot, into the controller's own record at the end (`close`)."""
 
-    def __init__(self, controller, n: int, compiled: bool):
+    def __init__(self, controller, n: int, compiled: bool, plants=None):
         self.controller = controller
         hook = callable(getattr(controller, "on_apex", None))
-        memoryless = not getattr(controller, "stateful", False)
+        # a privileged controller (`bound_env.control.privileged`) is handed its robot's true
+        # plant, so it runs as one copy per robot
+        privileged = plants is not None and getattr(controller, "privileged", False) is True
+        memoryless = not getattr(controller, "stateful", False) and not privileged
         self.batched = callable(getattr(controller, "batch", None)) and not hook and memoryless
         self.plans = None
         if not self.batched and compiled and memoryless:
@@ -255,8 +258,10 @@ class _Controllers:
         self.n0 = len(self.kinds) if self.kinds is not None else 0
         if not self.batched and self.plans is None:
             self.copies = [copy.deepcopy(controller) for _ in range(n)]
-            for c in self.copies:
+            for i, c in enumerate(self.copies):
                 reset_controller(c)
+                if privileged:
+                    c.set_plant(plants[i])
         self.hook = self.plans is not None or (self.copies is not None and hook)
 
     def apex(self, i: int, z, time_since_apex: float, noise) -> None:
@@ -300,6 +305,7 @@ def interval_loop(
     z_target=None,
     tol: float = RETURN_TOL,
     effort_strides: int | None = None,
+    plants=None,
 ) -> dict:
     """The one per-interval batched closed loop: robot i starts at the apex state Z0[i] and
     is stepped with ``controller`` through the ``task``'s batch kernel
@@ -314,7 +320,9 @@ def interval_loop(
       ``reset(options={"apex_state": z})`` do; an interval that reaches an apex ends the
       stride there. False: one long episode per robot (the env's loop: a failure in the
       interval of an apex ends it; the stride count is the env's, ``info["stride"]``).
-    - ``aux``: per-robot parameters (n, N_AUX) (model error), else the task's.
+    - ``aux``: per-robot parameters (n, N_AUX) (model error), else the task's; ``plants``:
+      the same robots' `bound_env.params.Params`, handed (``set_plant``) only to a
+      controller that declares itself ``privileged`` (the privileged reference).
     - ``terrain``: per-robot generators of the slope draws (rough terrain: the task's
       ``slope_noise_deg``; long episodes only), drawn at the start and after each apex as
       the env draws them.
@@ -366,7 +374,7 @@ def interval_loop(
     for i in np.flatnonzero(~live):  # impossible starts
         out["status"][i], out["phase"][i] = int(b.s[i, S_STATUS]), 0
     nominal = aux is None and noise is None and delay == 0 and kicks is None
-    ctl = _Controllers(controller, n, compiled=nominal and effort_strides is None)
+    ctl = _Controllers(controller, n, compiled=nominal and effort_strides is None, plants=plants)
     for i in range(n):
         ctl.apex(i, Z0[i].copy(), 0.0, noise)
     kick_at = np.full(n, -1, dtype=np.int64)

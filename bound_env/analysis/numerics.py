@@ -11,7 +11,8 @@ what it does with such a point. Nothing in this module knows about strides or pa
   f(z) - z kept while the residual falls (the closed-loop maps of `margins`, where
   one map evaluation is an episode and the map may be rough).
 - `sorted_eigenvalues`: largest modulus first.
-- `bisect_threshold`: the largest s at which a yes/no test still holds.
+- `bisect_threshold`: the largest s at which a yes/no test still holds (`threshold_steps`,
+  the same search as a generator; `run_together`: many searches, one batch of tests a step).
 
 Following scipy.optimize, they take callables and return a result object where the outcome
 is a result (``converged``/``reason``); a map that cannot be evaluated where it must is a
@@ -301,8 +302,19 @@ def bisect_threshold(
     search: the bracket grows by doubling from the last success (2 hi, 4 hi, ..., never
     beyond ``cap``) until ok fails, then bisects between the last success and the first
     failure; (cap, True) if ok still holds at ``cap``.
+
+    The search itself is `threshold_steps` (the same points, in the same order): this runs
+    it with ``ok``; `run_together` runs many such searches with one batch of tests per step.
     """
-    if ok(hi):
+    return run_together([threshold_steps(lo, hi, iters, log, grow, cap)], lambda s: [ok(s[0])])[0]
+
+
+def threshold_steps(
+    lo: float, hi: float, iters: int, log: bool = True, grow: bool = False, cap: float = math.inf
+):
+    """`bisect_threshold` as a generator: it yields each point s to test, is sent ok(s), and
+    returns (s, capped)."""
+    if (yield hi):
         if not grow:
             return hi, True
         lo = hi
@@ -310,17 +322,45 @@ def bisect_threshold(
             if lo >= cap:
                 return lo, True
             nxt = min(2.0 * lo, cap)
-            if ok(nxt):
+            if (yield nxt):
                 lo = nxt
             else:
                 hi = nxt
                 break
-    elif not ok(lo):
+    elif not (yield lo):
         return 0.0, False
     for _ in range(iters):
         mid = math.sqrt(lo * hi) if log else 0.5 * (lo + hi)
-        if ok(mid):
+        if (yield mid):
             lo = mid
         else:
             hi = mid
     return lo, False
+
+
+def run_together(searches, test_many) -> list:
+    """Run generator searches in lockstep: each yields a query and is sent its answer, until
+    it returns. At every step the pending queries of all searches are answered by one call
+    ``test_many(queries) -> answers`` (the same order), so a caller can answer them as one
+    batch (robots advanced together). Returns each search's return value, in order. Each
+    search sees exactly the answers it would see alone: its queries and result are its own."""
+    searches = list(searches)
+    results: list = [None] * len(searches)
+    pending = {}
+    for k, g in enumerate(searches):
+        try:
+            pending[k] = next(g)
+        except StopIteration as e:
+            results[k] = e.value
+    while pending:
+        keys = list(pending)
+        answers = list(test_many([pending[k] for k in keys]))
+        if len(answers) != len(keys):
+            raise ValueError(f"test_many answered {len(answers)} of {len(keys)} queries")
+        for k, a in zip(keys, answers, strict=True):
+            try:
+                pending[k] = searches[k].send(a)
+            except StopIteration as e:
+                results[k] = e.value
+                del pending[k]
+    return results

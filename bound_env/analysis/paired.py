@@ -19,7 +19,10 @@ difference, and the tests below use it:
 - `bootstrap_delta_x50`: the difference of the two columns' r50 (each the mean over its
   seeds of the per-seed r50) with a percentile bootstrap interval that resamples the
   directions (the same resample for both columns: paired) and, independently for each
-  column, its seeds.
+  column, its seeds. An r50 outside the grid is only a bound (0 below the first size, the
+  last size above it: `censored`), and so is a difference that involves one: the result
+  says which column is censored and in what share of the replicates, and `delta_text`
+  prints it as what it is.
 
 Pure NumPy/SciPy, no simulator.
 """
@@ -145,6 +148,12 @@ def bootstrap_delta_x50(
     d = replicate_x50(a) - replicate_x50(b)
     lo, hi = np.quantile(d, [(1 - level) / 2, (1 + level) / 2])
     seeds = a.shape[0] > 1 or b.shape[0] > 1
+    # censored crossings: of the observed curves (any seed), and of the replicates (either
+    # column), where the difference is only a bound
+    cens = [censored(xs, x.mean(axis=2)) for x in (a, b)]
+    succ = [np.einsum("srd,db->sbr", x, counts) / n_dirs for x in (a, b)]
+    edge = [(s[..., 0] < 0.5) | (s >= 0.5).all(axis=-1) for s in succ]  # (seeds, B)
+    share = float(np.mean(edge[0].any(axis=0) | edge[1].any(axis=0)))
     return {
         "delta": delta,
         "low": float(lo),
@@ -152,7 +161,57 @@ def bootstrap_delta_x50(
         "n_boot": int(n_boot),
         "level": level,
         "resampled": "directions and seeds" if seeds else "directions",
+        "censored": cens[0],
+        "censored_ref": cens[1],
+        "censored_share": share,
     }
+
+
+def censored(xs, rates, level: float = 0.5) -> str | None:
+    """Where the crossings of curves ``rates[..., :]`` (against ``xs``) are censored: "below"
+    (some curve fails already at the first size: its crossing is only known to be below it),
+    "above" (some curve never fails: above the last size), "below and above", or None."""
+    r = np.atleast_2d(np.asarray(rates, dtype=float))
+    if r.shape[-1] == 0:
+        return None
+    low = bool(np.any(r[..., 0] < level))
+    high = bool(np.any((r >= level).all(axis=-1)))
+    return {(True, False): "below", (False, True): "above", (True, True): "below and above"}.get(
+        (low, high)
+    )
+
+
+def delta_text(d: dict, xs) -> str:
+    """A `bootstrap_delta_x50` result as text: "+0.05 [+0.01, +0.09]" where both crossings lie
+    within the grid; where one is censored the difference is a bound and says so (e.g.
+    "both r50 < 0.01: no difference measured", "≥ +0.12 (ref r50 < 0.01)"), and an interval
+    resting partly on censored replicates is marked with their share."""
+    lo_x, hi_x = format(float(xs[0]), "g"), format(float(xs[-1]), "g")
+    ca, cb = d.get("censored"), d.get("censored_ref")
+    where = {"below": f"< {lo_x}", "above": f"> {hi_x}"}
+    if ca is not None and ca == cb and ca in where:
+        return f"both r50 {where[ca]}: no difference measured"
+    if ca is not None or cb is not None:
+        # a censored column's r50 is a bound: so is the difference
+        bound = None
+        if ca in ("above", None) and cb in ("below", None):
+            bound = "≥"  # a's r50 could only be larger, the reference's only smaller
+        elif ca in ("below", None) and cb in ("above", None):
+            bound = "≤"
+        notes = []
+        if ca in where:
+            notes.append(f"r50 {where[ca]}")
+        if cb in where:
+            notes.append(f"ref r50 {where[cb]}")
+        if ca not in (None, *where) or cb not in (None, *where):
+            notes.append("censored at both ends")
+        text = f"{bound} {d['delta']:+.3g}" if bound else "not measured"
+        return f"{text} ({', '.join(notes)})"
+    text = f"{d['delta']:+.3g} [{d['low']:+.3g}, {d['high']:+.3g}]"
+    share = d.get("censored_share", 0.0)
+    if share and share > 0.0:
+        text += f" ({100 * share:.0f} % of resamples censored)"
+    return text
 
 
 def radii_around(sizes, x: float) -> list[float]:

@@ -1,8 +1,8 @@
 """The paired comparisons of `bound_env.analysis.paired` in words and as Markdown tables.
 
 `paired_text` writes the results page's "Paired differences" section from the entries that
-``agents.compare.paired_comparisons`` makes (one per column and reference: ``delta_r50`` with
-its bootstrap interval, the per-size curve with McNemar's p, ``stands_out``; or ``skipped``
+``agents.results.compare.paired_comparisons`` makes (one per column and reference: ``delta_r50``
+with its bootstrap interval, the per-size curve with McNemar's p, ``stands_out``; or ``skipped``
 with the reason), i.e. from ``docs/paired.json``'s ``pairs``. Text only, no numerics.
 """
 
@@ -58,7 +58,8 @@ def paired_text(pairs) -> str:
             for c in e["curve"]
         ]
         details.append(
-            f"<details><summary>per size: {e['column']} vs {e['reference']}</summary>\n\n"
+            f'<details markdown="1"><summary>per size: {e["column"]} vs {e["reference"]}'
+            "</summary>\n\n"
             "| r | P(return) | P(return), reference | Δ | directions better | "
             "directions worse | McNemar p |\n| --- | --- | --- | --- | --- | --- | --- |\n"
             + "\n".join(drows)

@@ -12,11 +12,8 @@ Here dP/dz is obtained from *one* stride integrated together with its sensitivit
   only through hip_x - x^toe, so d f / d x_k^toe = -d f / d x_g with only leg k in stance.
 * At every event with guard g, reset R and fields f- (before) and f+ = f_aug(R(w)) (after),
   Psi jumps by the saltation matrix (Aizerman & Gantmacher 1958; Mueller 1995; the hybrid
-  framework of Remy et al.)
-
-      S = dR + (f+ - dR f-) grad g^T / (grad g . f-).
-
-  Liftoff: R = identity (the contact flag changes). Touchdown of leg k: R sets
+  framework of Remy et al.) S = dR + (f+ - dR f-) grad g^T / (grad g . f-). Liftoff: R =
+  identity (the contact flag changes). Touchdown of leg k: R sets
   x_k^toe = x_hip,k(y) + l_bar sin(gamma_k), a row of dR.
 * The stride ends on S_apex (eq. 17, guard ydot_g = 0), where the time correction gives
   dP/dz = Pz (I - f e_ydot^T / f_ydot) Psi(T), Psi(0) = E (the embedding z -> w, x_g = 0,

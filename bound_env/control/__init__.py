@@ -75,6 +75,14 @@ def load_controller(spec, gait: str | None = None):
     if s.offset_free is not None:
         inner = load_controller(replace(s, offset_free=None), gait)
         return OffsetFree(inner, name=s.name, **s.offset_free)
+    if s.privileged:
+        from .privileged import PrivilegedMPC
+
+        return PrivilegedMPC(gait, spec=s, name=s.name)
+    if s.adaptive:
+        from .adaptive import AdaptiveMPC
+
+        return AdaptiveMPC(gait, spec=s, name=s.name, **s.adaptive)
     gait = str(gait) if gait is not None else s.gait
     if s.controller == "damping":
         return DampingFeedback(s.name, s.c, s.max_torque, s.dt, gait)

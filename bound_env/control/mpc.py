@@ -168,6 +168,12 @@ class MPCController:
     rtol: float = 1e-8  # planning tolerance (the evaluation runs at 1e-10)
     # planning map: runs of equal interval actions integrated as one segment (`StrideMap`)
     segments: bool = True
+    # a return ends the search (the first stride at which a candidate returns: the soonest
+    # return of the round so far); False: the elites of every round are ranked in full
+    early_exit: bool = False
+    # > 0: the library's first ``screen`` rows (the LQR's plan first) are tried alone first;
+    # when each of them falls within its first stride the state is given up (their best)
+    screen: int = 0
     seed: int = 0
     library_seed: int = -1  # >= 0: the library's random rows are fixed (drawn from this seed)
     decision_seconds: list = field(default_factory=list, repr=False)
@@ -189,6 +195,7 @@ class MPCController:
 
         self.scales = np.asarray(APEX_SCALES, dtype=float)
         self.searches = 0  # decisions that searched beyond the LQR's own plan
+        self.given_up = 0  # searches that ended at the screen (every screened profile fell)
         self.evaluate(self.z_ref, np.zeros((1, self.basis.K)))  # compile (or load) it now
 
     # -- the protocol of bound_env.control.controllers --------------------------------------
@@ -233,7 +240,7 @@ class MPCController:
         if np.max(np.abs(z - self.z_ref) / self.scales) <= self.safe:
             self._kind = "gate"
             return u_lqr
-        s0, outcome, _ = self.evaluate(z, u_lqr[None])
+        s0, outcome, strides = self.evaluate(z, u_lqr[None])
         if outcome[0] == RETURNED:
             self._kind = "lqr"
             return u_lqr
@@ -242,26 +249,47 @@ class MPCController:
         rng = np.random.default_rng(
             [self.seed, *np.frombuffer(z.tobytes(), dtype=np.uint32).tolist()]
         )
-        K = self.basis.K
         lib_rng = rng if self.library_seed < 0 else np.random.default_rng(self.library_seed)
-        U = library(K, u_lqr, lib_rng, self.n_random, self.n_noise, self.noise)
-        # row 0 is the LQR's plan, just evaluated; the rest pruned below the elites (or below
-        # the best without cross-entropy rounds): the same elites and best, exactly
-        top = self.cem_elites if self.cem_iters > 0 else 1
-        s = np.concatenate([s0, self.evaluate(z, U[1:], prune=top)[0]])
+        U = library(self.basis.K, u_lqr, lib_rng, self.n_random, self.n_noise, self.noise)
+        return self._search(z, U, s0, outcome[0] == FELL and strides[0] == 0, rng)
+
+    def _search(self, z, U, s0, lqr_falls_at_once: bool, rng) -> np.ndarray:
+        """The library U (row 0: the LQR's plan, already scored ``s0``), then the
+        cross-entropy rounds (module docstring): the best row's coefficients."""
+        K = self.basis.K
+        # candidates each round must rank exactly: the elites of the next round, or only the
+        # best (no rounds, or ``early_exit``: a return ends the search). Those below are
+        # pruned: the same elites and best, exactly
+        top = 1 if self.early_exit or self.cem_iters == 0 else self.cem_elites
+        n_a = min(self.screen, len(U)) if self.screen > 0 else len(U)
+        s, outcome, strides = self.evaluate(z, U[1:n_a], prune=top)
+        s = np.concatenate([s0, s])
+        returned = bool(np.any(outcome == RETURNED))
+        if self.screen > 0 and lqr_falls_at_once and np.all((outcome == FELL) & (strides == 0)):
+            self.given_up += 1  # every screened profile falls within the stride: hopeless
+            return U[int(np.argmax(s))]
+        if n_a < len(U) and not (self.early_exit and returned):
+            s1, outcome, _ = self.evaluate(z, U[n_a:], prune=top)
+            s = np.concatenate([s, s1])
+            returned = returned or bool(np.any(outcome == RETURNED))
+        U = U[: len(s)]
         order = np.argsort(-s, kind="stable")
         best_u, best_s = U[order[0]], float(s[order[0]])
         for it in range(self.cem_iters):
-            if best_s >= self.best_score:  # returns after one stride: nothing scores higher
-                break
+            if best_s >= self.best_score or (self.early_exit and returned):
+                break  # nothing scores higher, or a return ends the search
             elite = U[order[: self.cem_elites]]
             mu, sd = elite.mean(axis=0), elite.std(axis=0) + 0.05
             U = np.clip(mu + sd * rng.standard_normal((self.cem_samples, K)), -1.0, 1.0)
             last = it == self.cem_iters - 1
             # the last round only has to beat the best so far (strictly)
-            s, _, _ = self.evaluate(
-                z, U, prune=1 if last else self.cem_elites, floor=best_s if last else -np.inf
+            s, outcome, _ = self.evaluate(
+                z,
+                U,
+                prune=1 if last or self.early_exit else self.cem_elites,
+                floor=best_s if last else -np.inf,
             )
+            returned = bool(np.any(outcome == RETURNED))
             order = np.argsort(-s, kind="stable")
             if float(s[order[0]]) > best_s:
                 best_u, best_s = U[order[0]], float(s[order[0]])
@@ -312,6 +340,9 @@ class MPCController:
     def settings(self) -> dict:
         keys = ("safe", "horizon", "n_random", "n_noise", "noise", "cem_iters", "cem_samples")
         keys += ("cem_elites", "rtol", "seed", "library_seed")
+        # the search's shortcuts, named only when on: the full search's settings (and its
+        # fingerprint) are what they were before the shortcuts existed
+        keys += tuple(k for k in ("early_exit", "screen") if getattr(self, k))
         return {k: getattr(self, k) for k in keys}
 
     def fingerprint(self) -> str:

@@ -57,6 +57,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..schema import real
 from ..stride_map import StrideMap, max_intervals
 from .controllers import OBS_TIME
 from .design import DESIGN_RTOL, FD_FLOOR_Z, FD_REL_Z, FD_U
@@ -148,6 +149,11 @@ class OffsetFree:
                 f"offset_free: estimator must be one of {ESTIMATORS}, got {estimator!r}"
             )
         self.estimator = estimator
+        if isinstance(inner, OffsetFree):
+            raise ValueError(
+                f"{inner.name!r} is held offset-free already: a second {SUFFIX} would estimate "
+                "the same offset twice, each chasing the other's shift (give it once)"
+            )
         if not callable(getattr(inner, "interval_actions", None)) or not callable(
             getattr(inner, "on_apex", None)
         ):
@@ -155,10 +161,16 @@ class OffsetFree:
                 f"{getattr(inner, 'name', inner)!r} is not a stride controller "
                 "(no interval_actions / on_apex): only stride controllers can be held offset-free"
             )
-        for key, v in (("gain", gain), ("deadband", deadband), ("max_shift", max_shift)):
+        given = {"gain": gain, "deadband": deadband, "max_shift": max_shift}
+        for key, v in given.items():  # any real number type (np.float32 too), not a bool
             lo, hi = OF_LIMITS[key]
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and lo <= v <= hi):
-                raise ValueError(f"offset_free: {key} must be a number in [{lo}, {hi}], got {v!r}")
+            try:
+                given[key] = real(v, f"offset_free: {key}", lo, hi)
+            except ValueError:
+                raise ValueError(
+                    f"offset_free: {key} must be a number in [{lo}, {hi}], got {v!r}"
+                ) from None
+        gain, deadband, max_shift = given["gain"], given["deadband"], given["max_shift"]
         if gain <= 0.0:
             raise ValueError(f"offset_free: gain must be > 0, got {gain!r}")
         self.inner = inner

@@ -29,6 +29,10 @@ It fails loudly where the loop would silently go wrong:
   accepted), ``info["tau"]`` after a non-zero action (the env's ``max_torque``), and
   ``info["time"]`` between two calls (the env's ``dt``): ValueError naming the setting.
   The integrator tolerance and the gait do not show in what the env returns.
+
+A privileged controller (``privileged`` true: `bound_env.control.privileged`, an upper
+reference that reads the robot's true plant) gets ``info["plant"]`` at each reset of an env
+that reports it (`bound_env.wrappers.RandomizedPlant`); no other controller ever does.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ from ..stride_protocol import notify_apex, reset_controller
 from ..task import DEFAULT_DT, OBS_NAMES
 
 FULL_OBS_DIM = len(OBS_NAMES) - 1  # the default observation (x_g excluded)
-_MAKE = 'gym.make("PassiveBound-v1") (or the env factory of agents.rollout.load_policy)'
+_MAKE = 'gym.make("PassiveBound-v1") (or the env factory of agents.runtime.rollout.load_policy)'
 _SHARED = "one act per env: call load_policy once per env, or copy.deepcopy(act)"
 
 
@@ -59,7 +63,8 @@ class PlainPolicy:
             raise TypeError(
                 "PlainPolicy: controller must be a callable controller (obs -> action in "
                 f"[-1, 1]), got {type(controller).__name__}; load one with "
-                "agents.rollout.load_policy(NAME) or bound_env.control.load_controller(NAME)"
+                "agents.runtime.rollout.load_policy(NAME) or "
+                "bound_env.control.load_controller(NAME)"
             )
         self.controller = controller  # public; the loop below calls its own reference
         self._ctrl = controller
@@ -121,6 +126,8 @@ class PlainPolicy:
         if "start_z" in info:  # a reset: a new episode
             self.restart()
             self._started = True
+            if getattr(self._ctrl, "privileged", False) is True and "plant" in info:
+                self._ctrl.set_plant(info["plant"])  # the privileged reference reads the plant
         elif not self._started:
             raise ValueError(
                 f"policy {self.name}: the first call of an episode must pass the info of "

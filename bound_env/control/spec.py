@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from .. import schema
-from ..resources import controllers_dir
+from ..resources import controllers_dir, parse_yaml
 
 # the repository's configs/controllers, or the wheel's copy (package data, bound_env.resources)
 CONTROLLERS_DIR = controllers_dir()
@@ -43,8 +43,12 @@ MPC_DEFAULTS = {
     "plan_rtol": 1e-8,
     "seed": 0,
     "library_seed": -1,
+    "early_exit": False,  # the search's shortcuts (bound_env.control.mpc): off, the full search
+    "screen": 0,
 }
+MPC_BOOLS = ("early_exit",)
 MPC_INTS = ("horizon", "n_random", "n_noise", "cem_iters", "cem_samples", "cem_elites", "seed")
+MPC_INTS += ("library_seed", "screen")
 # the range of each search setting (bounded work per decision): (lo, hi), reals in (lo, hi]
 MPC_LIMITS = {
     "safe": (0.0, 100.0),  # normalized apex error
@@ -58,15 +62,20 @@ MPC_LIMITS = {
     "plan_rtol": (0.0, 1e-2),
     "seed": (0, 2**32 - 1),
     "library_seed": (-1, 2**32 - 1),
+    "screen": (0, 10_000),
 }
 MAX_TORQUE_LIMIT = 1e4  # [N m]: a saturation above this is certainly a mistake
+# |gain| entries in units of the torque limit per apex scale (u = -G_n S dz; the shipped
+# designs are ~1): beyond it an error of a millionth of a scale saturates the torque, and
+# the closed loop's matrix A - B G overflows
+MAX_GAIN = 1e6
 SPEC_KEYS = {
     "lqr": COMMON_KEYS + ("basis", "K", "Q", "R", "jacobian", "gain", "offset_free"),
     "deadbeat": COMMON_KEYS + ("basis", "K", "jacobian", "gain", "offset_free"),
     "damping": COMMON_KEYS + ("c",),
     # the MPC's terminal controller is an LQR (its keys), plus the search (bound_env.control.mpc)
     "mpc": COMMON_KEYS
-    + ("basis", "K", "Q", "R", "jacobian", "gain", "offset_free")
+    + ("basis", "K", "Q", "R", "jacobian", "gain", "offset_free", "privileged", "adaptive")
     + tuple(MPC_DEFAULTS),
 }
 DEFAULT_MAX_TORQUE = 80.0  # [N m]: the saturation of the learned policies
@@ -93,6 +102,12 @@ class ControllerSpec:
     # None, or the settings of `bound_env.control.offset_free.OffsetFree` (checked): the
     # controller held on the plant's own cycle
     offset_free: object = None
+    # an mpc re-designed on the robot's true plant (`bound_env.control.privileged`): an upper
+    # reference, never a shipped or deployable policy
+    privileged: bool = False
+    # None, or the settings of `bound_env.control.adaptive.AdaptiveMPC` (checked): an mpc that
+    # identifies its plant online and re-designs on the estimate
+    adaptive: object = None
 
     @property
     def name(self) -> str:
@@ -136,6 +151,9 @@ def check_mpc_settings(values: dict, where, yaml_numbers: bool = True) -> dict:
     checked: integers are integers, reals finite, each in its range. ``yaml_numbers``: a
     string that spells a real is read as it (see `_positive`)."""
     out = dict(values)
+    for key in MPC_BOOLS:
+        if key in values and not isinstance(values[key], (bool, np.bool_)):
+            raise ValueError(f"{where}: {key} must be true or false, got {values[key]!r}")
     for key, (lo, hi) in MPC_LIMITS.items():
         name = "rtol" if key == "plan_rtol" and "rtol" in values else key
         if name not in values:
@@ -154,7 +172,7 @@ def load_spec(spec: str | Path) -> ControllerSpec:
     """Read and check a spec file (name or path); ValueError naming the file and the key."""
     path = resolve_spec_path(spec)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = parse_yaml(path.read_text())
     except yaml.YAMLError as e:
         raise ValueError(f"{path}: not valid YAML ({str(e).splitlines()[0]})") from None
     except UnicodeDecodeError:
@@ -194,6 +212,14 @@ def load_spec(spec: str | Path) -> ControllerSpec:
         out.extra = check_mpc_settings({k: data.get(k, v) for k, v in MPC_DEFAULTS.items()}, path)
     if out.offset_free is not None:
         out.offset_free = check_offset_free(out.offset_free, path)
+    if not isinstance(out.privileged, bool):
+        raise ValueError(f"{path}: privileged must be true or false, got {out.privileged!r}")
+    if out.adaptive is not None:
+        from .adaptive import check_adaptive
+
+        out.adaptive = check_adaptive(out.adaptive, path)
+    if sum([out.privileged, bool(out.adaptive), out.offset_free is not None]) > 1:
+        raise ValueError(f"{path}: privileged, adaptive and offset_free exclude each other")
     if out.jacobian not in ("fd", "variational"):
         raise ValueError(f"{path}: jacobian must be 'fd' or 'variational', got {out.jacobian!r}")
     return out
@@ -269,7 +295,7 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
     matrix (for every gait), a file, or a mapping of gait names to matrices (a gait it does
     not list is designed). Errors name where the gain came from: the spec's field
     (``gain`` or ``gain.<gait>``) or the gain file."""
-    g, where = spec.gain, f"{spec.path}: gain"
+    g, where = spec.gain, (f"{spec.path}: gain" if spec.path is not None else "gain")
     if isinstance(g, dict):
         key = _gait_key(g, gait if gait is not None else spec.gait)
         g, where = g.get(key), f"{where}.{key}"
@@ -300,4 +326,14 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
             f"{where} has shape {G.shape}, but basis {basis!r} with "
             f"K={K} needs a ({K}, 6) gain (one row per basis function)"
         )
-    return schema.real_array(G, where, shape=(K, 6))  # finite: no NaN or inf
+    G = schema.real_array(G, where, shape=(K, 6))  # finite: no NaN or inf
+    from ..task import APEX_SCALES
+
+    big = float(np.max(np.abs(G * np.asarray(APEX_SCALES)[None, :])))
+    if big > MAX_GAIN:
+        raise ValueError(
+            f"{where} has entries up to {big:.3g} times the torque limit per apex scale "
+            f"(at most {MAX_GAIN:g}; the designed gains are ~1): a torque saturated by an "
+            "error of a millionth of a scale"
+        )
+    return G

@@ -70,7 +70,7 @@ Measures (JSON keys)
   depends on the grid); ``r50_ci`` = the same crossing of the interval's bounds.
   ``outcomes``: per size, the outcome (1: returned, 0: not) from each direction, in the
   order of ``random_directions(directions, direction_seed)``, for paired comparisons of two
-  controllers on the same directions (`agents.compare`, `bound_env.analysis.paired`).
+  controllers on the same directions (`agents.results.compare`, `bound_env.analysis.paired`).
 - ``terrain``: survival of ``terrain_runs`` runs of ``terrain_strides`` strides from z_cl on
   rough terrain (``slope_noise_deg`` = sigma: the slope changes by sigma xi at every apex,
   `bound_env.terrain`), each run one long episode with its own seed (``TERRAIN_SEED`` + k),
@@ -101,6 +101,11 @@ Measures (JSON keys)
   delay (`bound_env.mismatch`): ``hold``, ``curve`` and ``r50`` (settled, not returned),
   ``mfpt``; the reference is `mismatch_tasks`' docstring, the text and the results page's
   section `mismatch_report`.
+- ``seconds``, ``tasks``: the run's wall time and how many of its tasks it took from the cache
+  (``cached``) and ``computed`` (a run that computed nothing timed only the assembly).
+- ``fingerprint``: what decided these numbers (`fingerprint.column_fingerprint`): the
+  controller's ``fingerprint()`` and ``config``, hashes of its planning constants and of its
+  code, and the git ``commit`` (``dirty`` if a tracked .py file differed from it).
 
 Controllers
 -----------
@@ -145,6 +150,7 @@ Modules
 - `assemble`: the JSON result from the tasks' results;
 - `report`: margins.json, the CSV tables, the plots and `summary_text`;
 - `stats`: Wilson and Student-t intervals, crossings on a grid, the MFPT estimate.
+- `fingerprint`: what decided a column's numbers (`column_fingerprint`, `stale_parts`).
 - `mismatch_tasks`: the model-error measures (``mm_hold``, ``mm_curve``, ``mm_mfpt``) and
   `mismatch_tasks.plant_runs`; `mismatch_report`: `mismatch_text`, `mismatch_markdown`.
 """
@@ -159,6 +165,7 @@ from .basin import (
     physical_cap,
     start_geometry,
     task_basin,
+    task_basins,
 )
 from .budget import (
     BUDGETS,
@@ -271,6 +278,7 @@ __all__ = [
     "start_geometry",
     "summary_text",
     "task_basin",
+    "task_basins",
     "task_ceiling",
     "task_curve",
     "task_cycle",

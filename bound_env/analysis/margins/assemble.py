@@ -139,6 +139,8 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None, seed=DEFAUL
     curve_sizes = [c["size"] for c in curve]
     return {
         "policy": controller_name(controller),
+        # it reads the robot's true plant (bound_env.control.privileged): a reference only
+        "privileged": getattr(controller, "privileged", False) is True,
         "gait": gait,
         "budget": budget.name,
         "seed": seed,

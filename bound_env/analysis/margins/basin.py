@@ -1,16 +1,28 @@
 """The basin along each axis (a minimal fatal shock per apex component and sign, JSON ``basin``):
 the start geometry, the physical cap of a direction, and the grown-then-bisected search that
-the ceiling uses too (`grown_search`)."""
+the ceiling uses too (`grown_search`).
+
+A direction's search is a generator (`basin_steps`): `task_basins` runs the searches of
+several directions in lockstep (`bound_env.analysis.numerics.run_together`), each step's
+closed-loop runs as one batch of robots advanced together (`closed_loop_runs`); each search
+sees the outcomes it would see alone, so its result is `task_basin`'s."""
 
 from __future__ import annotations
 
 import math
 
-from ..numerics import bisect_threshold
-from .closed_loop import ClosedLoop, Setup, loop_for
+import numpy as np
+
+from ...events import PHASES
+from ..apex_loop import RETURNED, apex_loop
+from ..numerics import run_together, threshold_steps
+from .closed_loop import FAILURES_BY_REASON, STRIDES, ClosedLoop, Setup, loop_for
 
 BASIN_LO, BASIN_HI = 1e-3, 1.0  # first bracket of the relative basin search (then it grows)
 BASIN_CAP = 64.0  # largest relative perturbation tried where the start state stays valid
+# the (component, sign) directions of each margins task `task_basins`: their bisections
+# advance together (one batch of robots per step); two tasks, one per worker of the page
+BASIN_GROUPS = tuple(tuple((i, sign) for i in range(6)) for sign in (1, -1))
 
 
 def start_geometry(z, loop: ClosedLoop) -> dict:
@@ -89,28 +101,38 @@ def hip_thresholds(loop: ClosedLoop, zc, zs, i: int, sign: int, cap: float) -> d
 
 def grown_search(ok, cap: float, iters: int) -> tuple[float, bool, float | None]:
     """`bisect_threshold` grown up to ``cap``, remembering the tested points: returns
-    (edge, capped, smallest failing size tested or None)."""
+    (edge, capped, smallest failing size tested or None) (`grown_steps`, run with ``ok``)."""
+    return run_together([grown_steps(cap, iters)], lambda sizes: [ok(sizes[0])])[0]
+
+
+def grown_steps(cap: float, iters: int):
+    """`grown_search` as a generator (`bound_env.analysis.numerics.threshold_steps`): it
+    yields each size to test, is sent whether it held, and returns what `grown_search`
+    returns."""
     fails = []
-
-    def test(s):
-        good = ok(s)
-        if not good:
-            fails.append(s)
-        return good
-
-    s, capped = bisect_threshold(
-        test, min(BASIN_LO, cap / 2), min(BASIN_HI, cap), iters, grow=True, cap=cap
+    search = threshold_steps(
+        min(BASIN_LO, cap / 2), min(BASIN_HI, cap), iters, grow=True, cap=cap
     )
+    try:
+        s = next(search)
+        while True:
+            good = yield s
+            if not good:
+                fails.append(s)
+            s = search.send(good)
+    except StopIteration as done:
+        s, capped = done.value
     first_fail = min(fails) if fails else None
     if not capped and first_fail is not None and first_fail >= cap:
         capped = True  # every size below the (invalid-start) cap returned
     return s, capped, first_fail
 
 
-def task_basin(setup: Setup, i: int, sign: int) -> dict:
-    loop = loop_for(setup)
+def basin_steps(setup: Setup, loop: ClosedLoop, i: int, sign: int):
+    """The basin along component ``i`` with ``sign`` as a generator: it yields each start
+    state to test (a closed-loop run from it to z_cl, ``basin_strides`` strides), is sent
+    that run's (returned, strides, failure, phase), and returns the task's result."""
     zs, zc = setup.z_star, setup.z_cl
-    n = setup.budget.basin_strides
 
     def start(s):
         z = zc.copy()
@@ -118,18 +140,24 @@ def task_basin(setup: Setup, i: int, sign: int) -> dict:
         return z
 
     cap, cap_reason = physical_cap(loop, zc, zs, i, sign)
-    s, capped, fail = grown_search(
-        lambda s: loop.run(start(s), zc, n)[0], cap, setup.budget.basin_iters
-    )
+    runs = {}  # size -> its run (the first failing size's is reported: no second run)
+    search = grown_steps(cap, setup.budget.basin_iters)
+    try:
+        s = next(search)
+        while True:
+            runs[s] = yield start(s)
+            s = search.send(runs[s][0])
+    except StopIteration as done:
+        s, capped, fail = done.value
     beyond = None
     if fail is not None:
-        ok, strides, failure = loop.run(start(fail), zc, n)
+        _, strides, failure, phase = runs[fail]
         geo = start_geometry(start(fail), loop)
         beyond = {
             "rel": fail,
             "reason": failure or "no_return",
             "stride": strides,
-            "phase": loop.last_phase if failure else None,
+            "phase": phase if failure else None,
             "mechanisms": geo["mechanisms"],
         }
     return {
@@ -140,3 +168,46 @@ def task_basin(setup: Setup, i: int, sign: int) -> dict:
         "cap_reason": cap_reason,
         "beyond": beyond,
     }
+
+
+def closed_loop_runs(loop: ClosedLoop, Z, z_target, max_strides: int) -> list[tuple]:
+    """`ClosedLoop.run` from every row of Z, all robots advanced together by the one batched
+    closed loop (`bound_env.analysis.apex_loop`, as `ClosedLoop.run_many`): per robot
+    (returned, strides, failure, phase), ``phase`` the stance condition at a failure (as
+    ``loop.last_phase`` after `ClosedLoop.run`), else None."""
+    Z = np.array(np.atleast_2d(Z), dtype=float)
+    if loop.stride_map is not None:
+        r = apex_loop(Z, z_target, max_strides, strides=loop.strides)
+    else:
+        r = apex_loop(Z, z_target, max_strides, task=loop.env.task, controller=loop.controller)
+        STRIDES[0] += r["apexes"]
+    out = []
+    for i in range(len(Z)):
+        reason = int(r["reason"][i])
+        failure = FAILURES_BY_REASON[reason]
+        phase = PHASES[int(r["phase"][i])] if failure and r["phase"][i] >= 0 else None
+        out.append((bool(r["outcome"][i] == RETURNED), int(r["strides"][i]), failure, phase))
+    return out
+
+
+def task_basins(setup: Setup, *directions) -> dict:
+    """The basins along several (component, sign) ``directions`` at once: their bisections
+    advance together, one batch of closed-loop runs per step (`closed_loop_runs`); each
+    direction's result is `task_basin`'s (``{"basins": [...]}``, in order)."""
+    loop = loop_for(setup)
+    zc, n = setup.z_cl, setup.budget.basin_strides
+    searches = [basin_steps(setup, loop, int(i), int(sign)) for i, sign in directions]
+    return {"basins": run_together(searches, lambda Z: closed_loop_runs(loop, Z, zc, n))}
+
+
+def task_basin(setup: Setup, i: int, sign: int) -> dict:
+    """The basin along component ``i`` with ``sign``: its bisection alone, one
+    `ClosedLoop.run` per step."""
+    loop = loop_for(setup)
+    zc, n = setup.z_cl, setup.budget.basin_strides
+
+    def one(Z):
+        ok, strides, failure = loop.run(Z[0], zc, n)
+        return [(ok, strides, failure, loop.last_phase if failure else None)]
+
+    return run_together([basin_steps(setup, loop, i, sign)], one)[0]

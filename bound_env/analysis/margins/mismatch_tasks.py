@@ -163,6 +163,7 @@ def plant_runs(
         noise=noise,
         delay=spec.delay,
         effort_strides=effort_strides,
+        plants=plants,
     )
     STRIDES[0] += int(r["strides"].sum())
     return {
@@ -301,6 +302,7 @@ def median_interval(values, level: float = 0.95) -> list:
 
 def assemble_mismatch(setup: Setup, res: dict) -> dict:
     """The JSON ``mismatch`` block from the tasks' results (module docstring)."""
+    from .decision_times import summary as decision_summary
     from .stats import crossing_on_grid, mfpt_crossing, mfpt_estimate, wilson_interval
 
     mb, spec = setup.mismatch_budget, setup.mismatch
@@ -315,6 +317,7 @@ def assemble_mismatch(setup: Setup, res: dict) -> dict:
     ]
     out = {
         "spec": spec.to_dict(),
+        "privileged": getattr(setup.controller, "privileged", False) is True,
         "budget": asdict(mb),
         "seeds": mismatch_seeds(setup.seed),
         "plants": [
@@ -375,6 +378,8 @@ def assemble_mismatch(setup: Setup, res: dict) -> dict:
         )
     out["mfpt"] = mfpt
     out["mfpt_strides"] = mb.mfpt_strides
+    # every apex decision of the robots under error (an adaptive controller identifies here)
+    out["decision_times"] = decision_summary(res[j] for j in mismatch_jobs(mb))
     out["mfpt_sigma_100_deg"] = mfpt_crossing(
         [m["sigma_deg"] for m in mfpt],
         [m["mfpt"] for m in mfpt],

@@ -18,7 +18,7 @@ from bound_env.parallel import TasksFailed, open_pool, run_tasks
 
 from ..apex_loop import CLOCK
 from .assemble import assemble, controller_name
-from .basin import BASIN_CAP, BASIN_HI, BASIN_LO, task_basin
+from .basin import BASIN_CAP, BASIN_GROUPS, BASIN_HI, BASIN_LO, task_basin, task_basins
 from .budget import (
     CURVE_SEED,
     DEFAULT_SEED,
@@ -37,6 +37,7 @@ from .closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TO
 from .curve import task_curve
 from .cycle import FD_FLOOR, FD_REL, task_cycle
 from .decision_times import histogram
+from .fingerprint import column_fingerprint
 from .mismatch_tasks import (
     MISMATCH_BUDGETS,
     MISMATCH_SEED,
@@ -58,6 +59,7 @@ CYCLE_RECORD_DT = 1e-3  # sampling of the passive stride for the cycle scale [s]
 TASKS = {
     "cycle": task_cycle,
     "basin": task_basin,
+    "basins": task_basins,
     "curve": task_curve,
     "window": task_window,
     "push": task_push,
@@ -88,6 +90,18 @@ def run_task(setup: Setup, name: str, args: tuple) -> dict:
     return result
 
 
+def basin_results(res: dict) -> dict:
+    """{("basin", (i, sign)): result} of every direction of the ``basins`` tasks in ``res``
+    (a task's error for each of its directions)."""
+    out = {}
+    for (name, args), r in res.items():
+        if name == "basins":
+            each = r["basins"] if "basins" in r else [r] * len(args)
+            for (i, sign), b in zip(args, each, strict=True):
+                out[("basin", (int(i), int(sign)))] = b
+    return out
+
+
 # --------------------------------------------------------------------------------------------
 # Orchestration
 # --------------------------------------------------------------------------------------------
@@ -99,10 +113,11 @@ def task_key(setup_key: str, name: str, args: tuple) -> str:
 
 
 def _run_all(
-    executor, setup: Setup, jobs: list, cache: TaskCache, progress: bool, desc: str
+    executor, setup: Setup, jobs: list, cache: TaskCache, progress: bool, desc: str, counts=None
 ) -> dict:
     """Run (name, args) jobs through the executor, using and filling the cache. A task that
-    raises is reported (key and arguments) without stopping the others; then `TasksFailed`."""
+    raises is reported (key and arguments) without stopping the others; then `TasksFailed`.
+    ``counts`` (a dict) adds up the tasks taken from the cache and those computed."""
     results, tasks = {}, {}
     for name, args in jobs:
         key = task_key(setup.key, name, args)
@@ -111,6 +126,9 @@ def _run_all(
             results[(name, args)] = hit
         else:
             tasks[key] = (run_task, (setup, name, args), (name, args))
+    if counts is not None:
+        counts["cached"] = counts.get("cached", 0) + len(results)
+        counts["computed"] = counts.get("computed", 0) + len(tasks)
 
     def keep(key, res):
         if "error" not in res:
@@ -281,15 +299,12 @@ def compute_margins(
     a `MismatchSpec`) or a list of them: the result then has the key ``mismatch`` too,
     {spec name: its block} (`mismatch_tasks`), each spec's tasks cached under `mismatch_key`.
     """
-    from bound_env.mismatch import as_spec
+    from bound_env.mismatch import as_spec, check_distinct
     from bound_env.params import load_gait
 
     budget = as_budget(budget)
     many = mismatch if isinstance(mismatch, (list, tuple)) else [mismatch]
-    specs = [as_spec(m) for m in many if m is not None]
-    names = [s.name for s in specs]
-    if len(set(names)) < len(names):
-        raise ValueError(f"--mismatch names a spec twice: {names}")
+    specs = check_distinct([as_spec(m) for m in many if m is not None])
     if specs and budget.name not in MISMATCH_BUDGETS:
         raise ValueError(f"--mismatch has budgets {sorted(MISMATCH_BUDGETS)}, got {budget.name!r}")
     if workers < 1:
@@ -313,6 +328,7 @@ def compute_margins(
         key=setup_key(controller, gait, budget, seed, extra_sources),
         seed=seed,
     )
+    fingerprint = column_fingerprint(controller)
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
         if executor is None:
@@ -320,7 +336,9 @@ def compute_margins(
         if out_dir is not None:  # once the pool is up: a refused --scheduler leaves nothing
             out_dir.mkdir(parents=True, exist_ok=True)
         cache = TaskCache(out_dir / "cache.jsonl" if (out_dir is not None and use_cache) else None)
-        cyc = _run_all(executor, setup, [("cycle", ())], cache, False, "cycle")[("cycle", ())]
+        counts: dict = {}
+        cyc = _run_all(executor, setup, [("cycle", ())], cache, False, "cycle", counts)
+        cyc = cyc[("cycle", ())]
         if "error" in cyc:
             raise RuntimeError(f"no closed-loop cycle: {cyc['error']}")
         setup = replace(
@@ -329,7 +347,7 @@ def compute_margins(
             cycle_steps=int(cyc["cycle_steps"]),
             period=float(cyc["period"]),
         )
-        jobs = [("basin", (i, s)) for i in range(6) for s in (1, -1)]
+        jobs = [("basins", group) for group in BASIN_GROUPS]  # bisections in lockstep
         jobs += [("ceiling", (i, s)) for i in range(6) for s in (1, -1)]
         jobs += [("curve", (r,)) for r in budget.curve_sizes]
         jobs += [("terrain", (v,)) for v in budget.terrain_sigmas]
@@ -339,8 +357,9 @@ def compute_margins(
         jobs += [("push", ("xdot", v, j)) for j, v in enumerate(budget.push_xdot)]
         jobs += [("push", ("th1dot", v, j)) for j, v in enumerate(budget.push_th1dot)]
         res = _run_all(
-            executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}"
+            executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}", counts
         )
+        res.update(basin_results(res))
         mm = {}
         for spec in specs:
             mb = MISMATCH_BUDGETS[budget.name]
@@ -354,12 +373,15 @@ def compute_margins(
                 cache,
                 progress,
                 f"mismatch {spec.name} {controller_name(controller)}",
+                counts,
             )
             mm[spec.name] = assemble_mismatch(mm_setup, mm_res)
     result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
+    result["fingerprint"] = fingerprint  # what decided these numbers, before they were made
     if mm:
         result["mismatch"] = mm
     result["seconds"] = time.perf_counter() - t0
+    result["tasks"] = counts  # taken from the cache, computed: the seconds' meaning
     if out_dir is not None:
         write_outputs(result, out_dir)
     return result

@@ -12,6 +12,9 @@
 - `crossing_on_grid`: where a rate first falls below 0.5, interpolated linearly in log x
   between the two grid points around the crossing (r50, sigma50); applied to the rate's
   lower and upper interval bounds it gives the crossing's interval.
+- `crossing_censored`: whether such a crossing lies outside the grid ("below" its first size,
+  "above" its last: only a bound is known), and `x50_text`, which prints it so ("< 0.01",
+  "> 0.4");
 - `mfpt_estimate`: the mean first-passage time (in strides) of a constant per-stride
   failure hazard from censored runs, and its exact Poisson interval;
 - `mfpt_crossing`: where an MFPT curve falls to a level (100 strides), log-log interpolated.
@@ -110,6 +113,31 @@ def crossing_on_grid(xs, rates, level: float = 0.5) -> float:
             return math.exp(math.log(x0) + t * (math.log(x) - math.log(x0)))
         prev = (x, p)
     return float(xs[-1]) if len(xs) else 0.0
+
+
+def crossing_censored(xs, rates, level: float = 0.5) -> str | None:
+    """Is the crossing of `crossing_on_grid` censored? "below": the first size already fails
+    (the crossing is somewhere below it; `crossing_on_grid` says 0), "above": no size fails
+    (somewhere above the last; it says the last size), None: it lies within the grid."""
+    rates = list(rates)
+    if not rates:
+        return None
+    if rates[0] < level:
+        return "below"
+    if all(p >= level for p in rates):
+        return "above"
+    return None
+
+
+def x50_text(value, censored: str | None, xs, fmt: str = ".3g") -> str:
+    """A crossing as text, a censored one as the bound it is: "< xs[0]" or "> xs[-1]"."""
+    if censored == "below":
+        return f"< {format(float(xs[0]), 'g')}"
+    if censored == "above":
+        return f"> {format(float(xs[-1]), 'g')}"
+    if value is None or not math.isfinite(float(value)):
+        return "–"
+    return format(float(value), fmt)
 
 
 def mfpt_estimate(strides_total: int, failures: int, level: float = 0.95) -> dict:

@@ -1,0 +1,1 @@
+"""What every room shares: run configs, policy files and their schema, networks, wrappers."""

@@ -1,0 +1,1 @@
+"""Learning from an expert controller: DAgger students, PPO fine-tuning and residual policies."""

@@ -1,0 +1,199 @@
+"""The recipe of the learned adaptive controller: ``bound-env train --config adaptive``.
+
+A config section with ``algo: adaptive-dagger`` (``configs/adaptive.yaml``) is read into an
+`agents.experts.adaptive.AdaptiveConfig` (`config_from_section`), trained by DAgger
+(`agents.experts.adaptive.train_adaptive`) into ``runs/<name>/`` (`train_from_config`, what
+``bound-env train`` runs for such a section: `train_recipe`), and every policy folder gets a
+``MODEL_CARD.md`` (`model_card`).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from bound_env.cache import atomic_write
+from bound_env.mismatch import as_spec
+
+from .adaptive import AdaptiveConfig, train_adaptive
+
+# --------------------------------------------------------------------------------------------
+# The recipe: ``bound-env train --config adaptive`` (a config section with ``algo:
+# adaptive-dagger``)
+# --------------------------------------------------------------------------------------------
+
+ALGO = "adaptive-dagger"
+_RANDOMIZED = ("bound_env.wrappers.RandomizedPlant", "bound_env.randomized.RandomizedPlant")
+_SECTION_KEYS = ("algo", "env_wrapper", "env_kwargs", "adaptive")
+
+
+def is_dagger_section(hp) -> bool:
+    """A config section of this module (``algo: adaptive-dagger``), not a PPO one."""
+    return isinstance(hp, dict) and hp.get("algo") == ALGO
+
+
+def config_from_section(hp: dict, env_id: str, seed: int, where: str = "config") -> AdaptiveConfig:
+    """The run's `AdaptiveConfig` from a config section (keys `_SECTION_KEYS`):
+
+    - the env id must be a stride env (its step is the one stride map's stride, which the
+      rollouts advance directly);
+    - ``env_wrapper``: `RandomizedPlant` with its ``mismatch`` (the training plants and
+      noise; none: the nominal plant);
+    - ``env_kwargs``: the stride env's gait, basis, K and max_torque, which must be the
+      expert's (its LQR's);
+    - ``adaptive``: any field of `AdaptiveConfig` but ``mismatch`` and ``seed``.
+
+    Every bad key is a one-line ValueError naming it."""
+    from dataclasses import fields
+
+    from bound_env import STRIDE_ENV_IDS
+    from bound_env.control import load_controller as load_classical
+
+    if env_id not in STRIDE_ENV_IDS:
+        raise ValueError(
+            f"{where}: algo {ALGO} trains on a stride env {STRIDE_ENV_IDS}, got {env_id}"
+        )
+    unknown = sorted(set(hp) - set(_SECTION_KEYS))
+    if unknown:
+        raise ValueError(
+            f"{where}: unknown key {unknown[0]!r} for algo {ALGO}; known: {_SECTION_KEYS}"
+        )
+    mismatch = "none"
+    for item in hp.get("env_wrapper") or []:
+        name, kw = (item, {}) if isinstance(item, str) else next(iter(dict(item).items()))
+        if name not in _RANDOMIZED:
+            raise ValueError(
+                f"{where}: env_wrapper {name!r}: algo {ALGO} takes RandomizedPlant only"
+            )
+        kw = kw or {}
+        if set(kw) - {"mismatch"}:
+            raise ValueError(f"{where}: RandomizedPlant takes mismatch only, got {sorted(kw)}")
+        mismatch = str(kw.get("mismatch", "pm5"))
+    as_spec(mismatch)
+    extra = dict(hp.get("adaptive") or {})
+    names = {f.name for f in fields(AdaptiveConfig)} - {"mismatch", "seed"}
+    for key in extra:
+        if key not in names:
+            raise ValueError(f"{where}: adaptive.{key}: unknown; known: {sorted(names)}")
+    if "hidden" in extra:
+        extra["hidden"] = tuple(int(h) for h in extra["hidden"])
+    cfg = AdaptiveConfig(mismatch=mismatch, seed=int(seed), **extra)
+    expert = load_classical(cfg.expert)
+    want = {
+        "gait": expert.gait,
+        "basis": expert.basis.name,
+        "K": expert.basis.K,
+        "max_torque": expert.max_torque,
+    }
+    env_kwargs = dict(hp.get("env_kwargs") or {})
+    for key, value in env_kwargs.items():
+        if key in want and value != want[key]:
+            raise ValueError(
+                f"{where}: env_kwargs.{key} = {value!r}, but the expert {cfg.expert!r} has "
+                f"{want[key]!r}"
+            )
+    return cfg
+
+
+def train_from_config(
+    config, env_id: str, seed: int, name=None, runs_dir="runs", sets=None, progress=True
+) -> Path:
+    """``bound-env train`` of a section with ``algo: adaptive-dagger``: DAgger into
+    ``runs_dir/name`` (default ``adaptive_s<seed>``; resumed when it holds the same settings),
+    with the policy in ``policy/`` and its ``run.json``. Returns the run folder."""
+    from ..common.config import apply_sets, load_hyperparams, resolve_config_path
+    from .distill import write_run_info
+
+    hp = apply_sets(load_hyperparams(config, env_id), sets)
+    cfg = config_from_section(hp, env_id, seed, str(resolve_config_path(config)))
+    run = Path(runs_dir) / (name or f"adaptive_s{seed}")
+    summary = train_adaptive(cfg, run, progress=progress)
+    rounds = summary["rounds"]
+    write_run_info(
+        run / "policy",
+        seed,
+        "bound-env " + " ".join(sys.argv[1:]),
+        summary["seconds"],
+        f"{sum(r['states'] for r in rounds)} apex states in {len(rounds)} DAgger rounds "
+        f"({sum(r['labelled'] for r in rounds)} labelled by the privileged teacher)",
+    )
+    write_model_card(run / "policy")
+    return run
+
+
+def model_card(folder) -> str:
+    """The model card of a policy folder (markdown): the plants and their range, the noise,
+    k, the teacher, the DAgger rounds and apex states, the training time and the validation
+    curve, all read from its ``config.json`` (and ``run.json`` when there is one)."""
+    folder = Path(folder)
+    cfg = json.loads((folder / "config.json").read_text())
+    a = cfg["adaptive"]
+    spec = as_spec(a["mismatch"]).to_dict()
+    ranges = ", ".join(f"{k} ±{d:.0%}" for k, d in spec["params"].items()) or "none (nominal)"
+    noise = sorted(set(spec["noise"].values()))
+    curve = cfg.get("validation_curve", [])
+    run = json.loads((folder / "run.json").read_text()) if (folder / "run.json").is_file() else {}
+    seconds = run.get("wall_time_s", curve[-1]["seconds"] if curve else float("nan"))
+    lines = [
+        f"# Model card: {folder.name}",
+        "",
+        "The learned adaptive controller (`agents.experts.adaptive`): deployable; its teacher "
+        "was privileged.",
+        "",
+        f"- plants: {ranges} (uniform, one plant per episode)",
+        f"- sensor noise: {noise[0]:.0%} of each component's scale" if noise else "- no noise",
+        f"- history: k = {a['k']} strides"
+        + (" plus the episode's means" if a.get("summary") and a["k"] > 0 else ""),
+        f"- teacher: {a['teacher']} (privileged: the expert {a['expert']}'s LQR gain about the "
+        "true plant's nearest cycle, else the MPC planning on the true plant)"
+        if a["teacher"] == "cycle"
+        else f"- teacher: the MPC {a['expert']} planning on the true plant (privileged)",
+        f"- DAgger: {a['rounds']} rounds, {a['episodes_first']} + {a['episodes_round']} per "
+        f"later round episodes of {a['strides']} strides, beta {a.get('beta', 0)}; "
+        f"{sum(r['states'] for r in curve)} apex states "
+        f"({sum(r['labelled'] for r in curve)} labelled)",
+        f"- network: tanh {list(a['hidden'])}, {a['epochs']} epochs per round, seed {a['seed']}",
+        f"- training time: {seconds:.0f} s on {run.get('machine', 'this machine')}",
+        "- selection: the final model (no selection); validation only on seed 777's plants",
+        "",
+        f"Validation curve (hold of {a['val_plants']} {a['val_mismatch']} plants of seed 777 "
+        f"for {a['val_strides']} strides from the nominal z*, the stride map):",
+        "",
+        "| round | states (total) | correction rms (targets') | factor rms | held |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for r in curve:
+        lines.append(
+            f"| {r['round']} | {r['states']} ({r['total']}) | {r['correction_rms']:.3f} "
+            f"({r['target_rms']:.3f}) | {r['factor_rms']:.3f} | "
+            f"{r['validation_hold']}/{r['validation_n']} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def write_model_card(folder) -> Path:
+    """`model_card` written to ``folder/MODEL_CARD.md`` (atomically)."""
+    return atomic_write(Path(folder) / "MODEL_CARD.md", model_card(folder))
+
+
+def train_recipe(args, sets) -> tuple[Path, Path | None]:
+    """``bound-env train`` of a section with ``algo: adaptive-dagger``: the export destination
+    checked first (`agents.experts.distill.check_export`), the run (`train_from_config`), then
+    its policy copied to ``--export-out``. Returns (run folder, export or None)."""
+    from .distill import check_export, export_folder
+
+    for flag, value in (("--seeds", args.seeds), ("--init-from", args.init_from)):
+        if value is not None:
+            raise ValueError(f"{flag}: not for algo {ALGO} (one seed per run)")
+    check_export(args.export, args.force)
+    run = train_from_config(
+        args.config,
+        args.env_id,
+        args.seed,
+        name=args.name,
+        runs_dir=args.runs_dir,
+        sets=sets,
+        progress=not args.no_progress,
+    )
+    return run, (export_folder(run / "policy", args.export) if args.export else None)

@@ -1,0 +1,363 @@
+"""The headline: the results page's first table and the README's (``python -m
+agents.results.headline``).
+
+`headline_numbers` makes the numbers of the `HEADLINE` rows (r50 and the sigma at which the
+MFPT falls to 100 strides, each with its 95 % interval) from the page's columns;
+``bound-env compare --docs docs`` writes them to ``docs/headline.json`` beside
+``docs/MARGINS.md`` and puts their table (`headline_table`) first on the page. This module's
+command puts the same table into README.md, between the markers ``<!-- headline:start -->`` and
+``<!-- headline:end -->``, so that it is regenerated, never edited by hand; ``--check`` only
+says whether the README is up to date (exit 1 if not). tests/test_docs.py checks both tables
+against the JSON.
+
+The page's other JSON beside it, so that every number the docs quote of the page is one value
+of a committed file (`agents.results.numbers`):
+
+- ``columns.json`` (`columns_json`): every column, with each policy's **fingerprint** (what
+  decided its numbers: `bound_env.analysis.margins.fingerprint`, recorded in its
+  ``margins.json`` when it was computed), its r50, the sigma where the MFPT falls to 100
+  strides and sigma50 with their 95 % intervals, its wall time in the run and the tasks it
+  took from the cache; and ``run``: the page run's wall time, workers, load and commit
+  (`run_record`);
+- ``model_error.json`` (`model_error_json`), when the columns were measured under model error
+  (``compare --mismatch``): the page's "Model error" section as numbers
+  (`bound_env.analysis.margins.mismatch_report.mismatch_summary`), each column's
+  fingerprints and the run.
+
+tests/test_page_fingerprints.py checks that every committed column's fingerprint is what its
+controller is now.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+from bound_env.analysis.margins.fingerprint import git_commit
+from bound_env.analysis.margins.stats import t_interval
+from bound_env.cache import atomic_write
+from bound_env.schema import check_keys, load_json_strict
+
+from .formatting import ROOT, num3, rel, value
+
+# The headline table (the page's first table and the README's): (role, column label, what it
+# is). The step-level PPO row is the shipped step-level recipe's column (`step-ppo`: residual
+# PPO on PassiveBound-v0; ppo-v1's plain recipe is the `ppo-v1` column of the full table).
+HEADLINE = (
+    ("passive", "passive", "zero spine torque"),
+    ("lqr", "lqr", "stride-to-stride LQR (classical)"),
+    ("mpc", "mpc", "model-predictive search over the next stride (classical, the teacher)"),
+    (
+        "best learned",
+        "fine-tuned",
+        "`default`: distilled from `mpc`, fine-tuned by PPO (3 seeds; `default` = s0)",
+    ),
+    (
+        "step-level PPO",
+        "step-ppo",
+        "PPO on PassiveBound-v0: a residual on `default`'s torques past its safe radius "
+        "(configs/ppo-residual.yaml, 3 final-model seeds)",
+    ),
+)
+HEADLINE_FILE = "headline.json"  # beside MARGINS.md and paired.json
+
+
+def mfpt_sigma_100_interval(r: dict) -> list:
+    """The Poisson-based interval of one run's ``mfpt_sigma_100_deg``: where the lower and the
+    upper ends of the MFPT's exact Poisson intervals cross 100 strides (log-log interpolated,
+    as the estimate; an unbounded upper end counts as above). The analogue of r50's
+    Wilson-based interval: the sampling error of the robots' runs. None where a bound does not
+    cross on the grid."""
+    from bound_env.analysis.margins.budget import MFPT_LEVEL
+    from bound_env.analysis.margins.stats import mfpt_crossing
+
+    m = r.get("mfpt") or []
+    if not m:
+        return [None, None]
+    sig = [e["sigma_deg"] for e in m]
+    lo = [e["ci"][0] for e in m]
+    hi = [math.inf if e["ci"][1] is None else e["ci"][1] for e in m]
+    # an infinite upper end is "above" for mfpt_crossing only as a huge finite number
+    hi = [1e300 if math.isinf(v) else v for v in hi]
+    no = [False] * len(m)
+    return [mfpt_crossing(sig, lo, no, MFPT_LEVEL), mfpt_crossing(sig, hi, no, MFPT_LEVEL)]
+
+
+def headline_measure(runs, fn, single_interval, single_method) -> dict:
+    vals = [value(fn, r) for r in runs]
+    if len(runs) > 1:
+        ti = t_interval(vals)
+        return {
+            "value": ti["mean"],
+            "low": ti["low"],
+            "high": ti["high"],
+            "interval": f"Student-t over {ti['n']} seeds",
+            "per_seed": vals,
+        }
+    lo, hi = single_interval(runs[0])
+    return {"value": vals[0], "low": lo, "high": hi, "interval": single_method}
+
+
+def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
+    """The headline (`HEADLINE`): per row present among the default-gait columns, r50 and the
+    sigma at which the MFPT falls to 100 strides, each with its 95 % interval (Student-t over
+    seeds; one run: Wilson-based for r50, Poisson-based for the sigma). ``yours``: the labels
+    of a user's own columns (``compare --entry``), each a row after them. What
+    docs/headline.json holds and `headline_table` renders."""
+    rows = []
+    known = {label for _, label, _ in HEADLINE}
+    mine = []
+    for label in yours:
+        g = next((g for g in groups if g["label"] == label), None)
+        if label not in known and g is not None:
+            what = "your column: " + ", ".join(f"`{rel(p)}`" for p in g["policies"])
+            if g["gait"] != "default":
+                what += f" (gait `{g['gait']}`)"
+            mine.append((label, label, what))
+    for role, label, what in (*HEADLINE, *mine):
+        gaits = ("default",) if label in known else (None,)  # a user's column: any gait
+        g = next(
+            (g for g in groups if g["label"] == label and (g["gait"] in gaits or not gaits[0])),
+            None,
+        )
+        if g is None:
+            continue
+        runs = g["runs"]
+        rows.append(
+            {
+                "role": role,
+                "label": label,
+                "what": what,
+                "policies": [rel(p) for p in g["policies"]],
+                "r50": headline_measure(
+                    runs,
+                    lambda r: r["basin_curve"]["r50"],
+                    lambda r: r["basin_curve"].get("r50_ci", [None, None]),
+                    "Wilson-based (the directions' sampling error)",
+                ),
+                "mfpt_sigma_100_deg": headline_measure(
+                    runs,
+                    lambda r: r.get("mfpt_sigma_100_deg"),
+                    mfpt_sigma_100_interval,
+                    "Poisson-based (the robots' sampling error)",
+                ),
+            }
+        )
+    return {"budget": budget, "seed": seed, "rows": rows}
+
+
+def headline_table(head: dict) -> str:
+    """The headline table in Markdown (five columns; one row per `HEADLINE` row present), from
+    the numbers `headline_numbers` made (docs/headline.json): the page's first table and the
+    README's results table are this text."""
+    lines = [
+        "| controller | what it is | r50 [95 % interval] | σ (deg) where MFPT = 100 "
+        "strides [95 % interval] | interval |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for row in head["rows"]:
+        cells = []
+        for key in ("r50", "mfpt_sigma_100_deg"):
+            m = row[key]
+            cells.append(f"{num3(m['value'])} [{num3(m['low'])}, {num3(m['high'])}]")
+        kinds = {row["r50"]["interval"], row["mfpt_sigma_100_deg"]["interval"]}
+        kind = (
+            kinds.pop()
+            if len(kinds) == 1
+            else "r50: Wilson-based; σ: Poisson-based (one run's sampling error)"
+        )
+        name = row["role"] if row["role"] == row["label"] else f"{row['role']} ({row['label']})"
+        lines.append(f"| **{name}** | {row['what']} | {cells[0]} | {cells[1]} | {kind} |")
+    return "\n".join(lines)
+
+
+COLUMNS_FILE = "columns.json"
+MODEL_ERROR_FILE = "model_error.json"
+
+
+def run_record(t0: float, workers: int, scheduler, load_before, groups, command: str) -> dict:
+    """How the page run went: its wall time since ``t0`` (`time.perf_counter`), the workers
+    and scheduler, the machine's load before and after, the tasks its columns took from the
+    cache and computed (a page made from an empty cache computed them all), and the commit."""
+    tasks = {"cached": 0, "computed": 0}
+    for g in groups:
+        for r in g["runs"]:
+            for k in tasks:
+                tasks[k] += int((r.get("tasks") or {}).get(k, 0))
+    commit, dirty = git_commit()
+    return {
+        "wall_seconds": time.perf_counter() - t0,
+        "workers": workers,
+        "scheduler": scheduler,
+        "cores": os.cpu_count(),
+        "machine": platform.machine(),
+        "load_average_before": load_before,
+        "load_average_after": [round(v, 2) for v in os.getloadavg()],
+        "tasks": tasks,
+        "commit": commit,
+        "dirty": dirty,
+        "command": command,
+    }
+
+
+def _fingerprints(g) -> list:
+    return [r.get("fingerprint") for r in g["runs"]]
+
+
+def _sigma50_interval(r: dict) -> list:
+    return list(r.get("terrain_sigma50_ci_deg") or [None, None])
+
+
+def columns_json(groups, budget: str, seed: int, run: dict) -> dict:
+    """``columns.json``: every column's fingerprints and headline measures, and the run."""
+    cols = []
+    for g in groups:
+        runs = g["runs"]
+        tasks = {"cached": 0, "computed": 0}
+        for r in runs:
+            for k in tasks:
+                tasks[k] += int((r.get("tasks") or {}).get(k, 0))
+        cols.append(
+            {
+                "label": g["label"],
+                "gait": g["gait"],
+                "policies": [rel(p) for p in g["policies"]],
+                "fingerprints": _fingerprints(g),
+                "seconds": sum(float(r.get("seconds") or 0.0) for r in runs),
+                "tasks": tasks,
+                "r50": headline_measure(
+                    runs,
+                    lambda r: r["basin_curve"]["r50"],
+                    lambda r: r["basin_curve"].get("r50_ci", [None, None]),
+                    "Wilson-based (the directions' sampling error)",
+                ),
+                "mfpt_sigma_100_deg": headline_measure(
+                    runs,
+                    lambda r: r.get("mfpt_sigma_100_deg"),
+                    mfpt_sigma_100_interval,
+                    "Poisson-based (the robots' sampling error)",
+                ),
+                "terrain_sigma50_deg": headline_measure(
+                    runs,
+                    lambda r: r.get("terrain_sigma50_deg"),
+                    _sigma50_interval,
+                    "Wilson-based (the terrain runs' sampling error)",
+                ),
+            }
+        )
+    return {"budget": budget, "seed": seed, "run": run, "columns": cols}
+
+
+def measured_under_error(groups) -> dict:
+    """{label: first run} of the columns measured under model error."""
+    return {g["label"]: g["runs"][0] for g in groups if g["runs"][0].get("mismatch")}
+
+
+def model_error_json(groups, budget: str, seed: int, run: dict) -> dict | None:
+    """``model_error.json``: the "Model error" section's numbers (paired against lqr where it
+    is a column), the columns' fingerprints and the run; None when no column was measured
+    under model error."""
+    from bound_env.analysis.margins.mismatch_report import mismatch_summary
+
+    measured = measured_under_error(groups)
+    if not measured:
+        return None
+    specs = list(dict.fromkeys(k for r in measured.values() for k in r["mismatch"]))
+    ref = "lqr" if "lqr" in measured else None
+    summary = mismatch_summary(measured, specs=specs, reference=ref)
+    return {
+        "budget": budget,
+        "seed": seed,
+        "reference": summary["reference"],
+        "specs": summary["specs"],
+        "columns": [
+            {
+                "label": g["label"],
+                "gait": g["gait"],
+                "policies": [rel(p) for p in g["policies"][:1]],
+                "fingerprints": _fingerprints(g)[:1],
+            }
+            for g in groups
+            if g["label"] in measured
+        ],
+        "run": run,
+    }
+
+
+START, END = "<!-- headline:start -->", "<!-- headline:end -->"
+README = ROOT / "README.md"
+HEADLINE_JSON = ROOT / "docs" / HEADLINE_FILE
+
+
+# what each row of headline.json holds (`agents.results.compare.headline_numbers`): a measure is its
+# value and 95 % interval (null where it could not be measured) and the interval's kind
+_MEASURE = {"value": (float, None), "low": (float, None), "high": (float, None), "interval": str}
+_ROW = {
+    "role": str,
+    "label": str,
+    "what": str,
+    "r50": _MEASURE,
+    "mfpt_sigma_100_deg": _MEASURE,
+}
+
+
+def load_headline(path: Path = HEADLINE_JSON) -> dict:
+    """docs/headline.json, checked: strict JSON (a NaN or Infinity is refused, so it never
+    reaches the README), ``budget``, ``seed`` and ``rows``, and each row's keys and types
+    (`_ROW`); a one-line ValueError naming the file and the key otherwise."""
+    path = Path(path)
+    head = load_json_strict(path, {"budget": str, "seed": int, "rows": list})
+    for i, row in enumerate(head["rows"]):
+        check_keys(row, _ROW, str(path), f"rows[{i}].")
+    if not head["rows"]:
+        raise ValueError(f"{path}: rows: empty (write it with bound-env compare --docs)")
+    return head
+
+
+def render_block(head: dict) -> str:
+    """The README's block: the markers around the table and the line saying where it is from."""
+    return (
+        f"{START}\n{headline_table(head)}\n\n"
+        f"The **{head['budget']}** budget on the test set (seed {head['seed']}); generated from "
+        f"`docs/{HEADLINE_FILE}` by `python -m agents.results.headline`.\n{END}"
+    )
+
+
+def update_readme(text: str, head: dict) -> str:
+    """``text`` with its headline block replaced (a ValueError if the markers are missing)."""
+    i, j = text.find(START), text.find(END)
+    if i < 0 or j < i:
+        raise ValueError(f"README.md: no {START} ... {END} block")
+    return text[:i] + render_block(head) + text[j + len(END) :]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m agents.results.headline", description=__doc__)
+    ap.add_argument("--json", default=str(HEADLINE_JSON), help="the page's headline.json")
+    ap.add_argument("--readme", default=str(README), help="the README to update")
+    ap.add_argument("--check", action="store_true", help="only check; exit 1 if out of date")
+    args = ap.parse_args(argv)
+    try:
+        head = load_headline(Path(args.json))
+        readme = Path(args.readme)
+        old = readme.read_text()
+        new = update_readme(old, head)
+    except (OSError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    if args.check:
+        print("README.md headline up to date" if new == old else "README.md headline is stale")
+        return 0 if new == old else 1
+    if new != old:
+        atomic_write(readme, new)
+    print(f"wrote {readme}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,112 @@
+"""How each column of the results page was made: its provenance section (`agents.results.page`).
+
+A classical controller says its spec and how its design was chosen (`CLASSICAL_SELECTION`); a
+trained policy its seed, timesteps, wall time, machine, command and whether a checkpoint was
+selected (from its ``run.json`` and ``exported.json``), and its recipe how it was chosen
+(`LEARNED_SELECTION`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from .formatting import ROOT, command_text, rel
+
+# How each shipped classical design was chosen (docs/controllers.md, "Design table"): first on
+# the quick budget with the test seed (its 32 random directions are the first 32 of the test
+# set's: a selection on the test set), then re-chosen by the same criterion on the validation
+# seed 777 (scripts/control_table.py): the same designs.
+CLASSICAL_SELECTION = {
+    "lqr": "its design (8 windows, Q = I, R = 0.1) was **first chosen on the quick budget with "
+    "the test seed** (criterion: largest basin_min, then r50, the slope window, push recovery; "
+    "its 32 random directions are the first 32 of the test set's 256, so that choice saw part of "
+    "the test set), then **re-chosen on the validation seed 777** (seed 777's random "
+    "directions, terrain and push samples, held out from the test set, seed 12345) among the 9 "
+    "designs of the design table (docs/controllers.md): the same design, by a tie-break on r50 "
+    "(0.1465 against 0.1462 for the other 8-window designs, which tie it on basin_min)",
+    "deadbeat": "8 windows over 6: **first chosen on the quick budget with the test seed**, "
+    "then **confirmed on the validation seed 777** by the same criterion (basin_min 4.8x "
+    "against 3.9x the passive's on both; docs/controllers.md's design table)",
+    "damping": "c is the spine's own damper c_c (the trivial baseline), not tuned on these "
+    "yardsticks: no selection",
+    "mpc": "**chosen on the validation seed 777**: its search settings (configs/controllers/"
+    "mpc.yaml) were set before any measurement and kept against 4 variants (a longer horizon, "
+    "a larger library, more cross-entropy rounds, a wider safe radius) on 96 random directions "
+    "of seed 777 at r = 0.15-0.35 (docs/learned.md); its LQR is `lqr`'s design",
+}
+# How a learned recipe was chosen (docs/learned.md, "Selection, on held-out directions only"),
+# said under its column's provenance
+LEARNED_SELECTION = {
+    "finetuned": "recipe **chosen on the validation seed 777** (96 random directions, r = "
+    "0.15-0.35), never on the test set (seed 12345): each seed is PPO (1.5e6 strides) from the "
+    "student distilled by DAgger from `mpc` with the same seed "
+    "(`agents/policies/archive/distilled/sS`); fine-tuning was chosen over the distilled "
+    "students and 1.5e6 strides over 3e5 there; "
+    "the name `default` is seed 0 (no choice among seeds)",
+    "step-ppo": "recipe (configs/ppo-residual.yaml) **chosen on the validation seed 777** "
+    "(agents/runtime/residual.py `validation_curve`: 64 random directions, r = 0.2-0.4), never "
+    "on the test set (seed 12345): step-level PPO on PassiveBound-v0 (`bound-env train --config "
+    "ppo-residual`), a residual on `default`'s interval torques active past its safe radius; "
+    "final models, one per seed",
+    "warm-started": "ppo-v1's recipe (configs/ppo.yaml, 3e6 steps) unchanged, but the actor "
+    "first clones the torques of the shipped `default` (fine-tuned/s0) in the training env "
+    "(`train --init-from default`, agents/training/warmstart.py); final models, nothing chosen "
+    "on any yardstick",
+    "ppo-v1-final": "ppo-v1's recipe (configs/ppo.yaml) unchanged, its final models (the "
+    "archived `ppo-v1` is a checkpoint selected on axis basins, left out here)",
+}
+
+
+def trained(g) -> bool:
+    """Whether every policy of column ``g`` was trained (has a ``run.json``)."""
+    return all((Path(p) / "run.json").is_file() for p in g["policies"])
+
+
+def provenance(g) -> list[str]:
+    """How each controller of a column was made."""
+    lines = []
+    for policy in g["policies"]:
+        if policy == "passive":
+            lines.append("zero spine torque (no controller)")
+            continue
+        p = Path(policy)
+        info_path = p / "run.json"
+        if not info_path.is_file():
+            from ..runtime.policy import CONTROLLERS
+
+            what = CONTROLLERS.get(policy, (None, None))[1]
+            spec = ROOT / "configs" / "controllers" / f"{policy}.yaml"
+            lines.append(
+                f"controller `{policy}`"
+                + (f": {what}" if what else "")
+                + (f"; spec `{rel(str(spec))}`" if spec.is_file() else "")
+                + "; designed, not trained: no seeds; "
+                + CLASSICAL_SELECTION.get(
+                    policy, "whether its spec was tuned on these yardsticks is not recorded here"
+                )
+            )
+            continue
+        info = json.loads(info_path.read_text())
+        t = info.get("wall_time_s")
+        exp_path = p / "exported.json"
+        exp = json.loads(exp_path.read_text()) if exp_path.is_file() else {}
+        if "timesteps" in exp:
+            sel = (
+                f"**selected**: the checkpoint with the best basin validation at "
+                f"{exp['timesteps']} timesteps"
+            )
+        else:
+            sel = "final model, **no selection**"
+        made = info.get("timesteps_done", "?")
+        made = made if isinstance(made, str) else f"{made} timesteps"  # or said in words
+        lines.append(
+            f"`{rel(policy)}`: seed {info.get('seed', '?')}, {made}, "
+            f"{'%.1f min' % (t / 60) if t else '?'} of training on "
+            f"{info.get('machine', '?')}; {sel}; command `{command_text(info.get('command', '?'))}`"
+            + (f" ({info['note']})" if info.get("note") else "")
+        )
+    group = Path(g["policies"][0]).parent.name if g["policies"] else ""
+    if group in LEARNED_SELECTION:
+        lines.append(LEARNED_SELECTION[group])
+    return lines

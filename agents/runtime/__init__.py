@@ -1,0 +1,1 @@
+"""Finding what a ``--policy`` name loads and running it as a controller."""

@@ -1,0 +1,304 @@
+"""A classical adaptive controller: the shipped MPC that identifies its robot and re-designs.
+
+``mpc-adaptive`` (configs/controllers/mpc-adaptive.yaml) sees only what a robot sees: the apex
+states the loop hands it (noisy under sensor noise) and the actions it chose itself. At every
+apex it
+
+1. adds the last stride to its record: the apex state it started from, the interval actions
+   it commanded (its plan's, `bound_env.stride_protocol.interval_actions_of`) and the apex
+   state it reached;
+2. checks how well its current estimate predicted that stride (the innovation, normalized
+   max |z_{k+1} - P(z_k, a_k; f^)|_i / s_i);
+3. re-identifies the eight factors f (`bound_env.control.identify`: maximum a posteriori over
+   the last ``window`` strides through the stride map, prior toward nominal) while it
+   identifies (the first ``identify`` strides, and whenever an innovation exceeds
+   ``trust_error``), unless the innovation is within ``deadband``: on the nominal plant the
+   estimate then never leaves the nominal one, and the controller is the shipped mpc, bit for
+   bit (zero torque on the cycle);
+4. **acts on the estimate only once it has predicted a stride it was not fitted to**: an
+   estimate is trusted when its innovation on the next stride is at most ``trust_error``.
+   Until then the nominal (robust) mpc acts. A trusted estimate that differs from the one the
+   controller was designed on by more than ``redesign`` (max |log f|) gets a new design
+   (`bound_env.control.plant_design`, as the privileged reference on the true plant): the
+   target at the estimated plant's own cycle, the LQR gain there, and the MPC planning on the
+   estimated plant.
+
+The estimate, the record and the design are the episode's: ``reset()`` (called by the loops
+at every start, `bound_env.stride_protocol.reset_controller`) forgets them. Like
+`bound_env.control.offset_free.OffsetFree` it has no stateless ``interval_actions``: the
+loops step it through the env, one robot per copy.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from .. import schema
+from ..mismatch import EIGHT
+from ..stride_protocol import grid_times, interval_actions_of
+from .controllers import OBS_TIME, OBS_Z
+from .identify import PlantIdentifier
+from .plant_design import PlantDesigner
+
+NAME = "mpc-adaptive"
+# settings (spec key ``adaptive``) and their defaults, chosen on the validation plants (seed
+# 777; docs/controllers.md)
+ADAPTIVE_DEFAULTS = {
+    "window": 10,  # strides in the fit
+    "prior": 0.1,  # prior standard deviation of each log factor
+    "sigma": 0.01,  # assumed error of a one-stride prediction (normalized apex units)
+    "identify": 20,  # strides from the start over which it identifies (then: frozen)
+    "trust_error": 0.15,  # an estimate is trusted after predicting a stride this well
+    "trust_strides": 1,  # ... or once it fits at least this many strides
+    "trust_rms": 0.05,  # ... with an rms residual at most this (normalized)
+    "deadband": 1e-5,  # innovations at most this: no update (the nominal plant)
+    "settle": 0.05,  # a trusted estimate is not refitted after innovations at most this
+    "redesign": 0.005,  # a trusted estimate this far (max |log f|) from the design: redesign
+    "iters": 10,  # Levenberg-Marquardt steps per fit (at most)
+    "candidates": 128,  # starting points of the search for the fit's global minimum
+    "search": 4,  # descents from the cheapest of them while the estimate is not trusted
+    "searches": 3,  # searching fits per episode at most (the work per episode is bounded)
+    "delays": 2,  # actuation delays [intervals] the searching fits consider (0 ... delays)
+}
+ADAPTIVE_INTS = ("window", "identify", "iters", "trust_strides", "candidates", "search", "delays")
+ADAPTIVE_LIMITS = {
+    "window": (1, 1000),
+    "prior": (0.0, 10.0),
+    "sigma": (0.0, 10.0),
+    "identify": (0, 100_000),
+    "trust_error": (0.0, 100.0),
+    "trust_strides": (1, 1000),
+    "trust_rms": (0.0, 100.0),
+    "deadband": (0.0, 1.0),
+    "settle": (0.0, 100.0),
+    "redesign": (0.0, 10.0),
+    "iters": (1, 100),
+    "candidates": (0, 65_536),
+    "search": (0, 65_536),
+    "searches": (0, 100_000),
+    "delays": (0, 20),
+}
+
+
+def check_adaptive(value, path) -> dict | None:
+    """The ``adaptive`` block of an mpc spec: ``true`` (the defaults), ``false`` (none) or a
+    mapping of some of `ADAPTIVE_DEFAULTS`, each checked (a one-line ValueError naming the file
+    and the key)."""
+    if value is True:
+        return dict(ADAPTIVE_DEFAULTS)
+    if value is False:
+        return None
+    if not isinstance(value, dict):
+        raise ValueError(
+            f"{path}: adaptive must be true or a mapping of {', '.join(ADAPTIVE_DEFAULTS)}, "
+            f"got {value!r}"
+        )
+    out = dict(ADAPTIVE_DEFAULTS)
+    for key, v in value.items():
+        if key not in ADAPTIVE_DEFAULTS:
+            raise ValueError(
+                f"{path}: unknown key {key!r} in adaptive (allowed: {', '.join(ADAPTIVE_DEFAULTS)})"
+            )
+        lo, hi = ADAPTIVE_LIMITS[key]
+        where = f"{path}: adaptive.{key}"
+        if key in ADAPTIVE_INTS:
+            out[key] = schema.integer(v, where, lo, hi)
+        else:
+            if isinstance(v, str):
+                try:
+                    v = float(v)
+                except ValueError:
+                    raise ValueError(f"{where} must be a number, got {v!r}") from None
+            out[key] = schema.real(v, where, lo, hi, lo_open=key in ("prior", "sigma"))
+    return out
+
+
+class AdaptiveMPC:
+    """The shipped mpc identifying its plant online and re-designing on the estimate (module
+    docstring). ``spec``: an mpc spec (name, path or `ControllerSpec`; default
+    ``mpc-adaptive``); ``gait``: default the spec's; the keyword arguments: `ADAPTIVE_DEFAULTS`
+    (default: the spec's ``adaptive`` block)."""
+
+    stateful = True  # the estimate is the episode's: reset() forgets it
+    privileged = False
+
+    def __init__(self, gait=None, spec=NAME, name: str | None = None, **settings):
+        from . import load_controller
+        from .spec import ControllerSpec, load_spec, weights
+
+        s = spec if isinstance(spec, ControllerSpec) else load_spec(spec)
+        if s.controller != "mpc":
+            raise ValueError(
+                f"{s.path}: an adaptive controller re-designs an mpc spec, got {s.controller!r}"
+            )
+        cfg = dict(s.adaptive or ADAPTIVE_DEFAULTS)
+        if settings:
+            checked = check_adaptive(settings, "AdaptiveMPC")
+            cfg.update({k: checked[k] for k in settings})
+        self.config = cfg
+        s = replace(s, privileged=False, adaptive=None)
+        self.base = load_controller(s, gait)
+        self.name = str(name) if name is not None else (s.name if s.path else NAME)
+        b = self.base
+        self.designer = PlantDesigner(
+            b.lqr, weights(s.path, "Q", s.Q, 6), weights(s.path, "R", s.R, b.basis.K)
+        )
+        self.identifier = PlantIdentifier(
+            b.gait, b.dt, b.max_torque, b.rtol, cfg["prior"], cfg["sigma"], cfg["candidates"]
+        )
+        self._times = grid_times(b.dt)
+        self.decision_seconds: list = []  # every apex decision, identification included
+        self.decision_kinds: list = []
+        self.reset()
+
+    # -- the episode -------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget the robot: the nominal estimate, no stride seen, the shipped mpc acting."""
+        p = len(EIGHT)
+        self.theta = np.zeros(p)  # the current estimate (log factors)
+        self.fit = None
+        self.trusted = False
+        self.designed_theta = np.zeros(p)  # the estimate of the acting design
+        self.design = None
+        self.mpc = self.base
+        self.strides = 0  # strides seen (transitions)
+        self.delay = 0  # the actuation delay [intervals] the fits assume (chosen with them)
+        self.searches = 0  # fits that searched for the global minimum
+        self.innovations: list = []
+        self._record: list = []  # per stride: (z_k, commanded actions, z_{k+1})
+        self._z = None  # the apex the current stride started from
+        self.last_actions = None  # its planned interval actions
+        self._commanded: list = []  # the actions __call__ returned in it (the step protocol)
+
+    @property
+    def factors(self) -> dict:
+        """The current estimate of the eight factors (1.0: nominal)."""
+        return dict(zip(EIGHT, np.exp(self.theta).tolist(), strict=True))
+
+    def applied(self, delay: int, window: int | None = None):
+        """(Z, A, Z1) of the last ``window`` strides, A the interval actions the plant got if
+        the actuation lags ``delay`` intervals: the last ``delay`` actions commanded in the
+        stride before (zero torque before the first), then the stride's own, the last held
+        (the stride map's convention)."""
+        rec = self._record[-window:] if window else self._record
+        first = len(self._record) - len(rec)
+        n = len(self._times)
+        A = np.empty((len(rec), n))
+        for j, (_, c, _) in enumerate(rec):
+            k = first + j
+            prev = self._record[k - 1][1] if k > 0 else np.zeros(max(delay, 1))
+            a = np.concatenate([prev[len(prev) - delay :] if delay else [], c])[:n]
+            A[j, : len(a)] = a
+            A[j, len(a) :] = a[-1]
+        Z = np.array([r[0] for r in rec])
+        Z1 = np.array([r[2] for r in rec])
+        return Z, A, Z1
+
+    def _observe(self, z) -> None:
+        """A stride ended at the apex z: record it, check the estimate, re-identify."""
+        if self._z is None:
+            return
+        cfg = self.config
+        c = np.array(self._commanded) if self._commanded else self.last_actions
+        self._record.append((self._z, np.asarray(c, dtype=float), z))
+        self.strides += 1
+        w = cfg["window"]
+        Z, A, Z1 = self.applied(self.delay, w)
+        e = float(np.max(np.abs(self.identifier.residuals(Z[-1:], A[-1:], Z1[-1:], self.theta))))
+        self.innovations.append(e)
+        if e <= cfg["deadband"]:
+            return
+        good = e <= cfg["trust_error"]
+        if self.fit is not None:  # a fitted estimate met a stride it was not fitted to
+            self.trusted = good
+        settled = self.trusted and e <= cfg["settle"]
+        if self.strides <= cfg["identify"] and not settled:
+            search = 0 if self.trusted or self.searches >= cfg["searches"] else cfg["search"]
+            self.searches += bool(search)
+            # while searching, every delay hypothesis: the cheapest fit wins
+            delays = range(cfg["delays"] + 1) if search and self._commanded else [self.delay]
+            best = None
+            for d in delays:
+                Z, A, Z1 = self.applied(d, w)
+                f = self.identifier.fit(Z, A, Z1, self.theta, cfg["iters"], search)
+                if best is None or f.cost < best[0].cost:
+                    best = (f, d)
+            self.fit, self.delay = best
+            self.theta = self.fit.theta
+            if len(Z) >= cfg["trust_strides"] and self.fit.rms <= cfg["trust_rms"]:
+                self.trusted = True  # enough strides, fitted consistently
+
+    def _redesign(self) -> None:
+        if not self.trusted:
+            return
+        if np.max(np.abs(self.theta - self.designed_theta)) <= self.config["redesign"]:
+            return
+        hint = self.design.z_ref if self.design is not None else None
+        d = self.designer.design(self.identifier.overrides(self.theta), z_hint=hint)
+        b = self.base
+        fb = self.designer.feedback(d, name=b.lqr.name)
+        mpc = replace(b, lqr=fb, decision_seconds=[], decision_kinds=[])
+        mpc.model = self.designer.plant_map(d.overrides, b.rtol, b.segments)
+        self.mpc, self.design, self.designed_theta = mpc, d, self.theta.copy()
+
+    def _decide(self, z) -> np.ndarray:
+        t0 = time.perf_counter()
+        z = np.asarray(z, dtype=float)
+        self._observe(z)
+        self._redesign()
+        u = self.mpc.plan(z)
+        self.decision_kinds.append(self.mpc._kind)
+        self._z = z.copy()
+        b = self.base
+        self.last_actions = interval_actions_of(b.basis, b.max_torque, [u], self._times, b.dt)[0]
+        self._commanded = []
+        self.decision_seconds.append(time.perf_counter() - t0)
+        return u
+
+    # -- the protocol of bound_env.control.controllers ---------------------------------------------
+    gait = property(lambda self: self.base.gait)
+    max_torque = property(lambda self: self.base.max_torque)
+    dt = property(lambda self: self.base.dt)
+    basis = property(lambda self: self.base.basis)
+    env_kwargs = property(lambda self: self.base.env_kwargs)
+    stride_env_kwargs = property(lambda self: self.base.stride_env_kwargs)
+    z_ref = property(lambda self: self.mpc.z_ref)  # the current target
+    snaps_time = True
+
+    def stride_action(self, z) -> np.ndarray:
+        """The action of PassiveBoundStride-v1 at the apex z (one call per stride, in order:
+        each call ends the last stride and starts the next)."""
+        return self._decide(z)
+
+    def on_apex(self, z, time_since_apex: float = 0.0) -> None:
+        self._u = self._decide(z)
+        self._t0 = float(time_since_apex)
+
+    def __call__(self, obs) -> float:
+        t = float(obs[OBS_TIME])
+        if self._z is None:
+            self.on_apex(np.asarray(obs, dtype=float)[list(OBS_Z)], t)
+        t = self._t0 + self.dt * round((t - self._t0) / self.dt)
+        taus = self.basis.torques(self._u, self.max_torque)
+        a = float(np.clip(self.basis.average(taus, t, t + self.dt) / self.max_torque, -1.0, 1.0))
+        self._commanded.append(a)
+        return a
+
+    def apex_torques(self, z) -> np.ndarray:
+        return self.basis.torques(self._decide(z), self.max_torque)
+
+    def settings(self) -> dict:
+        return {**self.base.settings(), "adaptive": dict(self.config)}
+
+    def fingerprint(self) -> str:
+        h = hashlib.sha256(b"adaptive")
+        h.update(self.base.fingerprint().encode())
+        h.update(repr(sorted(self.config.items())).encode())
+        return h.hexdigest()[:16]
+
+    def __repr__(self) -> str:
+        return f"AdaptiveMPC({self.name!r}, strides={self.strides}, trusted={self.trusted})"
