@@ -2,7 +2,7 @@
 give each robot the outcome of its own loop, one robot at a time, for every kind of
 controller (a stride controller through the stride map, a step policy with ``batch``, a
 step-level residual with ``on_apex`` through copies); margins and basin-map run it; margins
-times every apex decision."""
+times every apex decision; every robot starts with a fresh controller state."""
 
 from __future__ import annotations
 

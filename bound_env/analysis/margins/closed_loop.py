@@ -257,7 +257,7 @@ def rough_episodes(loop: ClosedLoop, z0, seeds, max_strides: int) -> dict:
     ``loop.episode(z0, max_strides, seed=seeds[k])`` (the same task, hence ``loop``'s rough
     terrain, and the same slope draws from its own env RNG), all advanced together by the one
     batched loop (`bound_env.analysis.apex_loop.interval_loop`, long episodes), each robot
-    with a fresh controller state (then bit-identical to ``episode``). Returns {"strides":
+    with a fresh controller state (the outcomes of ``episode``, tested). Returns {"strides":
     completed strides per robot, "fell": 0/1 per robot, "failures": {reason: count}}."""
     from gymnasium.utils import seeding
 
