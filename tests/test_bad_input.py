@@ -623,3 +623,28 @@ def test_the_shipped_order_still_composes():
     env = PerturbedStarts(_obs_filter(gym.make("PassiveBound-v1")))  # configs/ppo.yaml's order
     obs, _ = env.reset(seed=0)
     assert obs.shape == (10,) and np.all(np.isfinite(obs))
+
+
+# -- scripts/hold_eval.py ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--strides", "0"], "--strides: must be >= 10"),
+        (["--robots", "-1"], "--robots: must be >= 1"),
+        (["--delta", "1"], "--delta: must be <= 0.99"),
+        (["--delta", "nan"], "--delta: must be finite"),
+        (["--seed", "-1"], "--seed: must be >= 0"),
+        (["--set", "gain=abc"], "--set: gain: not a number"),
+        (["--set", "gain=0"], "--set: gain: must be > 0"),
+        (["--set", "foo=1"], "KEY one of estimator, gain"),
+        (["--set", "estimator=x"], "estimator must be one of"),
+        (["--policy", ""], "a policy must be a name or a path"),
+        (["--table", "x"], "--table: not an integer"),
+        (["--policy", "nope", "--robots", "2", "--strides", "10"], "'nope' does not exist"),
+        (["--gait", "nope", "--robots", "2", "--strides", "10"], "no gait file 'nope'"),
+    ],
+)
+def test_hold_eval_bad_arguments_are_one_line(argv, words, capsys):
+    assert words in usage_error(script("hold_eval").run, argv, capsys)

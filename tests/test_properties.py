@@ -298,6 +298,7 @@ def _script(name: str):
 SCRIPTS = sorted(p.stem for p in (ROOT / "scripts").glob("*.py"))
 TOKENS = st.one_of(
     st.sampled_from(["lqr", "passive", "nope", "", "ppo-v1", "-1", "0", "1", "2", "0.3", "1e9"]),
+    st.sampled_from(["gain=0.5", "gain=abc", "estimator=x", "foo=1", "10", "0.99", "1.0"]),
     st.sampled_from(["nan", "inf", "-inf", "1e400", "12345", "4294967296", "x", "--json"]),
     st.text(max_size=5),
 )
@@ -322,16 +323,25 @@ def test_every_script_parses_arguments_to_one_error_or_a_namespace(name, data, c
         assert e.code == 2 and err and ": error: " in err[-1] and "Traceback" not in "\n".join(err)
         return
     capsys.readouterr()
-    for key, value in vars(args).items():  # every number the parser gives is finite
+    for key, value in vars(args).items():  # every number the parser gives is finite, in range
         for v in value if isinstance(value, list) else [value]:
             if isinstance(v, float):
                 assert math.isfinite(v), (key, v)
-            if key in ("dirs", "workers"):
-                assert v >= 1, (key, v)
-            if key in ("seed",):
-                assert 0 <= v <= 2**32 - 1, (key, v)
-            if key == "sizes":
-                assert 0 < v <= 1, (key, v)
+            if key in RANGES and v is not None:  # None: not given (--table)
+                lo, hi = RANGES[key]
+                assert lo <= v <= hi, (key, v)
+
+
+RANGES = {  # the documented range of each numeric option of the scripts
+    "dirs": (1, 10_000),
+    "workers": (1, 256),
+    "seed": (0, 2**32 - 1),
+    "table": (0, 2**32 - 1),
+    "sizes": (5e-324, 1.0),  # > 0
+    "delta": (0.0, 0.99),
+    "robots": (1, 100_000),
+    "strides": (10, 100_000),
+}
 
 
 @settings(max_examples=max(3, settings().max_examples // 3))
