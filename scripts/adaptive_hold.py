@@ -86,9 +86,9 @@ def privileged_entry(name: str, spec_text: str, seed: int) -> dict:
     from the nominal z*, ``hold_strides`` strides through the one stride map (the step env's
     strides to rounding). ``cycle-teacher``: the adaptive controller's DAgger teacher
     (`agents.experts.adaptive.CycleTeacher`); ``mpc-true-plant``: the shipped mpc planning on
-    the true plant (issue 37's probe); ``cycle-teacher-blindN``: the teacher after N strides of
-    the nominal LQR (what knowing the plant is worth once N strides were played without
-    knowing it). Privileged: never deployable."""
+    the true plant (its planning map built on it); ``cycle-teacher-blindN``: the teacher
+    after N strides of the nominal LQR (what knowing the plant is worth once N strides were
+    played without knowing it). Privileged: never deployable."""
     from agents.experts.adaptive import CycleTeacher, hold_on, privileged_teacher
     from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS, mismatch_seeds
     from bound_env.control import load_controller as classical

@@ -25,8 +25,9 @@ microseconds.
 cycle nearest the nominal one, (z_c, u_c) with z_c = P(z_c, u_c) (`forced_cycle`: the passive
 cycle where the plant has one near z*, else the least-change forced one), u = clip(u_c - G
 (z - z_c), -1, 1) at the true state; where no such cycle is found, the shipped MPC planning
-on the true plant (`privileged_teacher`, issue 37's probe). Unclipped, its plan differs from
-the nominal LQR's by a constant per plant, u_c + G (z_c - z*): what the student has to infer.
+on the true plant (`privileged_teacher`: its planning map built on the true plant).
+Unclipped, its plan differs from the nominal LQR's by a constant per plant,
+u_c + G (z_c - z*): what the student has to infer.
 The student sees only its own apexes (noisy under the ``noise`` preset). The target of a
 state is the teacher's plan minus the LQR's plan at the state the student saw. (A first try
 with the MPC on the true plant as the only teacher, and the distilled student's categorical
