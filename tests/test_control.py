@@ -124,7 +124,7 @@ def test_riccati_without_stabilizing_solution_says_so():
         deadbeat_gain(np.eye(6), np.ones((6, 4)))
 
 
-def test_bad_specs_get_one_line_errors(tmp_path):
+def test_bad_specs_get_one_line_errors(tmp_path, cli):
     def spec(text):
         p = tmp_path / "c.yaml"
         p.write_text(text)
@@ -155,25 +155,11 @@ def test_bad_specs_get_one_line_errors(tmp_path):
     np.testing.assert_array_equal(ctrl.gain, g)
     # the CLI: one line on stderr, exit code 2
     p = spec("controller: lqr\nbogus: 1\n")
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "bound_env.cli",
-            "margins",
-            "--policy",
-            str(p),
-            "--budget",
-            "test",
-            "--no-cache",
-            "--out",
-            str(tmp_path / "m"),
-        ],
-        capture_output=True,
-        text=True,
+    code, _, err = cli(
+        "margins", "--policy", p, "--budget", "test", "--no-cache", "--out", tmp_path / "m"
     )
-    assert r.returncode == 2
-    assert r.stderr.strip().count("\n") == 0 and "unknown key 'bogus'" in r.stderr
+    assert code == 2
+    assert err.strip().count("\n") == 0 and "unknown key 'bogus'" in err
 
 
 def test_phases_basis_and_hats_design():
