@@ -222,8 +222,8 @@ def register(sub) -> None:
         "--mismatch",
         metavar="SPEC",
         help="also measure under model error (JSON key mismatch): a preset (pm5, pm10, pm20, "
-        "all5, all10, all20, noise, noise5, delay1, delay2, none; join with +, e.g. "
-        "pm5+delay1) or a YAML file (bound_env.mismatch); several separated by commas "
+        "pm2.5, pm7.5, pm15, all5, all10, all20, noise, noise5, delay1, delay2, none; join "
+        "with +, e.g. pm5+delay1) or a YAML file (bound_env.mismatch); several separated by commas "
         "(pm5,pm10); quick/full: 32 plants",
     )
     p.add_argument("--json", action="store_true", help="print the JSON result")

@@ -156,11 +156,14 @@ def compare_from_start(policy: str = DEMO_POLICY, gait="default", show_after: in
     a fall), ``failure``, ``mean_abs_tau``: mean |tau| [N m] over the control intervals up to
     the return, ``max_torque`` [N m]); and, under the private keys ``_states`` and ``_dt``,
     the recorded runs (passive, lqr, learned) and the control interval, for the animation."""
+    from bound_env.control.privileged import refuse_privileged
+
     from ..runtime.controllers import ZeroController
     from ..runtime.policy import load_controller
 
     z0, z_star, xi = demo_start(gait)
     ctrl = load_controller(policy, gait=gait)
+    refuse_privileged(ctrl, "be shown as the demo's controller", policy)
     p = _run(ZeroController(), gait, z0, z_star)
     lq = _run(load_controller(DEMO_BASELINE, gait=gait), gait, z0, z_star)
     q = _run(ctrl, gait, z0, z_star, show_after=show_after)

@@ -161,6 +161,11 @@ def columns_table(groups) -> str:
         else g["label"]
         for g in groups
     ]
+    # a privileged column reads the robot's true plant: an upper reference, never deployable
+    labels = [
+        f"{lab} (privileged)" if any(r.get("privileged") for r in g["runs"]) else lab
+        for lab, g in zip(labels, groups, strict=True)
+    ]
     rows = [("gait", [f"`{g['gait']}`" for g in groups])]
     for name, title, fn, digits, ratio in MEASURES:
         rows.append((title, [cell(g, base, name, fn, digits, ratio) for g in groups]))

@@ -100,6 +100,10 @@ def load_base(base: str):
         raise ValueError(f"base {base!r}: not a stride controller (a step-level PPO policy)")
     if not hasattr(ctrl, "on_apex"):
         raise ValueError(f"base {base!r}: not a stride controller (no on_apex)")
+    from bound_env.control.privileged import refuse_privileged
+
+    # a residual policy over a privileged base would read the true plant: never deployable
+    refuse_privileged(ctrl, "be the base of a residual policy", f"base {base}")
     return ctrl
 
 

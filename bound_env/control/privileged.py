@@ -53,6 +53,19 @@ def is_privileged(controller) -> bool:
     return False
 
 
+def refuse_privileged(controller, what: str, name=None) -> None:
+    """ValueError, saying why, if ``controller`` is privileged (`is_privileged`): the tools
+    that ship, deploy or build on a policy (``what``: e.g. "use as a residual's base") call
+    this; the evaluations (margins, compare, rollout) take it, marked."""
+    if is_privileged(controller):
+        label = name if name is not None else getattr(controller, "name", controller)
+        raise ValueError(
+            f"{label!r} is privileged: it reads the robot's true plant, which no robot knows "
+            f"(an upper reference for the model-error tables, never a shipped or deployable "
+            f"policy); it cannot {what}"
+        )
+
+
 class PrivilegedMPC:
     """The shipped MPC planning on, aiming at the cycle of, and with its LQR designed on the
     robot's true plant (module docstring). ``spec``: an mpc spec (name, path or
