@@ -276,7 +276,8 @@ def test_the_search_shortcuts_keep_the_returns_and_do_less():
 
 def test_a_given_up_state_falls_whatever_the_screen_tried():
     """A given-up state: the LQR's plan and every screened library row fall within their
-    first stride, and the plan is the one of them that falls latest."""
+    first stride, each before ``hopeless`` x the nominal period, and the plan is the one of
+    them that falls latest."""
     from bound_env.control.mpc import library
 
     mpc = load_controller("mpc")
@@ -289,7 +290,7 @@ def test_a_given_up_state_falls_whatever_the_screen_tried():
         u_lqr = mpc.lqr.coefficients(z)
         U = library(mpc.basis.K, u_lqr, rng, mpc.n_random, mpc.n_noise, mpc.noise)
         s, outcome, strides = mpc.evaluate(z, U[: mpc.screen])
-        assert np.all((outcome == FELL) & (strides == 0))
+        assert np.all((outcome == FELL) & (strides == 0)) and np.max(s) < mpc.hopeless
         assert np.array_equal(u, U[int(np.argmax(s))])
         return
     pytest.fail("no state of these was given up")
@@ -302,15 +303,17 @@ def test_the_full_search_is_named_as_before():
 
     fast = load_controller("mpc")
     full = replace(fast, early_exit=False, screen=0)
-    assert "early_exit" not in full.settings() and "screen" not in full.settings()
+    assert not {"early_exit", "screen", "hopeless"} & set(full.settings())
     assert fast.settings()["early_exit"] is True and fast.settings()["screen"] == fast.screen
+    assert fast.settings()["hopeless"] == fast.hopeless
     assert fast.fingerprint() != full.fingerprint()
 
 
 @pytest.mark.parametrize(
     "text, message",
     [("early_exit: 1", "early_exit"), ("early_exit: maybe", "early_exit"),
-     ("screen: -1", "screen"), ("screen: 2.5", "screen")],
+     ("screen: -1", "screen"), ("screen: 2.5", "screen"), ("hopeless: 0", "hopeless"),
+     ("hopeless: 1.5", "hopeless")],
 )  # fmt: skip
 def test_bad_search_shortcuts_are_refused(tmp_path, text, message):
     p = tmp_path / "m.yaml"

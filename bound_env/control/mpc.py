@@ -172,8 +172,10 @@ class MPCController:
     # return of the round so far); False: the elites of every round are ranked in full
     early_exit: bool = False
     # > 0: the library's first ``screen`` rows (the LQR's plan first) are tried alone first;
-    # when each of them falls within its first stride the state is given up (their best)
+    # when each of them falls within its first stride, before ``hopeless`` x the nominal
+    # stride period, the state is given up (the plan: the one of them that falls latest)
     screen: int = 0
+    hopeless: float = 0.75
     seed: int = 0
     library_seed: int = -1  # >= 0: the library's random rows are fixed (drawn from this seed)
     decision_seconds: list = field(default_factory=list, repr=False)
@@ -265,8 +267,11 @@ class MPCController:
         s, outcome, strides = self.evaluate(z, U[1:n_a], prune=top)
         s = np.concatenate([s0, s])
         returned = bool(np.any(outcome == RETURNED))
-        if self.screen > 0 and lqr_falls_at_once and np.all((outcome == FELL) & (strides == 0)):
-            self.given_up += 1  # every screened profile falls within the stride: hopeless
+        falls_at_once = lqr_falls_at_once and np.all((outcome == FELL) & (strides == 0))
+        if self.screen > 0 and falls_at_once and float(np.max(s)) < self.hopeless:
+            # every screened profile falls early in the stride (a fall's score: the fraction
+            # of the nominal period survived): hopeless
+            self.given_up += 1
             return U[int(np.argmax(s))]
         if n_a < len(U) and not (self.early_exit and returned):
             s1, outcome, _ = self.evaluate(z, U[n_a:], prune=top)
@@ -343,6 +348,7 @@ class MPCController:
         # the search's shortcuts, named only when on: the full search's settings (and its
         # fingerprint) are what they were before the shortcuts existed
         keys += tuple(k for k in ("early_exit", "screen") if getattr(self, k))
+        keys += ("hopeless",) if self.screen else ()
         return {k: getattr(self, k) for k in keys}
 
     def fingerprint(self) -> str:

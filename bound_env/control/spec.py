@@ -45,6 +45,7 @@ MPC_DEFAULTS = {
     "library_seed": -1,
     "early_exit": False,  # the search's shortcuts (bound_env.control.mpc): off, the full search
     "screen": 0,
+    "hopeless": 0.75,
 }
 MPC_BOOLS = ("early_exit",)
 MPC_INTS = ("horizon", "n_random", "n_noise", "cem_iters", "cem_samples", "cem_elites", "seed")
@@ -63,6 +64,7 @@ MPC_LIMITS = {
     "seed": (0, 2**32 - 1),
     "library_seed": (-1, 2**32 - 1),
     "screen": (0, 10_000),
+    "hopeless": (0.0, 1.0),
 }
 MAX_TORQUE_LIMIT = 1e4  # [N m]: a saturation above this is certainly a mistake
 # |gain| entries in units of the torque limit per apex scale (u = -G_n S dz; the shipped
