@@ -380,18 +380,10 @@ def cmd_train(args) -> int:
         args.env_id = default_env_id(args.config)
     from .common.config import load_hyperparams
 
-    if load_hyperparams(args.config, args.env_id).get("algo") == "adaptive-dagger":
-        from .experts.adaptive_recipe import train_recipe  # DAgger, no PPO
+    if load_hyperparams(args.config, args.env_id).get("algo") == "adaptive-dagger":  # DAgger
+        from .experts.adaptive_recipe import cmd_train_recipe
 
-        run, dest = train_recipe(args, train_sets(args))
-        say(
-            args,
-            f"run {run}  ({time.perf_counter() - t0:.0f} s)"
-            + (f", exported to {dest}" if dest else ""),
-        )
-        if args.json:
-            print(strict_json({"run": str(run), "export": str(dest) if dest else None}))
-        return 0
+        return cmd_train_recipe(args, train_sets(args), say, strict_json, t0)
     if args.seeds is not None:
         return _train_seeds(args, n, t0)
     if args.export:  # refused before training, not after it

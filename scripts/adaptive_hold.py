@@ -1,7 +1,7 @@
 """The hold of ``bound-env margins --mismatch`` alone, for several controllers and specs.
 
     PYTHONPATH=. python scripts/adaptive_hold.py --policy lqr mpc default adaptive/s0 \
-        --mismatch pm10 configs/mismatch/pm15.yaml --seed 12345 --out results.json
+        --mismatch pm10 pm15 --seed 12345 --out results.json
 
 Each (policy, spec) runs the margins' own model-error task ``mm_hold``
 (`bound_env.analysis.margins.mismatch_tasks.task_mm_hold`: the step env, robot i on plant i of

@@ -3,10 +3,11 @@
 **What it is.** A stride controller distilled from a privileged teacher. Its input is not
 only the apex it stands on but also its last ``k`` strides: at apex t it reads
 x_t = (z_t - z*) / s and, for j = 1..k, the apex x_{t-j} it saw, the coefficients u_{t-j} it
-played from there, and the *surprise* of that stride, r_{t-j} = (z_{t-j+1} - z* - A dz_{t-j}
-- B u_{t-j}) / s, the part of the next apex the nominal linear stride map (A, B: the LQR's
-design) did not predict. A robot 10 % off its model shows in the surprise from the first
-stride on. Slots with no stride yet (an episode's start) are zeros with a 0 ``valid`` flag.
+played from there, and the *surprise* of that stride, the part of the next apex the nominal
+linear stride map (A, B: the LQR's design) did not predict,
+r_{t-j} = (z_{t-j+1} - z* - A dz_{t-j} - B u_{t-j}) / s. A robot 10 % off its model shows
+in the surprise from the first stride on. Slots with no stride yet (an episode's start) are
+zeros with a 0 ``valid`` flag.
 
 **Explicit or implicit inference: both, cheaply.** One small tanh MLP (a shared trunk) has two
 linear heads: a correction Delta of the LQR's plan, u = clip(u_lqr(z) + Delta, -1, 1) (K

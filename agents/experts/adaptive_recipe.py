@@ -197,3 +197,20 @@ def train_recipe(args, sets) -> tuple[Path, Path | None]:
         progress=not args.no_progress,
     )
     return run, (export_folder(run / "policy", args.export) if args.export else None)
+
+
+def cmd_train_recipe(args, sets, say, strict_json, t0) -> int:
+    """``bound-env train``'s command for an ``algo: adaptive-dagger`` section (`train_recipe`),
+    reporting as ``train`` does (``say``, ``strict_json`` and the start time ``t0`` are the
+    command line's)."""
+    import time
+
+    run, dest = train_recipe(args, sets)
+    say(
+        args,
+        f"run {run}  ({time.perf_counter() - t0:.0f} s)"
+        + (f", exported to {dest}" if dest else ""),
+    )
+    if args.json:
+        print(strict_json({"run": str(run), "export": str(dest) if dest else None}))
+    return 0
