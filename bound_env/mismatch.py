@@ -404,7 +404,7 @@ def check_distinct(specs, flag: str = "--mismatch") -> list[MismatchSpec]:
         other = seen.get(s.name)
         if other is not None:
             if other.source == s.source:
-                raise ValueError(f"{flag} names the spec {s.source!r} twice")
+                raise ValueError(f"{flag} names a spec twice: {s.source!r}")
             raise ValueError(
                 f"{flag}: {other.source} and {s.source} are both named {s.name!r} (results "
                 "are keyed by name): give one a name: key of its own"

@@ -97,7 +97,7 @@ def test_two_files_of_one_stem_are_both_named(tmp_path):
     # the margins' own check names them too
     with pytest.raises(ValueError, match="soft.yaml and .*soft.yaml are both named"):
         mm.check_distinct([as_spec(a), as_spec(b)])
-    with pytest.raises(ValueError, match="names the spec 'pm5' twice"):
+    with pytest.raises(ValueError, match="names a spec twice: 'pm5'"):
         mm.parse_specs("pm5,pm5")
 
 

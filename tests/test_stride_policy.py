@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from agents.common.config import load_hyperparams, preprocess
+from agents.common.policy_files import write_fingerprint
 from agents.runtime.stride import (
     BASE_FILE,
     STRIDE_ENV_ID,
@@ -47,6 +48,7 @@ def _zero_residual_policy(tmp_path) -> Path:
     VecNormalize(venv, norm_obs=False, norm_reward=True).save(str(run / "vecnormalize.pkl"))
     write_config(run / "config.yaml", STRIDE_ENV_ID, hp, 0)
     write_base(run, venv)
+    write_fingerprint(run)  # as training does at its end
     venv.close()
     return run
 
@@ -110,6 +112,7 @@ def test_numpy_controller_matches_the_network_and_the_wrapper(zero_run, tmp_path
     model.save(run / "model.zip")
     for name in ("config.yaml", BASE_FILE, "vecnormalize.pkl"):
         (run / name).write_bytes((zero_run / name).read_bytes())
+    write_fingerprint(run)  # a policy of its own: its fingerprint (issue 40)
     ctrl = load_stride_policy(run)
     gym.register_envs(bound_env)
     env = StrideControl(gym.make(STRIDE_ENV_ID), base_gain=ctrl.base)
@@ -216,6 +219,7 @@ def test_anchored_policy_keeps_the_cycle_whatever_the_weights(zero_run, tmp_path
     model.save(run / "model.zip")
     for name in ("config.yaml", BASE_FILE, "vecnormalize.pkl"):
         (run / name).write_bytes((zero_run / name).read_bytes())
+    write_fingerprint(run)  # a policy of its own: its fingerprint (issue 40)
     ctrl = load_stride_policy(run)
     assert ctrl.anchored and ctrl.gate_scale > 0
     np.testing.assert_array_equal(ctrl.stride_action(ctrl.z_ref), np.zeros(ctrl.phi.shape[1]))

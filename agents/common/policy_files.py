@@ -325,10 +325,12 @@ def check_policy_files(
       short since the policy was saved (a config cut before ``env_kwargs`` still parses, and
       would evaluate the policy at the env's default max_torque); ``force`` evaluates it as it
       is, with a warning;
-    - a policy of this project's layout with a config but no ``fingerprint.json`` (deleted, or
-      saved before fingerprints): nothing above can be checked, nor ``also`` (what else a
-      caller would check with it, e.g. a residual's base); ``force`` evaluates it as it is,
-      with a warning naming what was not checked.
+    - a policy of this project's layout that rests on a base (a stride residual's
+      ``base.json``, or ``also``: what a caller would check with the fingerprint, e.g. a
+      step-level residual's base controller) but has no ``fingerprint.json`` (deleted, or
+      saved before fingerprints): none of it can be checked, and a swapped base or a shifted
+      reference would go unnoticed; ``force`` evaluates it as it is, with a warning naming
+      what was not checked. Without a base, a missing fingerprint is a warning.
     """
     warnings = []
     if files.config is None and not env_given:
@@ -373,8 +375,8 @@ def check_policy_files(
                         "policy with it as it is"
                     )
                 warnings.append(msg)
-    elif files.layout == "bound_env" and files.config is not None:
-        folder = files.model.parent
+    elif files.layout == "bound_env" and (also or (files.model.parent / "base.json").is_file()):
+        folder = files.model.parent  # it rests on a base: a swapped one would go unnoticed
         unchecked = [f"that vecnormalize.pkl belongs to {files.model.name}"] * bool(
             files.vecnormalize
         )
