@@ -412,8 +412,9 @@ def test_flat_array_layouts_are_contiguous_and_exported():
 
 
 # The longest a module may be, per package: a module longer than that holds more than one
-# concept and is split along them (agents/compare.py was 1,147 lines, agents/stride.py 724)
-MAX_LINES = {"agents": 600, "bound_env": 900}
+# concept and is split along them (agents/compare.py was 1,147 lines, agents/stride.py 724;
+# bound_env/task.py 779 and rescue_env.py 659, split by their jobs: issue 39 asks <= 700)
+MAX_LINES = {"agents": 600, "bound_env": 700}
 
 
 @pytest.mark.parametrize("package", sorted(MAX_LINES))
