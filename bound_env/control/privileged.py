@@ -76,7 +76,7 @@ class PrivilegedMPC:
     stateful = False  # the plant is not an episode's memory: a reset keeps it
 
     def __init__(self, gait=None, spec=NAME, name: str | None = None):
-        from . import load_controller
+        from .build import design_controller
         from .spec import ControllerSpec, load_spec, weights
 
         s = spec if isinstance(spec, ControllerSpec) else load_spec(spec)
@@ -85,7 +85,7 @@ class PrivilegedMPC:
                 f"{s.path}: a privileged controller re-designs an mpc spec, got {s.controller!r}"
             )
         s = replace(s, privileged=False, adaptive=None)
-        self.base = load_controller(s, gait)
+        self.base = design_controller(s, gait)
         self.name = str(name) if name is not None else (s.name if s.path else NAME)
         self.designer = PlantDesigner(
             self.base.lqr,

@@ -217,7 +217,7 @@ def load_spec(spec: str | Path) -> ControllerSpec:
     if not isinstance(out.privileged, bool):
         raise ValueError(f"{path}: privileged must be true or false, got {out.privileged!r}")
     if out.adaptive is not None:
-        from .adaptive import check_adaptive
+        from .adaptive_settings import check_adaptive
 
         out.adaptive = check_adaptive(out.adaptive, path)
     if sum([out.privileged, bool(out.adaptive), out.offset_free is not None]) > 1:

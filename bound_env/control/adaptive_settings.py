@@ -1,0 +1,78 @@
+"""The settings of `bound_env.control.adaptive.AdaptiveMPC` (an mpc spec's ``adaptive``
+block) and their check, apart from the controller so that the spec reader
+(`bound_env.control.spec`) needs nothing of it."""
+
+from __future__ import annotations
+
+from .. import schema
+
+# settings (spec key ``adaptive``) and their defaults, chosen on the validation plants (seed
+# 777; docs/controllers.md)
+ADAPTIVE_DEFAULTS = {
+    "window": 10,  # strides in the fit
+    "prior": 0.1,  # prior standard deviation of each log factor
+    "sigma": 0.01,  # assumed error of a one-stride prediction (normalized apex units)
+    "identify": 20,  # strides from the start over which it identifies (then: frozen)
+    "trust_error": 0.15,  # an estimate is trusted after predicting a stride this well
+    "trust_strides": 1,  # ... or once it fits at least this many strides
+    "trust_rms": 0.05,  # ... with an rms residual at most this (normalized)
+    "deadband": 1e-5,  # innovations at most this: no update (the nominal plant)
+    "settle": 0.05,  # a trusted estimate is not refitted after innovations at most this
+    "redesign": 0.005,  # a trusted estimate this far (max |log f|) from the design: redesign
+    "iters": 10,  # Levenberg-Marquardt steps per fit (at most)
+    "candidates": 128,  # starting points of the search for the fit's global minimum
+    "search": 4,  # descents from the cheapest of them while the estimate is not trusted
+    "searches": 3,  # searching fits per episode at most (the work per episode is bounded)
+    "delays": 2,  # actuation delays [intervals] the searching fits consider (0 ... delays)
+}
+ADAPTIVE_INTS = ("window", "identify", "iters", "trust_strides", "candidates", "search", "delays")
+ADAPTIVE_LIMITS = {
+    "window": (1, 1000),
+    "prior": (0.0, 10.0),
+    "sigma": (0.0, 10.0),
+    "identify": (0, 100_000),
+    "trust_error": (0.0, 100.0),
+    "trust_strides": (1, 1000),
+    "trust_rms": (0.0, 100.0),
+    "deadband": (0.0, 1.0),
+    "settle": (0.0, 100.0),
+    "redesign": (0.0, 10.0),
+    "iters": (1, 100),
+    "candidates": (0, 65_536),
+    "search": (0, 65_536),
+    "searches": (0, 100_000),
+    "delays": (0, 20),
+}
+
+
+def check_adaptive(value, path) -> dict | None:
+    """The ``adaptive`` block of an mpc spec: ``true`` (the defaults), ``false`` (none) or a
+    mapping of some of `ADAPTIVE_DEFAULTS`, each checked (a one-line ValueError naming the file
+    and the key)."""
+    if value is True:
+        return dict(ADAPTIVE_DEFAULTS)
+    if value is False:
+        return None
+    if not isinstance(value, dict):
+        raise ValueError(
+            f"{path}: adaptive must be true or a mapping of {', '.join(ADAPTIVE_DEFAULTS)}, "
+            f"got {value!r}"
+        )
+    out = dict(ADAPTIVE_DEFAULTS)
+    for key, v in value.items():
+        if key not in ADAPTIVE_DEFAULTS:
+            raise ValueError(
+                f"{path}: unknown key {key!r} in adaptive (allowed: {', '.join(ADAPTIVE_DEFAULTS)})"
+            )
+        lo, hi = ADAPTIVE_LIMITS[key]
+        where = f"{path}: adaptive.{key}"
+        if key in ADAPTIVE_INTS:
+            out[key] = schema.integer(v, where, lo, hi)
+        else:
+            if isinstance(v, str):
+                try:
+                    v = float(v)
+                except ValueError:
+                    raise ValueError(f"{where} must be a number, got {v!r}") from None
+            out[key] = schema.real(v, where, lo, hi, lo_open=key in ("prior", "sigma"))
+    return out
