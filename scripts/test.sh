@@ -4,6 +4,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 .venv/bin/ruff check .
-# two processes (pytest-xdist, the dev extra), each test file on one of them: its module
-# fixtures (a training run, the wheel install) are built once (docs/developers.md, "Test tiers")
-.venv/bin/python -m pytest tests -n 2 --dist loadfile "$@"
+# serial; `-n 2 --dist loadfile` (pytest-xdist, the dev extra) halves the time but is not the
+# default yet: docs/developers.md, "Test times"
+.venv/bin/python -m pytest tests "$@"
