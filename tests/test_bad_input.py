@@ -425,7 +425,7 @@ def test_render_only_shows_the_model_error_it_was_asked_for(tmp_path, capsys):
     assert "margins.json: no model-error block 'pm20' (it holds: pm10, pm5)" in err
     assert main([str(a) for a in argv] + ["--mismatch", "pm5"]) == 0, capsys.readouterr().err
     page = (tmp_path / "docs" / "MARGINS.md").read_text()
-    assert "#### pm5" in page and "#### pm10" not in page
+    assert "### pm5" in page and "### pm10" not in page
     # a block of that name measured under another spec (a YAML file named pm5) is refused
     other = tmp_path / "pm5.yaml"
     other.write_text("params: {m1: 0.3}\n")

@@ -322,5 +322,5 @@ def test_compute_margins_refuses_a_spec_twice():
     from agents.runtime.controllers import ZeroController
     from bound_env.analysis.margins import compute_margins
 
-    with pytest.raises(ValueError, match="names the spec 'pm5' twice"):
+    with pytest.raises(ValueError, match="names a spec twice: 'pm5'"):
         compute_margins(ZeroController(), budget="test", mismatch=["pm5", "pm5"])

@@ -55,13 +55,15 @@ ENV_ID = "PassiveBound-v0"  # the env class; the policy's env id only adds its r
 
 def _policy_wrappers(path) -> list:
     """[(class, kwargs)] of the observation/action wrappers in a saved policy's config (none
-    for a distilled choice policy, `agents.experts.distill`: it reads the env's own observation)."""
+    for a distilled choice policy, `agents.experts.distill`, or a learned adaptive controller,
+    `agents.runtime.adaptive_policy`: they read the env's own observation)."""
     import gymnasium as gym
 
     from ..common.config import class_entries, get_class_by_name
+    from .adaptive_policy import POLICY_FILE as ADAPTIVE
     from .choice_policy import POLICY_FILE
 
-    if Path(path).is_dir() and (Path(path) / POLICY_FILE).is_file():
+    if Path(path).is_dir() and any((Path(path) / f).is_file() for f in (POLICY_FILE, ADAPTIVE)):
         return []
     section, _, _ = read_policy_section(find_policy_files(path))
     out = []
