@@ -41,7 +41,7 @@ OTHER = re.compile(
     r"validation|seed\s+777|seeds?\s+20\d\d|seed\s+2024|quick\s+budget|budget\s+quick|"
     r"--budget\s+quick|--budget\s+test|test\s+budget|[Hh]istory|archived|[Tt]he\s+literal\s+reading|"
     r"\b20\d\d-\d\d-\d\d\b|hold_eval|control_table|control_effort|rescue_eval|validation_curve|"
-    r"stride_validation|run\.json|[Aa]blation|earlier\s+(?:version|measure)|own\s+benchmark|measured\s+with\s+margins\s+v2|older\s+page|not\s+shipped|tried",
+    r"stride_validation|adaptive_hold|adaptive_tables|hold_vs_delta|run\.json|[Aa]blation|earlier\s+(?:version|measure)|own\s+benchmark|measured\s+with\s+margins\s+v2|older\s+page|not\s+shipped|tried",
 )
 NUM = r"[+−-]?\d+(?:\.\d+)?"
 NOT_A_COUNT = r"(?!\s?(?:%|strides|directions|plants|seeds|robots|runs|windows))"
