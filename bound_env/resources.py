@@ -105,4 +105,3 @@ def _parsed_yaml(text: str):
     from .schema import yaml_load
 
     return yaml_load(text)
-

@@ -266,9 +266,7 @@ def to_next_apex(
 
 
 @jit
-def strides(
-    Y, AUX, FLAGS, SS, APEXES, OBS, cfg, A, kick_step, kick_index, kick_delta, n_max, out
-):
+def strides(Y, AUX, FLAGS, SS, APEXES, OBS, cfg, A, kick_step, kick_index, kick_delta, n_max, out):
     """`stride` for every robot i of a batch (row i of each array); ``out[i]`` = its six
     returns."""
     for i in range(Y.shape[0]):

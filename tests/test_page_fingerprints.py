@@ -21,10 +21,23 @@ from bound_env.analysis.margins.fingerprint import CHECKED, column_fingerprint, 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 FILES = ("columns.json", "model_error.json")
-REGENERATE = (
-    "bound-env compare --budget full --workers 2 --docs docs --mismatch pm5,pm10 "
-    "(then python -m agents.results.prose and python -m agents.results.headline)"
-)
+PAGE = "bound-env compare --budget full --workers 2 --docs docs"
+REGENERATE = f"{PAGE} (then python -m agents.results.prose and python -m agents.results.headline)"
+
+
+def regenerate_hint() -> str:
+    """How to regenerate each committed file: the command its run recorded (``run.command``;
+    the model-error section is its own `compare --mismatch` run), then the prose."""
+    lines = []
+    for name in FILES:
+        path = DOCS / name
+        run = json.loads(path.read_text()).get("run") or {} if path.is_file() else {}
+        lines.append(f"  docs/{name}: {run.get('command') or PAGE}")
+    return (
+        "regenerate it with the command each file recorded:\n"
+        + "\n".join(lines)
+        + "\n  then python -m agents.results.prose and python -m agents.results.headline"
+    )
 
 
 def committed_columns():
@@ -65,9 +78,7 @@ def _check(rows):
         f"regenerate it: {REGENERATE}"
     )
     stale = stale_columns(rows)
-    assert not stale, "the committed page is stale:\n" + "\n".join(stale) + (
-        f"\nregenerate it: {REGENERATE}"
-    )
+    assert not stale, "the committed page is stale:\n" + "\n".join(stale) + "\n" + regenerate_hint()
 
 
 def test_every_committed_column_is_what_its_controller_is_now():

@@ -514,6 +514,10 @@ def test_killed_client_resumes_with_the_missing_tasks_only(tmp_path, warm_cache)
     full = run(argv[:-3] + ["--out", tmp_path / "full", "--json", "--workers", "2"])
     a, b = json.loads(r.stdout), json.loads(full.stdout)
     a.pop("seconds"), b.pop("seconds")
+    # the runs' records of their work: the resumed one took the killed one's tasks from the cache
+    ta, tb = a.pop("tasks"), b.pop("tasks")
+    assert ta == {"cached": len(keys_before), "computed": len(after) - len(keys_before)}, ta
+    assert tb == {"cached": 0, "computed": len(after)}, tb
     assert a == b
     full_keys = [
         json.loads(line)["key"]

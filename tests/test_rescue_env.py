@@ -409,31 +409,6 @@ def test_plain_sb3_ppo_runs_on_both_versions():
         assert act.shape == (8,) and np.all(np.isfinite(act))
 
 
-@pytest.mark.slow  # 50,000 strides: about 1 min on a free core, several on the shared machine
-def test_plain_ppo_returns_from_more_fixed_starts_after_training():
-    """Plain SB3 PPO from scratch on PassiveBoundRescue-v1 learns: its deterministic policy
-    returns from more of 64 fixed starts (r = 0.1 and 0.15, directions of seed 1, not the
-    validation set's) after 50,000 strides than before training (the untrained policy plays
-    about zero torque, the passive gait, which returns from few of them). The hyperparameters
-    of the shipped section's first version (docs/learned.md: configuration A)."""
-    import torch
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.env_util import make_vec_env
-
-    torch.set_num_threads(1)
-    kw = dict(shaping=0.1, gamma=0.99)
-    venv = make_vec_env(RESCUE_ENV_ID_V1, n_envs=8, seed=0, env_kwargs=kw)
-    policy_kwargs = dict(log_std_init=-3.0, activation_fn=torch.nn.Tanh,
-                         net_arch=dict(pi=[64, 64], vf=[64, 64]))  # fmt: skip
-    model = PPO("MlpPolicy", venv, n_steps=256, batch_size=256, gamma=0.99, seed=0,
-                device="cpu", policy_kwargs=policy_kwargs)  # fmt: skip
-    starts = _fixed_starts(gym.make(RESCUE_ENV_ID_V1).unwrapped)
-    before = _returns(model, starts)
-    model.learn(50_000)
-    after = _returns(model, starts)
-    assert after >= before + 4, (before, after, len(starts))
-
-
 def test_the_shipped_config_section_makes_the_env():
     """configs/ppo-rescue.yaml's section is what `bound-env train --env-id
     PassiveBoundRescue-v0` reads: PPO takes its hyperparameters and its env_kwargs make the

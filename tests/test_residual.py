@@ -15,8 +15,12 @@ from bound_env.control import notify_apex
 
 gym.register_envs(bound_env)
 ENV_KW = dict(
-    gait="default", max_torque=80.0, rtol=1e-8, max_episode_steps=800,
-    tracking_cost_weight=0.0, ctrl_cost_weight=0.0,
+    gait="default",
+    max_torque=80.0,
+    rtol=1e-8,
+    max_episode_steps=800,
+    tracking_cost_weight=0.0,
+    ctrl_cost_weight=0.0,
 )  # fmt: skip  (the ppo-residual task: survival only)
 
 

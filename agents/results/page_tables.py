@@ -192,7 +192,7 @@ def seed_details(groups) -> list[str]:
             + " |"
         )
         details.append(
-            f"<details markdown=\"1\"><summary>per-seed values: {g['label']}</summary>\n\n"
+            f'<details markdown="1"><summary>per-seed values: {g["label"]}</summary>\n\n'
             + "\n".join([dh, ds, *drows])
             + "\n\n</details>"
         )

@@ -233,9 +233,7 @@ def assemble(controller, gait, budget, z_star, cyc, res, scale=None, seed=DEFAUL
         # who decided at the apexes of a gated controller (gate / the LQR's plan / override)
         "decision_shares": {
             "curve": decision_shares(curve),
-            "terrain": decision_shares(
-                terr + [r for key, r in res.items() if key[0] == "mfpt"]
-            ),
+            "terrain": decision_shares(terr + [r for key, r in res.items() if key[0] == "mfpt"]),
         },
         "max_torque": cyc["max_torque"],
         "period": cyc["period"],

@@ -110,9 +110,7 @@ def grown_steps(cap: float, iters: int):
     yields each size to test, is sent whether it held, and returns what `grown_search`
     returns."""
     fails = []
-    search = threshold_steps(
-        min(BASIN_LO, cap / 2), min(BASIN_HI, cap), iters, grow=True, cap=cap
-    )
+    search = threshold_steps(min(BASIN_LO, cap / 2), min(BASIN_HI, cap), iters, grow=True, cap=cap)
     try:
         s = next(search)
         while True:

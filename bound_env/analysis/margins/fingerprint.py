@@ -34,9 +34,16 @@ import numpy as np
 CHECKED = ("config", "constants", "code")  # the parts `stale_parts` compares
 PASSIVE = "passive"  # no controller: zero torque
 DIGITS = 8  # significant digits of a real in `controller_data`
-# attributes that are a controller's record of its use or of its design (its linearization,
-# whose last digits a finite difference amplifies), not the data it acts on
-RUNTIME = frozenset({"decision_seconds", "decision_kinds", "searches", "design"})
+# attributes that are not the data a controller acts on: its record or state of use, its label
+# (``name``: a policy folder's path is spelled per checkout; its weights are data), and what
+# it derived by finite differences from the model (an LQR's ``design``, the offset-free
+# estimator's interval ``model`` and its preconditioner ``P_d``): their last digits, amplified
+# by the difference, differ between a cold and a warm compiler cache. The code and constants
+# that derive them are hashed in ``code`` and ``constants``.
+RUNTIME = frozenset(
+    {"decision_seconds", "decision_kinds", "searches", "given_up", "state", "name"}
+    | {"design", "model", "P_d"}
+)
 
 
 def _held(controller, depth: int = 3) -> list:
