@@ -163,7 +163,10 @@ def main(argv=None) -> int:
     for item in args.set:
         k, _, v = item.partition("=")
         overrides[k] = v if k == "estimator" else float(v)
-    tag = ",".join(f"{k}={v:g}" for k, v in sorted(overrides.items()))
+    # the settings' tag, on the rows of the policies that take them (the '+of' ones)
+    tag = ",".join(
+        f"{k}={v}" if isinstance(v, str) else f"{k}={v:g}" for k, v in sorted(overrides.items())
+    )
     seen = set()
     if args.out is not None and args.out.exists():
         for line in args.out.read_text().splitlines():
@@ -171,27 +174,27 @@ def main(argv=None) -> int:
             if row.get("measure") == MEASURE:
                 seen.add((row["policy"], row["delta"], row["seed"], row.get("set", ""), row["n"]))
     for name in args.policy:
-        ctrl = None
+        ctrl = load(name, args.gait)
+        takes = bool(overrides) and getattr(ctrl, "stateful", False)  # an OffsetFree
+        row_tag = tag if takes else ""
+        if takes:
+            from bound_env.control import OffsetFree
+
+            ctrl = OffsetFree(ctrl.inner, name=ctrl.name, **{**ctrl.settings(), **overrides})
+        elif overrides:
+            print(f"note: {name} is not offset-free: --set does not apply to it", file=sys.stderr)
         for delta in args.delta:
-            key = (name, delta, args.seed, tag, args.robots)
+            key = (name, delta, args.seed, row_tag, args.robots)
             if key in seen:
                 continue
-            if ctrl is None:
-                ctrl = load(name, args.gait)
-                if overrides and getattr(ctrl, "stateful", False):
-                    from bound_env.control import OffsetFree
-
-                    ctrl = OffsetFree(
-                        ctrl.inner, name=ctrl.name, **{**ctrl.settings(), **overrides}
-                    )
             setup = setup_of(
-                ctrl, f"{name}/{tag}", delta, args.robots, args.strides, args.seed, args.gait
+                ctrl, f"{name}/{row_tag}", delta, args.robots, args.strides, args.seed, args.gait
             )
             t0 = time.time()
             res = hold(setup)
             n_held, eff = summary(res)
             print(
-                f"{name:14s} delta={delta:.2f} seed={args.seed} {tag:28s} held {n_held:2d}/"
+                f"{name:14s} delta={delta:.2f} seed={args.seed} {row_tag:28s} held {n_held:2d}/"
                 f"{args.robots}  median tail |tau| {eff:6.2f} N m  ({time.time() - t0:.0f} s)",
                 flush=True,
             )
@@ -202,7 +205,7 @@ def main(argv=None) -> int:
                     "seed": args.seed,
                     "measure": MEASURE,
                     "plant_seed": mismatch_seeds(args.seed)["plants"],
-                    "set": tag,
+                    "set": row_tag,
                     "n": args.robots,
                     "strides": args.strides,
                     "held": n_held,

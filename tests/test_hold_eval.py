@@ -72,3 +72,22 @@ def test_a_row_is_the_margins_hold(tmp_path, capsys):
     with pytest.raises(SystemExit) as bad:  # a one-line usage error, exit 2
         hold_eval.main(["--seed", "-1"])
     assert bad.value.code == 2 and "--seed" in capsys.readouterr().err
+
+
+def test_set_tags_and_changes_only_the_offset_free_rows(tmp_path, capsys):
+    """``--set gain=0.5`` reaches the '+of' policy (its row is tagged, and its torques are not
+    those of the default gain) and not ``lqr``, which has no gain to take: lqr's row is
+    untagged and is the row of a run without ``--set``. ``estimator=`` is a setting too."""
+    hold_eval = _script()
+    argv = ["--policy", "lqr", "lqr-of", "--delta", "0.1", "--seed", "777", "--robots", "3"]
+    argv += ["--strides", "12"]
+    plain, tuned = tmp_path / "plain.jsonl", tmp_path / "tuned.jsonl"
+    assert hold_eval.main([*argv, "--out", str(plain)]) == 0
+    sets = ["--set", "gain=0.5", "estimator=torque"]
+    assert hold_eval.main([*argv, *sets, "--out", str(tuned)]) == 0
+    assert "lqr is not offset-free" in capsys.readouterr().err
+    a = {r["policy"]: r for r in map(json.loads, plain.read_text().splitlines())}
+    b = {r["policy"]: r for r in map(json.loads, tuned.read_text().splitlines())}
+    assert b["lqr"]["set"] == "" and b["lqr-of"]["set"] == "estimator=torque,gain=0.5"
+    assert b["lqr"]["tail_effort"] == a["lqr"]["tail_effort"]
+    assert b["lqr-of"]["tail_effort"] != a["lqr-of"]["tail_effort"]
