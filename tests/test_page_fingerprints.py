@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bound_env.analysis.margins.fingerprint import CHECKED, column_fingerprint, stale_parts
@@ -141,3 +142,32 @@ def test_the_config_ignores_the_last_bits_of_a_design_but_not_a_change():
     assert column_fingerprint(ctrl, commit=False)["config"] == before["config"]
     ctrl.gain = ctrl.gain * (1 + 1e-6)
     assert column_fingerprint(ctrl, commit=False)["config"] != before["config"]
+
+
+def test_a_column_reads_the_same_config_from_any_checkout_and_after_use(tmp_path):
+    """A policy folder loaded by its relative path, by its absolute path or from a copy in
+    another folder (another checkout), and an offset-free controller after it ran (its
+    estimator's state moved), have one config: what a fresh clone reads is what was recorded.
+    A changed weight is another config."""
+    import shutil
+
+    from agents.runtime.policy import load_controller
+
+    rel = "agents/policies/finetuned/s0"
+    copy = tmp_path / "elsewhere" / rel
+    shutil.copytree(ROOT / rel, copy)
+    configs = {
+        column_fingerprint(load_controller(p), commit=False)["config"]
+        for p in (rel, str(ROOT / rel), str(copy))
+    }
+    assert len(configs) == 1
+    of = load_controller("lqr-of")
+    before = column_fingerprint(of, commit=False)["config"]
+    of.state.d += 0.01  # the estimator after three updates on a plant off the model
+    of.state.count += 3
+    assert np.all(of.state.d != 0.0)
+    assert column_fingerprint(of, commit=False)["config"] == before
+    ctrl = load_controller(rel)
+    W, b = ctrl.layers[0]
+    ctrl.layers[0] = (W * (1 + 1e-5), b)
+    assert column_fingerprint(ctrl, commit=False)["config"] not in configs
