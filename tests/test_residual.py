@@ -189,3 +189,39 @@ def test_the_gate_ramps_from_the_safe_radius(base):
     assert g(z)[1] == 1.0 and _Gate(base)(z)[1] == 1.0  # ramp 0: a step
     with pytest.raises(ValueError, match="ramp"):
         ResidualOver(gym.make("PassiveBound-v0", **ENV_KW), ramp=-1.0)
+
+
+def test_act_rows_gives_each_copy_its_own_action(base, monkeypatch):
+    """`ResidualController.act_rows` (the batched loop's one call for all robots) is each
+    copy called alone: exactly the base's action where the gate is closed, the same to
+    rounding where the network acts (one forward pass, each row computed alone); and the
+    batched closed loop through it ends every robot as the row-by-row loop does."""
+    import copy
+
+    ctrl = _residual(base, 1.0)
+    zs = base.z_ref
+    rng = np.random.default_rng(5)
+    d = rng.standard_normal((7, 6))
+    Z = np.vstack([zs, zs + 0.2 * np.abs(zs) * d / np.abs(d).max(axis=1, keepdims=True)])
+    env = gym.make("PassiveBound-v0", **ENV_KW)
+    obs, alone, rows = [], [], []
+    for z in Z:
+        o, _ = env.reset(options={"apex_state": z})
+        for group in (alone, rows):
+            c = copy.deepcopy(ctrl)
+            c.on_apex(z, 0.0)
+            group.append(c)
+        obs.append(o)
+    env.close()
+    obs = np.stack(obs)
+    gates = np.array([c._gate for c in rows])
+    assert gates[0] == 0.0 and (gates[1:] > 0).sum() >= 4  # closed on the cycle, open past it
+    got = ctrl.act_rows(rows, obs)
+    want = np.array([c(o) for c, o in zip(alone, obs, strict=True)])
+    bases = np.array([float(c.base(o)) for c, o in zip(alone, obs, strict=True)])
+    assert got[0] == want[0] == bases[0]
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    assert np.any(np.abs(want[1:] - bases[1:]) > 1e-3)  # the network acts past the radius
+    batched = ClosedLoop(ctrl).run_many(Z[1:], zs, 20)
+    monkeypatch.setattr(ResidualController, "act_rows", None)  # row by row
+    assert ClosedLoop(ctrl).run_many(Z[1:], zs, 20) == batched

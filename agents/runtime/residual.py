@@ -274,6 +274,28 @@ class ResidualController:
         r = self.residual(obs, a0)
         return float(np.clip(a0 + self.scale * self._gate * r, -1.0, 1.0))
 
+    def act_rows(self, copies, obs) -> np.ndarray:
+        """The actions of ``copies`` (copies of this controller, one per robot, each told its
+        own apexes) on their observations ``obs`` (one row each): each copy's ``__call__``,
+        with one forward pass of the network for every gated row (`MLPController.batch`,
+        each row computed alone; equal to the row-by-row actions to rounding)."""
+        n = len(copies)
+        a0, gates = np.empty(n), np.empty(n)
+        for k, c in enumerate(copies):
+            if c._x is None:  # as `__call__`: the observation at a reset is an apex
+                c.on_apex(obs[k][list(OBS_Z)], float(obs[k][OBS_TIME]))
+            a0[k] = float(c.base(obs[k]))
+            gates[k] = c._gate
+        out = a0.copy()
+        on = np.flatnonzero(gates)
+        if on.size:
+            feats = np.stack(
+                [residual_features(obs[k], self.keep, a0[k], copies[k]._x, gates[k]) for k in on]
+            )
+            r = self.net.batch(feats)
+            out[on] = np.clip(a0[on] + self.scale * gates[on] * r, -1.0, 1.0)
+        return out
+
     def fingerprint(self) -> str:
         h = hashlib.sha256(b"residual")
         h.update(self.base.fingerprint().encode())

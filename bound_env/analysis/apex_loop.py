@@ -236,7 +236,9 @@ class _Controllers:
       intervals and actions, to rounding);
     - any other controller: one copy per robot, reset (`reset_controller`: a stateful one,
       e.g. `OffsetFree`, forgets whatever it learned before), called row by row, with
-      ``on_apex`` at the start and at every apex, as a single env calls it.
+      ``on_apex`` at the start and at every apex, as a single env calls it; a controller
+      with ``act_rows(copies, obs)`` acts for all its live copies in one call (a step-level
+      residual policy: one forward pass of its network for every robot).
 
     Every ``on_apex`` is timed into `CLOCK`; the copies' ``decision_kinds`` go, robot by
     robot, into the controller's own record at the end (`close`)."""
@@ -256,12 +258,17 @@ class _Controllers:
         self.copies = None
         self.kinds = getattr(controller, "decision_kinds", None)
         self.n0 = len(self.kinds) if self.kinds is not None else 0
+        self.rows = None
         if not self.batched and self.plans is None:
             self.copies = [copy.deepcopy(controller) for _ in range(n)]
             for i, c in enumerate(self.copies):
                 reset_controller(c)
                 if privileged:
                     c.set_plant(plants[i])
+            # the copies' actions in one call (``act_rows(copies, obs)``: as each copy's
+            # ``__call__`` on its row, to rounding), where the controller offers it
+            rows = getattr(controller, "act_rows", None)
+            self.rows = rows if callable(rows) else None
         self.hook = self.plans is not None or (self.copies is not None and hook)
 
     def apex(self, i: int, z, time_since_apex: float, noise) -> None:
@@ -280,7 +287,12 @@ class _Controllers:
         if self.batched:
             return self.controller.batch(obs)
         a = np.zeros(len(obs))
-        for i in np.flatnonzero(live):
+        idx = np.flatnonzero(live)
+        if self.rows is not None:
+            if idx.size:
+                a[idx] = self.rows([self.copies[i] for i in idx], obs[idx])
+            return a
+        for i in idx:
             a[i] = self.copies[i](obs[i])
         return a
 
