@@ -84,6 +84,29 @@ def mapping(value, where: str, required=(), allowed=None) -> dict:
     return value
 
 
+def settings_block(value, path, block: str, defaults: dict, check_one) -> dict | None:
+    """A spec's settings block ``block``: ``true`` (the defaults), ``false`` (None) or a mapping
+    of some of ``defaults``' keys, each value checked by ``check_one(key, value, where)``
+    (``where`` = ``"{path}: {block}.{key}"``), over the defaults. A one-line ValueError names
+    ``path``, the block and the key."""
+    if value is True:
+        return dict(defaults)
+    if value is False:
+        return None
+    if not isinstance(value, dict):
+        raise ValueError(
+            f"{path}: {block} must be true or a mapping of {', '.join(defaults)}, got {value!r}"
+        )
+    out = dict(defaults)
+    for key, v in value.items():
+        if key not in defaults:
+            raise ValueError(
+                f"{path}: unknown key {key!r} in {block} (allowed: {', '.join(defaults)})"
+            )
+        out[key] = check_one(key, v, f"{path}: {block}.{key}")
+    return out
+
+
 def real_array(
     value,
     where: str,

@@ -49,30 +49,16 @@ def check_adaptive(value, path) -> dict | None:
     """The ``adaptive`` block of an mpc spec: ``true`` (the defaults), ``false`` (none) or a
     mapping of some of `ADAPTIVE_DEFAULTS`, each checked (a one-line ValueError naming the file
     and the key)."""
-    if value is True:
-        return dict(ADAPTIVE_DEFAULTS)
-    if value is False:
-        return None
-    if not isinstance(value, dict):
-        raise ValueError(
-            f"{path}: adaptive must be true or a mapping of {', '.join(ADAPTIVE_DEFAULTS)}, "
-            f"got {value!r}"
-        )
-    out = dict(ADAPTIVE_DEFAULTS)
-    for key, v in value.items():
-        if key not in ADAPTIVE_DEFAULTS:
-            raise ValueError(
-                f"{path}: unknown key {key!r} in adaptive (allowed: {', '.join(ADAPTIVE_DEFAULTS)})"
-            )
-        lo, hi = ADAPTIVE_LIMITS[key]
-        where = f"{path}: adaptive.{key}"
-        if key in ADAPTIVE_INTS:
-            out[key] = schema.integer(v, where, lo, hi)
-        else:
-            if isinstance(v, str):
-                try:
-                    v = float(v)
-                except ValueError:
-                    raise ValueError(f"{where} must be a number, got {v!r}") from None
-            out[key] = schema.real(v, where, lo, hi, lo_open=key in ("prior", "sigma"))
-    return out
+    return schema.settings_block(value, path, "adaptive", ADAPTIVE_DEFAULTS, _adaptive_value)
+
+
+def _adaptive_value(key: str, v, where: str):
+    lo, hi = ADAPTIVE_LIMITS[key]
+    if key in ADAPTIVE_INTS:
+        return schema.integer(v, where, lo, hi)
+    if isinstance(v, str):
+        try:
+            v = float(v)
+        except ValueError:
+            raise ValueError(f"{where} must be a number, got {v!r}") from None
+    return schema.real(v, where, lo, hi, lo_open=key in ("prior", "sigma"))

@@ -231,34 +231,24 @@ def check_offset_free(value, path) -> dict:
     """The ``offset_free`` block: ``true`` (the defaults), ``false`` (none) or a mapping of some of
     ``estimator`` (torque | innovation), ``gain`` (0 < L <= 1), ``deadband`` and ``max_shift``
     (`bound_env.control.offset_free`)."""
-    from .offset_free import ESTIMATORS, OF_DEFAULTS, OF_LIMITS
+    from .offset_free import OF_DEFAULTS
 
-    if value is True:
-        return dict(OF_DEFAULTS)
-    if value is False:
-        return None
-    if not isinstance(value, dict):
-        raise ValueError(
-            f"{path}: offset_free must be true or a mapping of {', '.join(OF_DEFAULTS)}, "
-            f"got {value!r}"
-        )
-    out = dict(OF_DEFAULTS)
-    for key, v in value.items():
-        if key not in OF_DEFAULTS:
-            raise ValueError(
-                f"{path}: unknown key {key!r} in offset_free (allowed: {', '.join(OF_DEFAULTS)})"
-            )
-        if key == "estimator":
-            if v not in ESTIMATORS:
-                raise ValueError(
-                    f"{path}: offset_free.estimator must be one of {ESTIMATORS}, got {v!r}"
-                )
-            out[key] = v
-            continue
-        lo, hi = OF_LIMITS[key]
-        value_ = _positive(path, f"offset_free.{key}", v) if isinstance(v, str) else v
-        out[key] = schema.real(value_, f"{path}: offset_free.{key}", lo, hi, lo_open=key == "gain")
-    return out
+    return schema.settings_block(
+        value, path, "offset_free", OF_DEFAULTS, lambda key, v, _: _offset_free_value(path, key, v)
+    )
+
+
+def _offset_free_value(path, key: str, v):
+    from .offset_free import ESTIMATORS, OF_LIMITS
+
+    where = f"{path}: offset_free.{key}"
+    if key == "estimator":
+        if v not in ESTIMATORS:
+            raise ValueError(f"{where} must be one of {ESTIMATORS}, got {v!r}")
+        return v
+    lo, hi = OF_LIMITS[key]
+    value_ = _positive(path, f"offset_free.{key}", v) if isinstance(v, str) else v
+    return schema.real(value_, where, lo, hi, lo_open=key == "gain")
 
 
 def weights(path, key: str, value, n: int) -> np.ndarray:
