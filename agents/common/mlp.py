@@ -79,6 +79,18 @@ def affine_rows(x, W, b):
     return out
 
 
+def linear_layers(modules) -> list:
+    """The (W, b) of each torch ``Linear`` among ``modules``, in order, as float64 NumPy
+    copies: the layers `mlp_forward` takes."""
+    from torch import nn
+
+    return [
+        (m.weight.detach().double().numpy().copy(), m.bias.detach().double().numpy().copy())
+        for m in modules
+        if isinstance(m, nn.Linear)
+    ]
+
+
 def extract_actor(model, model_path: Path) -> tuple[list, str]:
     """(layers, activation) of an SB3 actor-critic: the hidden layers of
     ``mlp_extractor.policy_net`` plus ``action_net``, as float64 NumPy arrays."""
@@ -87,20 +99,15 @@ def extract_actor(model, model_path: Path) -> tuple[list, str]:
     policy = model.policy
     if type(policy.pi_features_extractor).__name__ != "FlattenExtractor":
         raise ValueError(f"{model_path}: only MLP policies on a flat observation are supported")
-    layers, activation = [], "Identity"
+    activation = "Identity"
     for m in policy.mlp_extractor.policy_net:
         if isinstance(m, nn.Linear):
-            layers.append(
-                (m.weight.detach().double().numpy().copy(), m.bias.detach().double().numpy().copy())
-            )
-        elif type(m).__name__ in ACTIVATIONS:
+            continue
+        if type(m).__name__ in ACTIVATIONS:
             activation = type(m).__name__
         else:
             raise ValueError(f"{model_path}: unsupported layer {m} in the policy network")
-    an = policy.action_net
-    layers.append(
-        (an.weight.detach().double().numpy().copy(), an.bias.detach().double().numpy().copy())
-    )
+    layers = linear_layers([*policy.mlp_extractor.policy_net, policy.action_net])
     if getattr(policy, "squash_output", False):
         raise ValueError(f"{model_path}: squashed (gSDE) policies are not supported")
     return layers, activation

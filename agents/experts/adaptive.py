@@ -72,6 +72,7 @@ from bound_env.mismatch import as_spec, plant_params, plant_values, sample_facto
 from bound_env.params import Z_NAMES
 from bound_env.stride_map import EVAL_RTOL, StrideMap
 
+from ..common.mlp import linear_layers
 from ..common.seeds import VALIDATION_SEED
 
 # The controller half, importable from here
@@ -359,8 +360,7 @@ def fit(F, T, W, Y, cfg: AdaptiveConfig, log=print):
         f"[adaptive] fit: {n} states ({int(lab.sum())} labelled), correction rms {rms:.3f} "
         f"(targets' {spread:.3f}), factor rms {err:.3f} (units of the range; 0.577 = none)"
     )
-    lin = [m for m in net if isinstance(m, torch.nn.Linear)]
-    layers = [(m.weight.detach().double().numpy(), m.bias.detach().double().numpy()) for m in lin]
+    layers = linear_layers(net)
     return layers, mu, sd, {"correction_rms": rms, "target_rms": spread, "factor_rms": err}
 
 

@@ -44,6 +44,7 @@ from bound_env.rescue_env import sample_starts  # noqa: F401  (moved there; re-e
 from bound_env.stride_map import EVAL_RTOL, StrideMap
 
 from ..common.learn_config import DistillConfig  # noqa: F401 - importable from here as before
+from ..common.mlp import linear_layers
 from ..common.seeds import VALIDATION_SEED  # noqa: F401 - importable from here as before
 
 # The loader half (the student as a controller), importable from here as before
@@ -167,8 +168,7 @@ def fit(X, G, cfg: DistillConfig, scales, z_ref, log=print):
         pick = net(x).argmax(dim=1)
         acc = float(g[torch.arange(n), pick].float().mean())
     log(f"[distill] fit: {n} states, loss {total / n:.3f}, picks a good row on {acc:.1%}")
-    lin = [m for m in net if isinstance(m, torch.nn.Linear)]
-    return [(m.weight.detach().double().numpy(), m.bias.detach().double().numpy()) for m in lin]
+    return linear_layers(net)
 
 
 def distill(cfg: DistillConfig, out_dir: Path, progress: bool = True) -> dict:

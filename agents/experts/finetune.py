@@ -36,6 +36,7 @@ from bound_env.cache import atomic_write
 from bound_env.wrappers import LibraryActions
 
 from ..common.learn_config import FinetuneConfig
+from ..common.mlp import linear_layers
 from ..common.policy_files import source_name
 from ..runtime.choice_policy import ChoicePolicyController, load_choice_policy, save_policy
 
@@ -153,11 +154,7 @@ def _copy_actor(model, layers) -> None:
 
 
 def _actor_layers(model) -> list:
-    import torch
-
-    lin = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
-    lin.append(model.policy.action_net)
-    return [(m.weight.detach().double().numpy(), m.bias.detach().double().numpy()) for m in lin]
+    return linear_layers([*model.policy.mlp_extractor.policy_net, model.policy.action_net])
 
 
 def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -> dict:
