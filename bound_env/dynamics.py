@@ -49,7 +49,11 @@ from .params import (  # A_* and N_AUX are re-exported from here
     P_TAU,
 )
 
-jit = nb.njit(cache=True, fastmath={"contract", "arcp", "nsz", "reassoc"}, error_model="numpy")
+# No fast-math: with ``reassoc``/``contract`` LLVM may reorder sums and fuse multiply-adds
+# differently when a function is compiled with its callers than when it is loaded from the
+# cache, so the last bits of a stride depended on the cache's history (docs/developers.md,
+# "Same commit, same numbers"). IEEE arithmetic in source order rounds the same everywhere.
+jit = nb.njit(cache=True, error_model="numpy")
 
 
 def make_aux(p: np.ndarray, back_stance=False, front_stance=False, x_toe_b=0.0, x_toe_f=0.0):

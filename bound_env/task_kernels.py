@@ -180,9 +180,9 @@ def observe(y, aux, flags, time_since_apex, cfg, out):
         out[j - k0] = lo if not x >= lo else (hi if x > hi else x)  # NaN -> lo
 
 
-# Reward arithmetic is compiled without fast-math, so that it rounds the same in every caller
-# (fast-math lets the compiler reorder sums differently in the serial and the threaded kernel).
-strict_jit = nb.njit(cache=True, error_model="numpy")
+# Kept as a name for its importers: every kernel now compiles without fast-math (`jit`), so the
+# reward rounds the same in the serial and the threaded kernel, and from a cold or warm cache.
+strict_jit = jit
 
 
 @strict_jit
@@ -340,9 +340,7 @@ def step_batch(Y, AUX, FLAGS, S, APEX, OBS, cfg, actions, active):
             step_env(Y[i], AUX[i], FLAGS[i], S[i], APEX[i], OBS[i], cfg, actions[i])
 
 
-@nb.njit(
-    cache=True, parallel=True, fastmath={"contract", "arcp", "nsz", "reassoc"}, error_model="numpy"
-)
+@nb.njit(cache=True, parallel=True, error_model="numpy")
 def step_batch_parallel(Y, AUX, FLAGS, S, APEX, OBS, cfg, actions, active):
     """`step_batch` with the robots spread over Numba's threads."""
     for i in nb.prange(Y.shape[0]):
