@@ -2,12 +2,14 @@
 
 The repository's root (`ROOT`), a path relative to it (`rel`), a number to a few significant
 digits (`fmt`, `num3`), one measure of one result (`value`: NaN where the result lacks it)
-and several seeds' values as mean [95 % Student-t interval] (`agg`).
+and several seeds' values as mean [95 % Student-t interval] (`agg`); a value written in
+the form of a text that quotes it (`render_like`, for `agents.results.numbers`'s data blocks).
 """
 
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 from bound_env.analysis.margins.stats import bounded_t_interval, t_interval
@@ -68,3 +70,34 @@ def rel(p: str) -> str:
         return str(Path(p).resolve().relative_to(ROOT))
     except ValueError:
         return p
+
+
+DATA_UNITS = {"ms": 1e3, "us": 1e6, "min": 1 / 60, "pct": 100.0, "k": 1e-3}
+NUMBER_TEXT = re.compile(r"^(?P<sign>[+−-]?)\d+(?:\.(?P<dec>\d+))?(?P<exp>e[+-]?\d+)?$")
+
+
+def render_like(v, text: str, unit: str = "") -> str:
+    """``v`` written in the form of ``text``: ``k/n`` for a count of held plants, else a number
+    with as many decimals (and the sign, the exponent) as ``text`` shows."""
+    if isinstance(v, dict):
+        k = v.get("k", v.get("held"))
+        if isinstance(k, int) and isinstance(v.get("n"), int):
+            return f"{k}/{v['n']}"
+        raise TypeError(f"an item, not a number or a count k/n ({sorted(v)[:6]})")
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise TypeError(f"not a number: {v!r}")
+    if unit:
+        if unit not in DATA_UNITS:
+            raise ValueError(f"unit {unit!r}: not one of {', '.join(DATA_UNITS)}")
+        v = v * DATA_UNITS[unit]
+    m = NUMBER_TEXT.match(text.strip())
+    if not m:
+        raise ValueError(f"the text {text!r} is not a number to compare with {v!r}")
+    dec = len(m.group("dec") or "")
+    out = f"{v:.{dec}e}" if m.group("exp") else f"{v:.{dec}f}"
+    if m.group("exp"):  # 1.3e-11, as written (no zero-padded exponent)
+        mant, exp = out.split("e")
+        out = f"{mant}e{int(exp)}"
+    if m.group("sign") == "+" and v >= 0:
+        out = "+" + out
+    return out.replace("-", "−") if "−" in text else out

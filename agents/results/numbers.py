@@ -25,6 +25,15 @@ The sources (`Sources`, each in ``docs/``): ``headline.json`` (the headline's ro
 fingerprint; the page's run), ``paired.json`` (the paired differences and the fair decision
 times), ``model_error.json`` (the page's model-error section) and ``timings.json`` (the
 measured speed of the env's step and of the basin maps, `benchmarks/`).
+
+Any other committed data file is bound by its name and a key path: ``<!-- n:data(FILE,PATH)
+-->TEXT<!-- /n -->`` (or ``data(FILE,PATH,UNIT)``), FILE one of ``docs/*.json``,
+``docs/*.jsonl``, ``docs/data/*.json``, ``docs/data/*.jsonl`` (relative to ``docs/``), PATH its
+keys joined by dots, a list's item by its index or by ``[field=value;field=value]`` (the one
+item, or JSON-lines row, whose fields have those values), e.g.
+``data(data/hold_vs_delta.json,columns.mpc.rows[delta=0.1].effort_median)``. TEXT keeps the
+form it is written in (`formatting.render_like`: decimals, exponent, sign; ``k/n``), UNIT
+scales the value first (``ms``, ``us``, ``min``, ``pct``, ``k``).
 """
 
 from __future__ import annotations
@@ -33,7 +42,7 @@ import json
 import re
 from pathlib import Path
 
-from .formatting import ROOT, num3
+from .formatting import ROOT, num3, render_like
 
 INLINE = re.compile(r"<!-- n:(?P<key>[^>]*?) -->(?P<text>.*?)<!-- /n -->", re.S)
 KEY = re.compile(r"^(?P<q>[a-z0-9_]+)\((?P<args>[^()]*)\)$")
@@ -135,6 +144,26 @@ class Sources:
             self._fail("model_error", f"specs[name={spec!r}].rows[column={label!r}].delta_r50")
         return d
 
+    def data(self, name: str):
+        """``docs/NAME`` (`DATA_FILE`): its JSON, or for JSON lines the list of its rows."""
+        if not DATA_FILE.match(name):
+            raise ValueError(f"{name}: not a data file of docs/ (docs/[data/]NAME.json[l])")
+        key = f"data:{name}"
+        if key not in self._cache:
+            path = self.docs / name
+            try:
+                text = path.read_text()
+                if name.endswith(".jsonl"):
+                    data = [json.loads(line) for line in text.splitlines() if line.strip()]
+                else:
+                    data = json.loads(text)
+            except FileNotFoundError:
+                raise ValueError(f"{path}: missing") from None
+            except (OSError, json.JSONDecodeError) as e:
+                raise ValueError(f"{path}: not JSON ({e})") from None
+            self._cache[key] = data
+        return self._cache[key]
+
     def timing(self, section: str, *keys: str) -> float:
         t = self._load("timings").get(section)
         for k in keys:
@@ -145,6 +174,97 @@ class Sources:
         if not isinstance(t, (int, float)) or isinstance(t, bool):
             self._fail("timings", ".".join((section, *keys)))
         return float(t)
+
+
+DATA_FILE = re.compile(r"^(?:data/)?[A-Za-z0-9_.-]+\.jsonl?$")
+PATH_PART = re.compile(r"\[(?P<sel>[^\]]*)\]|(?P<key>[^.\[\]]+)")
+
+
+def _matches(item, conditions: list[tuple[str, str]]) -> bool:
+    """Whether the mapping ``item`` has each field of ``conditions`` at its value."""
+    if not isinstance(item, dict):
+        return False
+    for field, want in conditions:
+        have = item.get(field)
+        if isinstance(have, (int, float)) and not isinstance(have, bool):
+            try:
+                if float(want) != float(have):
+                    return False
+            except ValueError:
+                return False
+        elif str(have) != want:
+            return False
+    return True
+
+
+def data_lookup(data, path: str):
+    """The item of ``data`` at ``path``; a KeyError naming the part that is not there."""
+    pos, seen = 0, ""
+    path = path.strip()
+    while pos < len(path):
+        if path[pos] == ".":
+            pos += 1
+            continue
+        m = PATH_PART.match(path, pos)
+        if not m:
+            raise KeyError(f"{path}: cannot read at {path[pos:]!r}")
+        pos, part = m.end(), m.group(0)
+        seen += part if part.startswith("[") or not seen else "." + part
+        if m.group("sel") is not None:
+            conds = [c.split("=", 1) for c in m.group("sel").split(";")]
+            if any(len(c) != 2 for c in conds) or not isinstance(data, list):
+                raise KeyError(f"{seen}: a selector [field=value;...] of a list")
+            found = [x for x in data if _matches(x, [(f.strip(), v.strip()) for f, v in conds])]
+            if len(found) != 1:
+                raise KeyError(f"{seen}: {len(found)} items match, not one")
+            data = found[0]
+        elif isinstance(data, list) and part.isdigit() and int(part) < len(data):
+            data = data[int(part)]
+        elif isinstance(data, dict) and part in data:
+            data = data[part]
+        else:
+            raise KeyError(f"{seen}: missing")
+    return data
+
+
+def _data(s: Sources, name: str, path: str, unit: str = "", text: str = "") -> str:
+    try:
+        return render_like(data_lookup(s.data(name), path), text, unit)
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"docs/{name}: {e.args[0]}") from None
+
+
+HOLD_EVAL_SEEDS = (2026, 2027, 2028)  # scripts/hold_eval.py's test seeds, pooled
+
+
+def _hold_eval_rows(s: Sources, policy: str, delta: str) -> list[dict]:
+    rows = [
+        r
+        for r in s.data("hold_eval.jsonl")
+        if r.get("policy") == policy and r.get("delta") == float(delta) and not r.get("set")
+        and r.get("measure") == "mm_hold" and r.get("seed") in HOLD_EVAL_SEEDS
+    ]  # fmt: skip
+    if sorted(r["seed"] for r in rows) != list(HOLD_EVAL_SEEDS):
+        raise KeyError(f"hold_eval.jsonl: [policy={policy};delta={delta}] on {HOLD_EVAL_SEEDS}")
+    return rows
+
+
+def _hold_eval_torque(s: Sources, policy: str, delta: str) -> str:
+    import numpy as np
+
+    rows = _hold_eval_rows(s, policy, delta)
+    eff = [e for r in rows for e, h in zip(r["tail_effort"], r["held"], strict=True) if h]
+    return f"{float(np.median(eff)):.2g}"
+
+
+def _hold_eval_table(s: Sources) -> str:
+    """``scripts/hold_eval.py --table 2026 2027 2028`` of ``docs/hold_eval.jsonl``."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("hold_eval", ROOT / "scripts/hold_eval.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return "\n\n" + mod.table(s.docs / "hold_eval.jsonl", list(HOLD_EVAL_SEEDS)) + "\n\n"
 
 
 def _interval(m: dict, fmt=num3) -> str:
@@ -276,6 +396,11 @@ QUANTITIES = {
             f"{_signed(s.model_error_pair(c, m)['high'])}]"
         ),
     ),
+    "holdevaltorque": (
+        2,
+        "median mean |τ| of the held plants, scripts/hold_eval.py's test seeds pooled [N m]",
+        _hold_eval_torque,
+    ),
     "pagemin": (0, "the page's wall time [min]", lambda s: f"{s.run()['wall_seconds'] / 60:.1f}"),
     "pageworkers": (0, "the page run's workers", lambda s: str(s.run()["workers"])),
     "basinmap": (
@@ -368,14 +493,22 @@ TABLES = {
     "mismatch-presets": _presets,  # bound_env.mismatch.PRESETS, from the code
     "model-error-run": _model_error_run,  # how model_error.json was made
     "model-error": _model_error_tables,  # the page's model-error section, from its JSON
+    "hold-eval": _hold_eval_table,  # scripts/hold_eval.py's table of docs/hold_eval.jsonl
 }
 
 
 def parse_key(key: str) -> tuple[str, list[str]]:
     """(quantity, arguments) of a block's key; a ValueError naming the key otherwise."""
     m = KEY.match(key.strip())
+    if m and m.group("q") == "data":  # data(FILE,PATH[,UNIT]): bound to a named data file
+        args = [a.strip() for a in m.group("args").split(",")]
+        if len(args) not in (2, 3) or not DATA_FILE.match(args[0]) or not args[1]:
+            raise ValueError(f"<!-- n:{key} -->: data takes (FILE,PATH[,UNIT]), FILE in docs/")
+        return "data", args
     if not m or m.group("q") not in QUANTITIES:
-        raise ValueError(f"<!-- n:{key} -->: not a quantity ({', '.join(sorted(QUANTITIES))})")
+        raise ValueError(
+            f"<!-- n:{key} -->: not a quantity (data, {', '.join(sorted(QUANTITIES))})"
+        )
     args = [a.strip() for a in m.group("args").split(",")] if m.group("args").strip() else []
     if len(args) != QUANTITIES[m.group("q")][0]:
         raise ValueError(
@@ -384,11 +517,17 @@ def parse_key(key: str) -> tuple[str, list[str]]:
     return m.group("q"), args
 
 
-def value(key: str, sources: Sources) -> str:
-    """The text of the block ``key`` from ``sources`` (a ValueError naming what is missing)."""
+def value(key: str, sources: Sources, text: str = "") -> str:
+    """The text of the block ``key`` from ``sources`` (a ValueError naming what is missing);
+    a ``data`` block's in the form of its ``text``."""
     q, args = parse_key(key)
     try:
-        text = QUANTITIES[q][2](sources, *args)
+        if q == "data":
+            text = _data(sources, *args, text=text)
+        else:
+            text = QUANTITIES[q][2](sources, *args)
+    except ValueError as e:
+        raise ValueError(f"<!-- n:{key} -->: {e}") from None
     except (KeyError, TypeError, ZeroDivisionError, AttributeError, IndexError) as e:
         raise ValueError(f"<!-- n:{key} -->: a malformed value in the JSON ({e!r})") from None
     if "nan" in text or "inf" in text:
@@ -420,7 +559,10 @@ def update_text(text: str, sources: Sources, where: str = "", errors: list | Non
 
     text = INLINE.sub(
         lambda m: fill(
-            m, lambda: value(m.group("key"), sources), f"<!-- n:{m.group('key')} -->", "<!-- /n -->"
+            m,
+            lambda: value(m.group("key"), sources, m.group("text")),
+            f"<!-- n:{m.group('key')} -->",
+            "<!-- /n -->",
         ),
         text,
     )
@@ -449,10 +591,10 @@ def stale_blocks(text: str, sources: Sources) -> list[str]:
             out.append(f"table:{m.group('name')}: not the table its source gives")
     for m in INLINE.finditer(text):
         try:
-            v = value(m.group("key"), sources)
+            v = value(m.group("key"), sources, m.group("text"))
         except ValueError as e:
             out.append(str(e))
             continue
         if v != m.group("text"):
-            out.append(f"n:{m.group('key')}: {m.group('text')!r}, the JSON says {v!r}")
+            out.append(f"n:{m.group('key')}: {m.group('text')!r}, its source says {v!r}")
     return out
