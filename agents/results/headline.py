@@ -328,11 +328,21 @@ def render_block(head: dict) -> str:
     )
 
 
-def update_readme(text: str, head: dict) -> str:
-    """``text`` with its headline block replaced (a ValueError if the markers are missing)."""
+def update_readme(text: str, head: dict, where: str = "README.md") -> str:
+    """``text`` with its headline block replaced: a ValueError naming ``where`` unless it
+    holds exactly one ``START`` and one ``END`` after it (a lost marker, or a second block,
+    would have the rewrite cut the text between them, or leave a stale copy)."""
+    starts, ends = text.count(START), text.count(END)
+    if not starts and not ends:
+        raise ValueError(f"{where}: no {START} ... {END} block")
+    if starts != 1 or ends != 1:
+        raise ValueError(
+            f"{where}: {starts} {START} and {ends} {END} markers (one block of each expected; "
+            "a lost or doubled marker: mend it by hand)"
+        )
     i, j = text.find(START), text.find(END)
-    if i < 0 or j < i:
-        raise ValueError(f"README.md: no {START} ... {END} block")
+    if j < i:
+        raise ValueError(f"{where}: {END} before {START}")
     return text[:i] + render_block(head) + text[j + len(END) :]
 
 
@@ -346,7 +356,7 @@ def main(argv=None) -> int:
         head = load_headline(Path(args.json))
         readme = Path(args.readme)
         old = readme.read_text()
-        new = update_readme(old, head)
+        new = update_readme(old, head, str(readme))
     except (OSError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

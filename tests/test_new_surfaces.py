@@ -1,0 +1,137 @@
+"""The surfaces of the learned adaptive recipe, ``mpc-adaptive`` and ``mpc-privileged``, the
+privileged mark, the scripts and the page's tools, hardened: each unclean input ends in one line
+naming the key, file or option (a non-zero exit for a command), never a traceback, lost text or
+a silently ignored setting; a privileged controller is marked wherever it appears."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    lines = [ln for ln in err.splitlines() if not ln.startswith("warning:")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+# -- python -m agents.results.prose and agents.results.headline: no text lost -----------------
+
+
+@pytest.fixture
+def prose_on(tmp_path, monkeypatch):
+    """``prose.main`` on copies: the page ``name`` of docs/ and the JSON sources, ``change``
+    applied to model_error.json."""
+    from agents.results import numbers, prose
+
+    sources = numbers.Sources
+
+    def run(name: str, edit=lambda text: text, change=lambda me: None, argv=()):
+        docs = tmp_path / "docs"
+        shutil.copytree(
+            ROOT / "docs", docs, ignore=shutil.ignore_patterns("*.md", "data"), dirs_exist_ok=True
+        )
+        page = tmp_path / name
+        page.write_text(edit((ROOT / "docs" / name).read_text()))
+        me = json.loads((docs / "model_error.json").read_text())
+        change(me)
+        (docs / "model_error.json").write_text(json.dumps(me))
+        monkeypatch.setattr(prose, "doc_files", lambda: [page])
+        monkeypatch.setattr(numbers, "Sources", lambda: sources(docs))
+        before = page.read_text()
+        return prose.main(list(argv)), page, before
+
+    return run
+
+
+def _drop_nth_closing(text: str, n: int = 3) -> str:
+    i = -1
+    for _ in range(n):
+        i = text.index("<!-- /n -->", i + 1)
+    return text[:i] + text[i + len("<!-- /n -->") :]
+
+
+@pytest.mark.parametrize("argv", [(), ("--check",)])
+def test_prose_refuses_a_lost_closing_marker_and_writes_nothing(prose_on, capsys, argv):
+    code, page, before = prose_on("model-error.md", edit=_drop_nth_closing, argv=argv)
+    line = _one_line(capsys)
+    assert code == 2 and str(page) in line and "is not closed by <!-- /n -->" in line, line
+    assert page.read_text() == before  # the words between two blocks are still there
+
+
+@pytest.mark.parametrize(
+    "edit, words",
+    [
+        (
+            lambda t: t + "\n<!-- n:r50(mpc) -->0.1 <!-- n:r50(lqr) -->0.2<!-- /n -->\n",
+            "not closed",
+        ),
+        (lambda t: t + "\nend <!-- /n -->\n", "without its opening"),
+        (lambda t: t + "\n<!-- n:r50(mpc) -->0.1\n", "never closed"),
+        (lambda t: t + "\n<!-- table:model-error --> <!-- /table:presets -->\n", "inside"),
+    ],
+)
+def test_prose_refuses_unbalanced_markers(prose_on, capsys, edit, words):
+    code, page, before = prose_on("model-error.md", edit=edit)
+    line = _one_line(capsys)
+    assert code == 2 and words in line and str(page) in line, line
+    assert page.read_text() == before
+
+
+def test_prose_refuses_a_nan_hold_before_writing_anything(prose_on, capsys):
+    def nan_hold(me):
+        me["specs"][0]["rows"][1]["hold"]["k"] = float("nan")
+
+    def stale(text):  # a block the run would rewrite: nothing may be written all the same
+        return text.replace("<!-- /n -->", " stale<!-- /n -->", 1)
+
+    code, page, before = prose_on("model-error.md", edit=stale, change=nan_hold)
+    err = capsys.readouterr().err
+    assert code == 2 and "not a finite number" in err, err
+    assert page.read_text() == before and "nan/32" not in page.read_text()
+
+
+def test_prose_check_sees_a_stale_block_and_writes_nothing(prose_on, capsys):
+    def stale(text):
+        return text.replace("<!-- /n -->", " stale<!-- /n -->", 1)
+
+    code, page, before = prose_on("model-error.md", edit=stale, argv=["--check"])
+    assert code == 1 and "stale" in capsys.readouterr().out
+    assert page.read_text() == before
+    code, page, _ = prose_on("model-error.md", edit=stale)
+    assert code == 0 and page.read_text() == (ROOT / "docs" / "model-error.md").read_text()
+
+
+def _readme_case(tmp_path, text):
+    readme = tmp_path / "README.md"
+    readme.write_text(text)
+    return readme
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        # the end marker lost, a second block further down: the rewrite cut the words between
+        "a\n<!-- headline:start -->\nold\nwords\n<!-- headline:start -->\nold\n"
+        "<!-- headline:end -->\nmore\n",
+        # a stale second block: --check said "up to date" while it stayed
+        "a\n<!-- headline:start -->\nold\n<!-- headline:end -->\nb\n"
+        "<!-- headline:start -->\nold\n<!-- headline:end -->\n",
+        "a\n<!-- headline:end -->\nold\n<!-- headline:start -->\n",
+    ],
+)
+@pytest.mark.parametrize("argv", [(), ("--check",)])
+def test_headline_refuses_lost_or_doubled_markers(tmp_path, capsys, text, argv):
+    from agents.results.headline import main as headline_main
+
+    readme = _readme_case(tmp_path, text)
+    code = headline_main(["--readme", str(readme), *argv])
+    line = _one_line(capsys)
+    assert code == 2 and str(readme) in line and "headline:" in line, line
+    assert readme.read_text() == text
