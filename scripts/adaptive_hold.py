@@ -47,8 +47,11 @@ def hold_entry(policy: str, spec_text: str, seed: int) -> dict:
     t0 = time.perf_counter()
     r = task_mm_hold(setup)
     held = [e for e, o in zip(r["effort"], r["outcomes"], strict=True) if o and e is not None]
+    from bound_env.control.privileged import is_privileged
+
     return {
         "policy": policy,
+        "privileged": is_privileged(ctrl),  # reads the robot's true plant: marked
         "spec": spec.to_dict(),
         "spec_name": spec.name,
         "seed": seed,

@@ -135,3 +135,88 @@ def test_headline_refuses_lost_or_doubled_markers(tmp_path, capsys, text, argv):
     line = _one_line(capsys)
     assert code == 2 and str(readme) in line and "headline:" in line, line
     assert readme.read_text() == text
+
+
+# -- a privileged controller is marked wherever it appears -----------------------------------
+
+MARGINS_JSON = ROOT / "tests" / "data" / "render_only" / "out" / "lqr" / "margins.json"
+
+
+def _privileged_run(label="mpc-privileged") -> dict:
+    r = json.loads(MARGINS_JSON.read_text())
+    return {**r, "policy": label, "label": label, "privileged": True}
+
+
+@pytest.mark.parametrize("name", ["mpc-privileged+of"])
+def test_offset_free_over_a_privileged_controller_is_refused(name, capsys):
+    from agents.runtime.policy import load_controller
+    from bound_env.cli import main
+
+    with pytest.raises(ValueError, match="'mpc-privileged' is privileged.*no offset"):
+        load_controller(name)
+    assert main(["rollout", "--policy", name, "--strides", "1"]) != 0
+    assert "is privileged" in _one_line(capsys)
+
+
+def test_rollout_marks_a_privileged_controller():
+    from agents.runtime.rollout import rollout, summary_text
+
+    r = rollout("mpc-privileged", strides=1)
+    assert r["privileged"] is True and "(privileged" in summary_text(r)
+    r = rollout("lqr", strides=1)
+    assert r["privileged"] is False and "privileged" not in summary_text(r)
+
+
+def test_margins_console_marks_a_privileged_controller():
+    from bound_env.analysis.margins import summary_text
+
+    assert "PRIVILEGED" in summary_text(_privileged_run())
+    assert "PRIVILEGED" not in summary_text({**_privileged_run(), "privileged": False})
+
+
+def test_margins_figures_label_a_privileged_column(tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from bound_env.analysis.margins.report import plot_margins
+
+    legends = []
+    save = Figure.savefig
+
+    def record(fig, *a, **kw):
+        for ax in fig.axes:
+            if ax.get_legend() is not None:
+                legends.append([t.get_text() for t in ax.get_legend().get_texts()])
+        return save(fig, *a, **kw)
+
+    monkeypatch.setattr(Figure, "savefig", record)
+    lqr = json.loads(MARGINS_JSON.read_text())
+    paths = plot_margins([_privileged_run(), {**lqr, "label": "lqr"}], tmp_path)
+    assert len(legends) == len(paths) >= 3
+    for texts in legends:
+        assert "mpc-privileged (privileged)" in texts and "lqr" in texts, texts
+
+
+def test_headline_row_and_json_mark_a_privileged_column(tmp_path):
+    from agents.results.headline import headline_numbers, headline_table, load_headline
+
+    groups = [
+        {"label": "mpc", "gait": "default", "policies": ["mpc"], "runs": [_privileged_run("mpc")]}
+    ]
+    head = headline_numbers(groups, "quick", 12345)
+    assert head["rows"][0]["privileged"] is True
+    assert "**mpc (privileged: reads the true plant)**" in headline_table(head)
+    p = tmp_path / "headline.json"
+    m = {"value": 1.0, "low": 0.5, "high": 2.0, "interval": "Poisson-based"}
+    head["rows"][0]["mfpt_sigma_100_deg"] = m  # the fixture's run has no MFPT curve
+    p.write_text(json.dumps(head))
+    assert load_headline(p)["rows"][0]["privileged"] is True
+    head["rows"][0]["privileged"] = "yes"
+    p.write_text(json.dumps(head))
+    with pytest.raises(ValueError, match=r"rows\[0\].privileged must be true or false"):
+        load_headline(p)
+    groups[0]["runs"][0]["privileged"] = False
+    head = headline_numbers(groups, "quick", 12345)
+    assert head["rows"][0]["privileged"] is False and "privileged" not in headline_table(head)

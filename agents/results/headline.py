@@ -134,6 +134,8 @@ def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
                 "label": label,
                 "what": what,
                 "policies": [rel(p) for p in g["policies"]],
+                # it reads the robot's true plant (bound_env.control.privileged): marked
+                "privileged": any(r.get("privileged") is True for r in runs),
                 "r50": headline_measure(
                     runs,
                     lambda r: r["basin_curve"]["r50"],
@@ -172,6 +174,8 @@ def headline_table(head: dict) -> str:
             else "r50: Wilson-based; σ: Poisson-based (one run's sampling error)"
         )
         name = row["role"] if row["role"] == row["label"] else f"{row['role']} ({row['label']})"
+        if row.get("privileged"):
+            name += " (privileged: reads the true plant)"
         lines.append(f"| **{name}** | {row['what']} | {cells[0]} | {cells[1]} | {kind} |")
     return "\n".join(lines)
 
@@ -314,6 +318,8 @@ def load_headline(path: Path = HEADLINE_JSON) -> dict:
     head = load_json_strict(path, {"budget": str, "seed": int, "rows": list})
     for i, row in enumerate(head["rows"]):
         check_keys(row, _ROW, str(path), f"rows[{i}].")
+        if not isinstance(row.get("privileged", False), bool):  # absent: an older file
+            raise ValueError(f"{path}: rows[{i}].privileged must be true or false")
     if not head["rows"]:
         raise ValueError(f"{path}: rows: empty (write it with bound-env compare --docs)")
     return head

@@ -154,6 +154,14 @@ class OffsetFree:
                 f"{inner.name!r} is held offset-free already: a second {SUFFIX} would estimate "
                 "the same offset twice, each chasing the other's shift (give it once)"
             )
+        from .privileged import is_privileged
+
+        if is_privileged(inner):
+            raise ValueError(
+                f"{getattr(inner, 'name', inner)!r} is privileged: it is designed on the robot's "
+                f"true plant and aims at that plant's own cycle already, so {SUFFIX} has no "
+                "offset to estimate (give it without the suffix)"
+            )
         if not callable(getattr(inner, "interval_actions", None)) or not callable(
             getattr(inner, "on_apex", None)
         ):
