@@ -220,3 +220,81 @@ def test_headline_row_and_json_mark_a_privileged_column(tmp_path):
     groups[0]["runs"][0]["privileged"] = False
     head = headline_numbers(groups, "quick", 12345)
     assert head["rows"][0]["privileged"] is False and "privileged" not in headline_table(head)
+
+
+# -- a stateful base is reset at each episode ---------------------------------------------------
+
+
+def _episode_actions(act, env, seed: int, steps: int = 120) -> list:
+    obs, info = env.reset(seed=seed)
+    out = []
+    for _ in range(steps):
+        a = act(obs, info)
+        out.append(float(a[0]))
+        obs, _, terminated, truncated, info = env.step(a)
+        if terminated or truncated:
+            break
+    return out
+
+
+def _second_equals_fresh(make_controller):
+    """The actions of a second episode (after a first one from another start) and those of
+    the same episode played by a freshly loaded controller."""
+    import gymnasium as gym
+    import numpy as np
+
+    import bound_env
+    from bound_env.control.plain import PlainPolicy
+
+    gym.register_envs(bound_env)
+    used, fresh = make_controller(), make_controller()
+    env = gym.make("PassiveBound-v0", reset_noise_scale=2.0, **used.env_kwargs)
+    act = PlainPolicy(used)
+    _episode_actions(act, env, seed=3)
+    second = _episode_actions(act, env, seed=5)
+    again = _episode_actions(PlainPolicy(fresh), env, seed=5)
+    assert len(second) == len(again) and len(second) > 50
+    np.testing.assert_array_equal(second, again)
+
+
+def test_a_residual_policy_over_an_adaptive_base_resets_it():
+    import dataclasses
+
+    from agents.runtime.policy import load_controller
+    from agents.runtime.residual import load_base
+
+    def make():  # step-ppo's network over the learned adaptive controller
+        return dataclasses.replace(load_controller("step-ppo/s0"), base=load_base("adaptive/s0"))
+
+    assert make().stateful is True and load_controller("step-ppo/s0").stateful is False
+    _second_equals_fresh(make)
+
+
+def test_residual_over_resets_an_adaptive_base():
+    import gymnasium as gym
+    import numpy as np
+
+    import bound_env
+    from agents.runtime.residual import ResidualOver
+
+    gym.register_envs(bound_env)
+
+    def episode(w, seed):
+        obs, _ = w.reset(seed=seed)
+        out = [obs]
+        for _ in range(120):
+            obs, _, terminated, truncated, _ = w.step(np.array([0.0], np.float32))
+            out.append(obs)
+            if terminated or truncated:
+                break
+        return np.array(out)
+
+    def make():
+        env = gym.make("PassiveBound-v0", max_torque=80.0, reset_noise_scale=2.0)
+        return ResidualOver(env, base="adaptive/s0", r_max=None, end_on_return=False)
+
+    used = make()
+    episode(used, 3)
+    second, again = episode(used, 5), episode(make(), 5)
+    assert second.shape == again.shape and len(second) > 50
+    np.testing.assert_array_equal(second, again)
