@@ -298,3 +298,149 @@ def test_residual_over_resets_an_adaptive_base():
     second, again = episode(used, 5), episode(make(), 5)
     assert second.shape == again.shape and len(second) > 50
     np.testing.assert_array_equal(second, again)
+
+
+# -- the learned adaptive recipe: one validator -------------------------------------------------
+
+
+@pytest.fixture
+def train_cli(tmp_path, monkeypatch, capsys):
+    """``bound-env train --config adaptive ARGS`` in-process: the one-line error (training
+    itself, should the arguments pass, fails the test)."""
+    from agents.experts import adaptive_recipe
+    from bound_env.cli import main
+
+    def never(*a, **k):
+        raise AssertionError("training started: the arguments were accepted")
+
+    monkeypatch.setattr(adaptive_recipe, "train_adaptive", never)
+
+    def run(*args):
+        argv = ["train", "--config", "adaptive", "--out", str(tmp_path / "runs"), *args]
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as e:
+            code = e.code
+        line = _one_line(capsys)
+        assert code not in (0, None), line
+        return line
+
+    return run
+
+
+@pytest.mark.parametrize(
+    "setting, key",
+    [
+        ("k=1e9", "adaptive.k"),
+        ("k=1.5", "adaptive.k"),
+        ("k=-1", "adaptive.k"),
+        ("hidden=[-3]", "adaptive.hidden[0]"),
+        ("hidden=[0]", "adaptive.hidden[0]"),
+        ("hidden=64", "adaptive.hidden"),
+        ("hidden=[]", "adaptive.hidden"),
+        ("beta=5", "adaptive.beta"),
+        ("nominal_start_prob=2", "adaptive.nominal_start_prob"),
+        ("gate_surprise=-1", "adaptive.gate_surprise"),
+        ("val_plants=0", "adaptive.val_plants"),
+        ("summary=maybe", "adaptive.summary"),
+        ("summary=1", "adaptive.summary"),
+        ("lr=0", "adaptive.lr"),
+        ("lr=.nan", "adaptive.lr"),
+        ("aux_weight=-1", "adaptive.aux_weight"),
+        ("rounds=0", "adaptive.rounds"),
+        ("epochs=2.5", "adaptive.epochs"),
+        ("r_max=-0.1", "adaptive.r_max"),
+        ("teacher=oracle", "adaptive.teacher"),
+        ("val_mismatch=pm10+noise", "adaptive.val_mismatch"),
+        ("val_mismatch=pm10+delay1", "adaptive.val_mismatch"),
+        ("kk=3", "adaptive.kk: unknown"),
+    ],
+)
+def test_adaptive_recipe_keys_are_typed_and_range_checked(train_cli, setting, key):
+    line = train_cli("--hp", f"adaptive.{setting}")
+    assert key in line and "configs/adaptive.yaml" in line, line
+
+
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (("--n-timesteps", "1000"), "--n-timesteps"),
+        (("--eval-freq", "5"), "--eval-freq"),
+        (("--n-eval-episodes", "3"), "--n-eval-episodes"),
+        (("--save-freq", "10"), "--save-freq"),
+        (("--export-from", "best"), "--export-from"),
+        (("--vec-env", "dummy"), "--vec-env"),
+        (("--set", "kc=300"), "--set kc=300"),
+        (("--seeds", "1,2"), "--seeds"),
+        (("--init-from", "default"), "--init-from"),
+    ],
+)
+def test_adaptive_recipe_refuses_ppo_options(train_cli, args, option):
+    line = train_cli(*args)
+    assert option in line and "adaptive-dagger" in line, line
+
+
+@pytest.mark.parametrize(
+    "hp, words",
+    [
+        (
+            "env_wrapper=[{bound_env.wrappers.RandomizedPlant: {mismatch: pm10+delay1}}]",
+            "RandomizedPlant mismatch 'pm10+delay1'",
+        ),
+        ("env_kwargs.gait_overrides.kc=300", "env_kwargs.gait_overrides"),
+        ("env_kwargs.dt=0.02", "env_kwargs.dt"),
+        ("env_wrapper=RandomizedPlant", "env_wrapper must be a list"),
+        ("adaptive=[1]", "adaptive must be a mapping"),
+    ],
+)
+def test_adaptive_recipe_refuses_what_it_would_ignore(train_cli, hp, words):
+    line = train_cli("--hp", hp)
+    assert words in line, line
+
+
+def test_adaptive_recipe_resume_needs_a_run(train_cli, tmp_path):
+    line = train_cli("--resume", "--name", "nothing")
+    assert "--resume" in line and "nothing" in line, line
+
+
+def test_adaptive_rerun_names_the_changed_settings(tmp_path):
+    from dataclasses import asdict
+
+    from agents.experts.adaptive import AdaptiveConfig, train_adaptive
+
+    run = tmp_path / "run"
+    run.mkdir()
+    old = {**asdict(AdaptiveConfig()), "k": 2, "lr": 0.01}
+    (run / "adaptive.json").write_text(json.dumps(old, default=str))
+    with pytest.raises(ValueError, match=r"\(k: 2 -> 3; lr: 0.01 -> 0.003\)") as e:
+        train_adaptive(AdaptiveConfig(), run, progress=False)
+    assert "\n" not in str(e.value)
+
+
+def test_adaptive_recipe_checks_every_config_field():
+    from dataclasses import fields
+
+    from agents.experts.adaptive import AdaptiveConfig
+    from agents.experts.adaptive_recipe import RECIPE_KEYS
+
+    assert set(RECIPE_KEYS) == {f.name for f in fields(AdaptiveConfig)} - {"mismatch", "seed"}
+
+
+def test_adaptive_recipe_without_seed_trains_seed_0(tmp_path, monkeypatch):
+    from agents.experts import adaptive_recipe
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def record(cfg, run, progress=True):
+        seen.append((cfg.seed, Path(run).name))
+        raise Stop
+
+    monkeypatch.setattr(adaptive_recipe, "train_adaptive", record)
+    with pytest.raises(Stop):  # was a TypeError: int(None)
+        adaptive_recipe.train_from_config(
+            "adaptive", "PassiveBoundStride-v1", None, runs_dir=tmp_path
+        )
+    assert seen == [(0, "adaptive_s0")]
