@@ -444,3 +444,84 @@ def test_adaptive_recipe_without_seed_trains_seed_0(tmp_path, monkeypatch):
             "adaptive", "PassiveBoundStride-v1", None, runs_dir=tmp_path
         )
     assert seen == [(0, "adaptive_s0")]
+
+
+# -- the adaptive spec and the mismatch specs ---------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "block, words",
+    [
+        ("adaptive: null", "adaptive is null"),
+        ("offset_free: null", "offset_free is null"),
+        ("adaptive: {window: 2.5}", "adaptive.window must be an integer"),
+        ("adaptive: {identify: 20.5}", "adaptive.identify must be an integer"),
+        ("adaptive: {candidates: 12.0}", "adaptive.candidates must be an integer"),
+        ("adaptive: {trust_strides: 12}", "adaptive.trust_strides 12 is longer than"),
+        ("adaptive: {window: 3, trust_strides: 4}", "adaptive.trust_strides 4 is longer than"),
+        ("adaptive: {sigma: 1e-300}", "adaptive.sigma must be a finite number in [1e-06, 10]"),
+        ("adaptive: {prior: 1.0e-300}", "adaptive.prior must be a finite number in [1e-06, 10]"),
+        ("adaptive: {sigma: 0}", "adaptive.sigma"),
+    ],
+)
+def test_an_adaptive_spec_refuses_what_it_cannot_mean(tmp_path, capsys, block, words):
+    from bound_env.cli import main
+    from bound_env.control.spec import load_spec
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(f"controller: mpc\n{block}\n")
+    with pytest.raises(ValueError, match="spec.yaml: ") as e:
+        load_spec(spec)
+    assert words in str(e.value) and "\n" not in str(e.value)
+    assert main(["rollout", "--policy", str(spec), "--strides", "1"]) != 0
+    line = _one_line(capsys)
+    assert words in line and "ZeroDivisionError" not in line, line
+
+
+@pytest.mark.parametrize("key", ["sigma", "prior"])
+def test_adaptive_mpc_refuses_a_tiny_sigma_or_prior(key):
+    from bound_env.control.adaptive import AdaptiveMPC
+
+    with pytest.raises(ValueError, match=f"AdaptiveMPC: adaptive.{key} must be"):
+        AdaptiveMPC(**{key: 1e-300})
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("pm10+pm5", "preset pm10 and preset pm5 both set m1"),
+        ("pm5+all10", "both set m1"),
+        ("noise+noise5", "both set noise"),
+        ("delay1+delay2", "both set delay"),
+        ("noise5+noise5", "the preset 'noise5' is given twice"),
+        ("pm5+noise+pm5", "the preset 'pm5' is given twice"),
+    ],
+)
+def test_mismatch_presets_that_overlap_are_refused(capsys, text, words):
+    from bound_env.cli import main
+    from bound_env.mismatch import as_spec, parse_specs
+
+    with pytest.raises(ValueError, match=r"^mismatch ") as e:
+        as_spec(text)
+    assert words in str(e.value)
+    with pytest.raises(ValueError, match=r"^--mismatch: "):
+        parse_specs(text)
+    assert main(["margins", "--policy", "lqr", "--mismatch", text, "--budget", "test"]) != 0
+    assert words in _one_line(capsys)
+
+
+def test_mismatch_presets_that_do_not_overlap_combine():
+    from bound_env.mismatch import as_spec
+
+    s = as_spec("pm10+noise+delay1")
+    assert dict(s.ranges)["m1"] == 0.1 and s.has_noise and s.delay == 1
+
+
+@pytest.mark.parametrize("content", ["", "\n\n", "# nothing\n", "{}\n"])
+def test_an_empty_mismatch_file_is_refused(tmp_path, content):
+    from bound_env.mismatch import as_spec
+
+    p = tmp_path / "mine.yaml"
+    p.write_text(content)
+    with pytest.raises(ValueError, match=r"mismatch file .*mine.yaml: empty"):
+        as_spec(str(p))
