@@ -525,3 +525,41 @@ def test_an_empty_mismatch_file_is_refused(tmp_path, content):
     p.write_text(content)
     with pytest.raises(ValueError, match=r"mismatch file .*mine.yaml: empty"):
         as_spec(str(p))
+
+
+# -- compare --render-only: the model-error blocks checked -----------------------------------
+
+
+def _block(k=30, n=32):
+    return {"spec": {"name": "pm5"}, "hold": {"k": k, "n": n, "outcomes": [1] * n}}
+
+
+@pytest.mark.parametrize(
+    "mismatch, words",
+    [
+        ({"pm5": {"spec": {"name": "pm5"}}}, "mismatch.pm5: hold: missing"),
+        ({"pm5": "text"}, "mismatch.pm5: not a JSON object"),
+        (
+            {"pm5": {**_block(), "hold": {"k": float("nan"), "n": 32}}},
+            "mismatch.pm5.hold: k: must be an integer",
+        ),
+        ({"pm5": _block(99, 8)}, "k 99 of n 8"),
+        ({"pm5": {**_block(), "hold": {"k": 3, "n": 8, "outcomes": [1]}}}, "1 outcomes for n 8"),
+        ("pm5", "mismatch: must be a JSON object"),
+    ],
+)
+def test_render_only_refuses_a_malformed_mismatch_block(tmp_path, capsys, mismatch, words):
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_compare_page import _fixture, _render_here
+
+    out, docs = _fixture(tmp_path)
+    p = out / "lqr" / "margins.json"
+    r = json.loads(p.read_text())
+    r["mismatch"] = mismatch
+    p.write_text(json.dumps(r))
+    res = _render_here(out, docs, capsys)
+    lines = [ln for ln in res.stderr.strip().splitlines() if not ln.startswith("warning:")]
+    assert res.returncode != 0 and len(lines) == 1, res.stderr
+    assert words in lines[0] and "margins.json" in lines[0], lines
