@@ -10,7 +10,6 @@ are also pooled as their mean held count and the range over the seeds.
 
 from __future__ import annotations
 
-import json
 import sys
 from collections import defaultdict
 
@@ -76,8 +75,23 @@ def paired_seeds(entries: list, spec: str, a: str, b: str) -> str:
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    data = json.loads(open(argv[0]).read())["entries"]
+    import argparse
+
+    from bound_env.schema import read_json
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("json", help="the hold JSON of scripts/adaptive_hold.py")
+    args = ap.parse_args(argv)
+    try:
+        raw = read_json(args.json)
+        data = raw.get("entries") if isinstance(raw, dict) else None
+        if not isinstance(data, list) or not all(
+            isinstance(e, dict) and {"spec_name", "policy", "held", "n"} <= set(e) for e in data
+        ):
+            raise ValueError(f"{args.json}: entries: not a list of adaptive_hold.py's entries")
+    except (OSError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     for spec in dict.fromkeys(e["spec_name"] for e in data):
         print(f"### {spec}\n")
         print(table(data, spec, "lqr"))

@@ -563,3 +563,81 @@ def test_render_only_refuses_a_malformed_mismatch_block(tmp_path, capsys, mismat
     lines = [ln for ln in res.stderr.strip().splitlines() if not ln.startswith("warning:")]
     assert res.returncode != 0 and len(lines) == 1, res.stderr
     assert words in lines[0] and "margins.json" in lines[0], lines
+
+
+# -- the scripts parse their arguments ---------------------------------------------------------
+
+
+def _script(name: str):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        f"script48_{name}", ROOT / "scripts" / f"{name}.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _script_error(name, argv, capsys) -> str:
+    try:
+        code = _script(name).main([str(a) for a in argv])
+    except SystemExit as e:
+        code = e.code
+    err = capsys.readouterr().err.strip()
+    assert code not in (0, None) and "Traceback" not in err, err
+    return err.splitlines()[-1]
+
+
+def test_adaptive_tables_help_and_bad_files(tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        _script("adaptive_tables").main(["--help"])
+    assert e.value.code == 0 and "adaptive_hold" in capsys.readouterr().out
+    bad = tmp_path / "h.json"
+    bad.write_text('{"entries": [1]}')
+    assert "entries" in _script_error("adaptive_tables", [bad], capsys)
+    assert "h2.json" in _script_error("adaptive_tables", [tmp_path / "h2.json"], capsys)
+
+
+@pytest.mark.parametrize(
+    "name, argv, words",
+    [
+        ("adaptive_hold", ["--policy", "lqr", "--mismatch", "pm5", "--seed", "-1"], "--seed"),
+        ("adaptive_hold", ["--policy", "nope", "--mismatch", "pm5"], "--policy nope"),
+        ("adaptive_hold", ["--policy", "lqr", "--mismatch", "pm99"], "--mismatch pm99"),
+        ("adaptive_factors", ["--policy", "lqr", "--plants", "0"], "--plants"),
+        ("adaptive_factors", ["--policy", "nope"], "--policy nope"),
+        ("hold_vs_delta", ["--policy", "lqr", "--seed", "-1"], "--seed"),
+    ],
+)
+def test_scripts_refuse_bad_arguments_before_running(tmp_path, capsys, name, argv, words):
+    line = _script_error(name, [*argv, "--out", tmp_path / "o.json"], capsys)
+    assert words in line and ": error: " in line, line
+    assert not (tmp_path / "o.json").exists()
+
+
+def test_hold_vs_delta_refuses_a_garbage_row(tmp_path, capsys):
+    (tmp_path / "o.jsonl").write_text('{"policy": "lqr", "delta": 0.05, "seed": 777}\n{garbage\n')
+    line = _script_error("hold_vs_delta", ["--policy", "lqr", "--out", tmp_path / "o.json"], capsys)
+    assert "o.jsonl:2: not a row" in line, line
+
+
+def test_hold_eval_set_on_mpc_adaptive_is_a_note_not_a_crash(tmp_path, capsys, monkeypatch):
+    mod = _script("hold_eval")
+    ran = []
+
+    class Measured(Exception):  # stops the script where it would measure (minutes)
+        pass
+
+    def setup_of(*a, **k):
+        ran.append(a[0])
+        raise Measured
+
+    monkeypatch.setattr(mod, "setup_of", setup_of)
+    with pytest.raises(Measured):
+        mod.run(
+            ["--policy", "mpc-adaptive", "--set", "gain=0.5", "--out", str(tmp_path / "h.jsonl")]
+        )
+    err = capsys.readouterr().err
+    assert "AttributeError" not in err and "mpc-adaptive is not offset-free" in err, err
+    assert type(ran[0]).__name__ == "AdaptiveMPC"  # measured as itself, not re-wrapped
