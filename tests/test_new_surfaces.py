@@ -641,3 +641,89 @@ def test_hold_eval_set_on_mpc_adaptive_is_a_note_not_a_crash(tmp_path, capsys, m
     err = capsys.readouterr().err
     assert "AttributeError" not in err and "mpc-adaptive is not offset-free" in err, err
     assert type(ran[0]).__name__ == "AdaptiveMPC"  # measured as itself, not re-wrapped
+
+
+# -- property tests: the recipe's keys and the adaptive spec (Hypothesis; the examples per
+# test are the profile's: 12 in the fast tier, 150 in CI, tests/conftest.py) ----------------
+
+from hypothesis import given  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+WILD = st.one_of(
+    st.integers(-2, 40),  # around the counts' bounds (a trust_strides past the window)
+    st.sampled_from([1e-300, 1e-200, 5e-7, 1e-6]),  # a sigma or prior that overflows 1 / x^2
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**12), 10**12),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([1e-300, 1e300, 0, 1, 2, 3, 0.5, -1, 10, 100, "10", "0.5", "maybe", "pm10"]),
+    st.text(max_size=6),
+    st.lists(st.integers(-5, 5000), max_size=4),
+)
+
+
+def _in_range(v, lo, hi, kind) -> bool:
+    import math
+
+    if kind is int:
+        return isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
+    return isinstance(v, float) and math.isfinite(v) and lo <= v <= hi
+
+
+@given(
+    key=st.sampled_from(
+        sorted(__import__("agents.experts.adaptive_recipe", fromlist=["x"]).RECIPE_KEYS)
+    ),
+    value=WILD,
+)
+def test_every_recipe_key_is_its_type_and_range_or_one_line_naming_it(key, value):
+    from agents.experts.adaptive_recipe import check_recipe
+
+    try:
+        out = check_recipe({key: value}, "configs/adaptive.yaml")[key]
+    except ValueError as e:
+        msg = str(e)
+        assert msg.startswith(f"configs/adaptive.yaml: adaptive.{key}") and "\n" not in msg, msg
+        return
+    if key == "hidden":
+        assert isinstance(out, tuple) and 1 <= len(out) <= 16
+        assert all(_in_range(h, 1, 4096, int) for h in out)
+    elif key == "summary":
+        assert out is value and isinstance(out, bool)
+    elif key in ("teacher", "expert", "val_mismatch"):
+        assert isinstance(out, str)
+    else:
+        assert isinstance(out, (int, float)) and not isinstance(out, bool)
+        assert out == out and abs(out) < 1e7  # finite, in its range
+
+
+@given(
+    block=st.dictionaries(
+        st.sampled_from(
+            sorted(
+                __import__("bound_env.control.adaptive_settings", fromlist=["x"]).ADAPTIVE_DEFAULTS
+            )
+        ),
+        WILD,
+        max_size=4,
+    )
+)
+def test_an_adaptive_block_is_in_range_or_one_line_naming_the_key(block):
+    from bound_env.control.adaptive_settings import ADAPTIVE_INTS, ADAPTIVE_LIMITS, check_adaptive
+
+    try:
+        out = check_adaptive(block, "spec.yaml")
+    except ValueError as e:
+        msg = str(e)
+        assert msg.startswith("spec.yaml: adaptive.") and "\n" not in msg, msg
+        assert any(f"adaptive.{k}" in msg for k in block), msg
+        return
+    for k, (lo, hi) in ADAPTIVE_LIMITS.items():
+        assert _in_range(
+            out[k] if k in ADAPTIVE_INTS else float(out[k]),
+            lo,
+            hi,
+            int if k in ADAPTIVE_INTS else float,
+        ), (k, out[k])
+    assert out["trust_strides"] <= out["window"]
+    assert out["sigma"] >= 1e-6 and out["prior"] >= 1e-6  # 1 / sigma^2 stays finite

@@ -42,7 +42,11 @@ def _flag(v, where: str) -> bool:
 
 
 def _spec(v, where: str, plants_only: bool = False) -> str:
-    spec = as_spec(check.text(v, where))
+    try:
+        spec = as_spec(check.text(v, where))
+    except ValueError as e:
+        msg = str(e)
+        raise ValueError(msg if msg.startswith(where) else f"{where}: {msg}") from None
     if spec.delay:
         raise ValueError(
             f"{where} {v!r}: algo {ALGO} draws plants and sensor noise, never an actuation "
