@@ -727,3 +727,51 @@ def test_an_adaptive_block_is_in_range_or_one_line_naming_the_key(block):
         ), (k, out[k])
     assert out["trust_strides"] <= out["window"]
     assert out["sigma"] >= 1e-6 and out["prior"] >= 1e-6  # 1 / sigma^2 stays finite
+
+
+# -- tampered learned adaptive policies, another gait ---------------------------------------------
+
+
+@pytest.fixture
+def adaptive_copy(tmp_path):
+    """agents/policies/adaptive/s0 copied, its weights x 1.5."""
+    import numpy as np
+
+    folder = tmp_path / "adaptive-s0"
+    shutil.copytree(ROOT / "agents" / "policies" / "adaptive" / "s0", folder)
+    with np.load(folder / "adaptive.npz") as d:
+        arrays = {k: d[k] for k in d.files}
+    arrays["W0"] = arrays["W0"] * 1.5
+    np.savez(folder / "adaptive.npz", **arrays)
+    return folder
+
+
+@pytest.mark.parametrize("fingerprint", [None, "{}", '{"adaptive.npz": "x"}'])
+def test_a_tampered_adaptive_policy_without_fingerprint_needs_force(
+    adaptive_copy, capsys, fingerprint
+):
+    from agents.runtime.policy import load_controller
+    from bound_env.cli import main
+
+    fp = adaptive_copy / "fingerprint.json"
+    fp.unlink()
+    if fingerprint is not None:
+        fp.write_text(fingerprint)
+    with pytest.raises(ValueError, match="fingerprint.json: .*pass --force"):
+        load_controller(adaptive_copy)
+    assert main(["rollout", "--policy", str(adaptive_copy), "--strides", "1"]) != 0
+    assert "fingerprint.json" in _one_line(capsys)
+    assert load_controller(adaptive_copy, force=True).k == 3
+    assert "warning: " in capsys.readouterr().err
+
+
+def test_a_learned_adaptive_policy_on_another_gait_needs_force(capsys):
+    from agents.runtime.policy import load_controller
+    from bound_env.cli import main
+
+    with pytest.raises(ValueError, match="trained on gait 'default', not 'literal-cycle'"):
+        load_controller("adaptive/s0", gait="literal-cycle")
+    argv = ["rollout", "--policy", "adaptive/s0", "--gait", "literal-cycle", "--strides", "1"]
+    assert main(argv) != 0
+    assert "--force" in _one_line(capsys)
+    assert load_controller("adaptive/s0", gait="literal-cycle", force=True).gait == "literal-cycle"
