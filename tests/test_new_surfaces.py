@@ -775,3 +775,73 @@ def test_a_learned_adaptive_policy_on_another_gait_needs_force(capsys):
     assert main(argv) != 0
     assert "--force" in _one_line(capsys)
     assert load_controller("adaptive/s0", gait="literal-cycle", force=True).gait == "literal-cycle"
+
+
+# -- the cases left from earlier sets ------------------------------------------------------------
+
+
+def _cli_line(argv, capsys) -> str:
+    from bound_env.cli import main
+
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as e:
+        code = e.code
+    line = _one_line(capsys)
+    assert code not in (0, None), line
+    return line
+
+
+def test_train_hp_gamma_beside_the_shaping_discount_is_refused(tmp_path, capsys):
+    argv = ["train", "--config", "ppo-rescue", "--hp", "gamma=0.5", "--out", tmp_path]
+    line = _cli_line([*argv, "--n-timesteps", "10"], capsys)
+    assert "gamma: 0.5" in line and "env_kwargs.gamma" in line, line
+    assert not (tmp_path / "PassiveBoundRescue-v1_s0").exists()
+
+
+def test_train_set_on_the_rescue_env_names_the_key_and_option(tmp_path, capsys):
+    argv = ["train", "--config", "ppo-rescue", "--set", "kc=300", "--out", tmp_path]
+    line = _cli_line([*argv, "--n-timesteps", "10"], capsys)
+    assert "--set kc=300" in line and "takes no gait overrides" in line, line
+
+
+def test_rescue_eval_says_what_lqr_of_is():
+    mod = _script("rescue_eval")
+    with pytest.raises(ValueError, match="lqr-of: a stride controller with memory"):
+        mod.controller_actor("lqr-of")
+
+
+@pytest.mark.parametrize("key, value", [("r_max", "0.3"), ("shaping", "0.1"), ("r_max", b"0.3")])
+def test_the_rescue_env_refuses_numbers_given_as_text(key, value):
+    import gymnasium as gym
+
+    import bound_env
+
+    gym.register_envs(bound_env)
+    with pytest.raises(ValueError, match=f"{key} must be a number, got"):
+        gym.make("PassiveBoundRescue-v1", **{key: value})
+
+
+def test_an_archived_folders_own_name_points_to_its_path(capsys):
+    from agents.runtime.policy import load_controller
+
+    with pytest.raises(FileNotFoundError, match=r"did you mean .*agents/policies/archive/ppo-v1"):
+        load_controller("archive/ppo-v1")
+    line = _cli_line(["rollout", "--policy", "archive/ppo-v1", "--strides", "1"], capsys)
+    assert "agents/policies/archive/ppo-v1" in line, line
+
+
+@pytest.mark.parametrize("drop", ["budget", "r50"])
+def test_headline_without_budget_or_a_rows_r50_is_one_line(tmp_path, capsys, drop):
+    from agents.results.headline import main as headline_main
+
+    head = json.loads((ROOT / "docs" / "headline.json").read_text())
+    if drop == "budget":
+        del head["budget"]
+    else:
+        del head["rows"][0]["r50"]
+    p = tmp_path / "headline.json"
+    p.write_text(json.dumps(head))
+    readme = _readme_case(tmp_path, "<!-- headline:start -->\n<!-- headline:end -->\n")
+    assert headline_main(["--json", str(p), "--readme", str(readme)]) == 2
+    assert f"{drop}: missing" in _one_line(capsys)
