@@ -154,17 +154,6 @@ class OffsetFree:
                 f"{inner.name!r} is held offset-free already: a second {SUFFIX} would estimate "
                 "the same offset twice, each chasing the other's shift (give it once)"
             )
-        # privileged (reads the true plant; `privileged.is_privileged`, not imported: a cycle)
-        c, seen = inner, set()
-        while c is not None and id(c) not in seen and getattr(c, "privileged", False) is not True:
-            seen.add(id(c))
-            c = getattr(c, "inner", None) or getattr(c, "controller", None)
-        if c is not None and getattr(c, "privileged", False) is True:
-            raise ValueError(
-                f"{getattr(inner, 'name', inner)!r} is privileged: it is designed on the robot's "
-                f"true plant and aims at that plant's own cycle already, so {SUFFIX} has no "
-                "offset to estimate (give it without the suffix)"
-            )
         if not callable(getattr(inner, "interval_actions", None)) or not callable(
             getattr(inner, "on_apex", None)
         ):
