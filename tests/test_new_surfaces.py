@@ -845,3 +845,16 @@ def test_headline_without_budget_or_a_rows_r50_is_one_line(tmp_path, capsys, dro
     readme = _readme_case(tmp_path, "<!-- headline:start -->\n<!-- headline:end -->\n")
     assert headline_main(["--json", str(p), "--readme", str(readme)]) == 2
     assert f"{drop}: missing" in _one_line(capsys)
+
+
+def test_a_non_finite_apex_state_is_one_line():
+    import gymnasium as gym
+    import numpy as np
+
+    import bound_env
+
+    gym.register_envs(bound_env)
+    env = gym.make("PassiveBoundRescue-v1")
+    with pytest.raises(ValueError, match="apex_state must be finite") as e:
+        env.reset(options={"apex_state": [0, 0, 0, 0, 1e8 + 1, np.inf]})
+    assert "\n" not in str(e.value)  # found by test_properties' env property (a NumPy repr)
