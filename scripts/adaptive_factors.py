@@ -59,12 +59,17 @@ def run(policy: str, spec: str, n: int) -> dict:
     return out
 
 
-def main(argv=None) -> int:
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--policy", nargs="+", required=True)
     ap.add_argument("--mismatch", default="pm10")
     ap.add_argument("--plants", type=number(int, 1, 4096), default=32)
     ap.add_argument("--out", required=True)
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = parser()
     args = ap.parse_args(argv)
     from agents.runtime.policy import load_controller
     from bound_env.mismatch import as_spec

@@ -74,14 +74,21 @@ def paired_seeds(entries: list, spec: str, a: str, b: str) -> str:
     return "; ".join(out)
 
 
-def main(argv=None) -> int:
+def parser():
     import argparse
-
-    from bound_env.schema import read_json
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("json", help="the hold JSON of scripts/adaptive_hold.py")
-    args = ap.parse_args(argv)
+    ap.add_argument(
+        "--reference", default="lqr", help="the column paired against (default: %(default)s)"
+    )
+    return ap
+
+
+def main(argv=None) -> int:
+    from bound_env.schema import read_json
+
+    args = parser().parse_args(argv)
     try:
         raw = read_json(args.json)
         data = raw.get("entries") if isinstance(raw, dict) else None
@@ -89,12 +96,14 @@ def main(argv=None) -> int:
             isinstance(e, dict) and {"spec_name", "policy", "held", "n"} <= set(e) for e in data
         ):
             raise ValueError(f"{args.json}: entries: not a list of adaptive_hold.py's entries")
+        if args.reference not in {e["policy"] for e in data}:
+            raise ValueError(f"--reference {args.reference}: no such column in {args.json}")
     except (OSError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     for spec in dict.fromkeys(e["spec_name"] for e in data):
         print(f"### {spec}\n")
-        print(table(data, spec, "lqr"))
+        print(table(data, spec, args.reference))
         print()
         print(pooled(data, spec))
         print()

@@ -597,6 +597,9 @@ def test_adaptive_tables_help_and_bad_files(tmp_path, capsys):
     bad.write_text('{"entries": [1]}')
     assert "entries" in _script_error("adaptive_tables", [bad], capsys)
     assert "h2.json" in _script_error("adaptive_tables", [tmp_path / "h2.json"], capsys)
+    hold = ROOT / "docs" / "data" / "adaptive_hold_test.json"
+    line = _script_error("adaptive_tables", [hold, "--reference", "nope"], capsys)
+    assert "--reference nope" in line, line
 
 
 @pytest.mark.parametrize(
