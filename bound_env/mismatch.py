@@ -314,10 +314,21 @@ def from_dict(data, where: str = "mismatch", source: str = "") -> MismatchSpec:
 
 
 def combine(specs, name: str) -> MismatchSpec:
-    """Several specs as one: the ranges and noise of each (a later one wins per key), the
-    largest delay."""
+    """Several specs as one: the ranges and noise of each, the delay of the one that has one.
+    Two specs that set the same parameter, noise component or a delay are a one-line
+    ValueError naming both (``pm10+pm5``: which range would be meant?)."""
     ranges, noise, delay = {}, {}, 0
+    owner: dict = {}  # what set each key: its spec's source
     for s in specs:
+        keys = [*dict(s.ranges), *(f"noise {k}" for k in dict(s.noise))]
+        keys += ["delay"] if s.delay else []
+        for k in keys:
+            if k in owner:
+                raise ValueError(
+                    f"mismatch {name!r}: {owner[k]} and {s.source} both set {k} (one range "
+                    "per key: give one of them)"
+                )
+            owner[k] = s.source
         ranges.update(dict(s.ranges))
         noise.update(dict(s.noise))
         delay = max(delay, s.delay)
@@ -340,11 +351,13 @@ def as_spec(spec) -> MismatchSpec:
     if _is_path(text):
         return load_spec(path)
     parts = [p.strip() for p in text.split("+")]
-    for p in parts:
+    for i, p in enumerate(parts):
         if p not in PRESETS:
             raise ValueError(
                 f"unknown mismatch preset {_show(p)}; known: {sorted(PRESETS)} (or a .yaml file)"
             )
+        if p in parts[:i]:
+            raise ValueError(f"mismatch {text!r}: the preset {p!r} is given twice")
     return combine([from_dict(PRESETS[p], f"preset {p}") for p in parts], "+".join(parts))
 
 
@@ -417,8 +430,11 @@ def load_spec(path) -> MismatchSpec:
     """A spec from a YAML file; a one-line ValueError naming the file otherwise."""
     path = Path(path)
     data = schema.read_yaml(path, "mismatch file")
-    data = {} if data is None else data
     where = f"mismatch file {path}"
+    if data is None or data == {}:
+        raise ValueError(
+            f"{where}: empty (give params, noise or delay; the nominal plant is the preset none)"
+        )
     if isinstance(data, dict) and "name" not in data:
         try:
             check_name(path.stem, "name", spaces=True)

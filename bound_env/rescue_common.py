@@ -54,7 +54,7 @@ def sample_starts(rng, n: int, z_ref, r_max: float, axis_prob: float, r_min=0.0)
 
 
 def number_in(name: str, value, low: float, high: float = np.inf, strict_low=True) -> float:
-    if isinstance(value, bool):
+    if isinstance(value, (bool, str, bytes)):  # '0.3' is text, not a number (as schema.real)
         raise ValueError(f"{name} must be a number, got {value!r}")
     try:
         v = float(value)

@@ -387,7 +387,7 @@ class PassiveBoundTask:
         except (TypeError, ValueError):
             raise ValueError(msg) from None
         if not np.all(np.isfinite(z)):
-            raise ValueError(f"apex_state must be finite, got {z}")
+            raise ValueError(f"apex_state must be finite, got {z.tolist()}")  # one line
         return z
 
     def reset_robot(self, b: Batch, i: int, z: np.ndarray) -> None:

@@ -19,6 +19,8 @@ import json
 
 import numpy as np
 
+from bound_env.cli_args import number
+
 CHECKPOINTS = (1, 3, 10, 30)
 
 
@@ -57,13 +59,30 @@ def run(policy: str, spec: str, n: int) -> dict:
     return out
 
 
-def main(argv=None) -> int:
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--policy", nargs="+", required=True)
     ap.add_argument("--mismatch", default="pm10")
-    ap.add_argument("--plants", type=int, default=32)
+    ap.add_argument("--plants", type=number(int, 1, 4096), default=32)
     ap.add_argument("--out", required=True)
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = parser()
     args = ap.parse_args(argv)
+    from agents.runtime.policy import load_controller
+    from bound_env.mismatch import as_spec
+
+    try:  # what the run needs, before it starts: one line naming the option
+        as_spec(args.mismatch)
+    except ValueError as e:
+        ap.error(f"--mismatch: {e}")
+    for p in args.policy:
+        try:
+            load_controller(p)
+        except (OSError, ValueError) as e:
+            ap.error(f"--policy {p}: {e}")
     from pathlib import Path
 
     from bound_env.cache import atomic_write

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bound_env.cli_args import number
+
 
 def hold_entry(policy: str, spec_text: str, seed: int) -> dict:
     from agents.runtime.policy import load_controller
@@ -47,8 +49,11 @@ def hold_entry(policy: str, spec_text: str, seed: int) -> dict:
     t0 = time.perf_counter()
     r = task_mm_hold(setup)
     held = [e for e, o in zip(r["effort"], r["outcomes"], strict=True) if o and e is not None]
+    from bound_env.control.privileged import is_privileged
+
     return {
         "policy": policy,
+        "privileged": is_privileged(ctrl),  # reads the robot's true plant: marked
         "spec": spec.to_dict(),
         "spec_name": spec.name,
         "seed": seed,
@@ -125,15 +130,36 @@ def privileged_entry(name: str, spec_text: str, seed: int) -> dict:
     }
 
 
+def check_arguments(ap, args) -> None:
+    """Every policy loads and every spec reads, before any run: else a usage error naming
+    the option (exit 2)."""
+    from agents.runtime.policy import load_controller
+    from bound_env.mismatch import as_spec
+
+    for spec in args.mismatch:
+        try:
+            as_spec(spec)
+        except ValueError as e:
+            ap.error(f"--mismatch {spec}: {e}")
+    for policy in args.policy:
+        if policy in PRIVILEGED:
+            continue
+        try:
+            load_controller(policy)
+        except (OSError, ValueError) as e:
+            ap.error(f"--policy {policy}: {e}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument(
         "--policy", nargs="+", required=True, help=f"policies, or privileged {PRIVILEGED}"
     )
     ap.add_argument("--mismatch", nargs="+", required=True, help="specs (presets or .yaml)")
-    ap.add_argument("--seed", type=int, default=12345)
+    ap.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=12345)
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
+    check_arguments(ap, args)
     from bound_env.cache import atomic_write
 
     out = Path(args.out)

@@ -10,7 +10,6 @@ are also pooled as their mean held count and the range over the seeds.
 
 from __future__ import annotations
 
-import json
 import sys
 from collections import defaultdict
 
@@ -75,12 +74,36 @@ def paired_seeds(entries: list, spec: str, a: str, b: str) -> str:
     return "; ".join(out)
 
 
+def parser():
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("json", help="the hold JSON of scripts/adaptive_hold.py")
+    ap.add_argument(
+        "--reference", default="lqr", help="the column paired against (default: %(default)s)"
+    )
+    return ap
+
+
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    data = json.loads(open(argv[0]).read())["entries"]
+    from bound_env.schema import read_json
+
+    args = parser().parse_args(argv)
+    try:
+        raw = read_json(args.json)
+        data = raw.get("entries") if isinstance(raw, dict) else None
+        if not isinstance(data, list) or not all(
+            isinstance(e, dict) and {"spec_name", "policy", "held", "n"} <= set(e) for e in data
+        ):
+            raise ValueError(f"{args.json}: entries: not a list of adaptive_hold.py's entries")
+        if args.reference not in {e["policy"] for e in data}:
+            raise ValueError(f"--reference {args.reference}: no such column in {args.json}")
+    except (OSError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     for spec in dict.fromkeys(e["spec_name"] for e in data):
         print(f"### {spec}\n")
-        print(table(data, spec, "lqr"))
+        print(table(data, spec, args.reference))
         print()
         print(pooled(data, spec))
         print()

@@ -175,11 +175,12 @@ def main(argv=None) -> int:
                 seen.add((row["policy"], row["delta"], row["seed"], row.get("set", ""), row["n"]))
     for name in args.policy:
         ctrl = load(name, args.gait)
-        takes = bool(overrides) and getattr(ctrl, "stateful", False)  # an OffsetFree
+        from bound_env.control import OffsetFree
+
+        # an OffsetFree only (mpc-adaptive is stateful too, and has no inner controller)
+        takes = bool(overrides) and isinstance(ctrl, OffsetFree)
         row_tag = tag if takes else ""
         if takes:
-            from bound_env.control import OffsetFree
-
             ctrl = OffsetFree(ctrl.inner, name=ctrl.name, **{**ctrl.settings(), **overrides})
         elif overrides:
             print(f"note: {name} is not offset-free: --set does not apply to it", file=sys.stderr)

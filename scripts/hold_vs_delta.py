@@ -31,6 +31,7 @@ from bound_env.analysis.margins.hold_delta import (
     spec_name,
 )
 from bound_env.cache import append_line, atomic_write, read_lines
+from bound_env.cli_args import number
 
 
 def load(name: str, gait: str):
@@ -49,7 +50,9 @@ def main(argv=None) -> int:
         default=[100 * d for d in DELTAS],
         help="model error in percent (presets pmD; default: 2.5 5 7.5 10 15)",
     )
-    ap.add_argument("--seed", type=int, default=777, help="plant seed (777: validation)")
+    ap.add_argument(
+        "--seed", type=number(int, 0, 2**32 - 1), default=777, help="plant seed (777: validation)"
+    )
     ap.add_argument("--gait", default="default")
     ap.add_argument("--out", type=Path, required=True, help="the JSON to write")
     ap.add_argument("--figure", type=Path, default=None, help="the PNG to write")
@@ -64,9 +67,13 @@ def main(argv=None) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     log = args.out.with_suffix(".jsonl")
     done = {}
-    for line in read_lines(log) if log.exists() else []:
-        r = json.loads(line)
-        done[(r["policy"], r["delta"], r["seed"])] = r
+    for i, line in enumerate(read_lines(log) if log.exists() else [], 1):
+        try:
+            r = json.loads(line)
+            done[(r["policy"], r["delta"], r["seed"])] = r
+        except (json.JSONDecodeError, KeyError, TypeError):
+            print(f"error: {log}:{i}: not a row of this script ({line[:40]!r})", file=sys.stderr)
+            return 2
     columns = {}
     for name in args.policy:
         try:

@@ -136,6 +136,12 @@ def controller_actor(name: str):
 
     ctrl = load_controller(name)
     plan = getattr(ctrl, "stride_action", None)
+    if plan is None and getattr(ctrl, "stateful", False):
+        raise ValueError(
+            f"{name}: a stride controller with memory across strides (stateful: e.g. held "
+            "offset-free), which this script cannot run: it asks a memoryless plan "
+            "(stride_action) of each start; evaluate the controller it wraps"
+        )
     if plan is None:
         raise ValueError(f"{name}: not a stride controller (no stride_action)")
     return lambda obs, env: np.asarray(plan(env.unwrapped.z), dtype=np.float32)

@@ -343,6 +343,7 @@ RANGES = {  # the documented range of each numeric option of the scripts
     "delta": (0.0, 0.99),
     "robots": (1, 100_000),
     "strides": (10, 100_000),
+    "plants": (1, 4096),
 }
 
 

@@ -256,6 +256,13 @@ def preprocess(hp: dict) -> TrainSpec:
     if normalize_kwargs is not None and "gamma" in hp:
         normalize_kwargs["gamma"] = float(hp["gamma"])  # rl-zoo3 uses the algorithm's gamma
     env_kwargs = dict(hp.get("env_kwargs") or {})
+    shaping, env_gamma = env_kwargs.get("shaping"), env_kwargs.get("gamma")
+    if shaping and env_gamma is not None and "gamma" in hp and env_gamma != hp["gamma"]:
+        # potential-based shaping keeps the optimal policy only at the learner's discount
+        raise ValueError(
+            f"gamma: {hp['gamma']!r}, but env_kwargs.gamma (the shaping's discount, shaping "
+            f"{shaping!r}) is {env_gamma!r}: set both (--hp gamma=G --hp env_kwargs.gamma=G)"
+        )
     wrappers = [(get_class_by_name(n), kw) for n, kw in class_entries(hp.get("env_wrapper"))]
     callbacks = [(get_class_by_name(n), kw) for n, kw in class_entries(hp.get("callback"))]
     algo = {k: v for k, v in hp.items() if k not in _NON_ALGO_KEYS}

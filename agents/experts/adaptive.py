@@ -388,8 +388,18 @@ def train_adaptive(cfg: AdaptiveConfig, out_dir, progress: bool = True) -> dict:
     as_spec(cfg.mismatch), as_spec(cfg.val_mismatch)  # a bad spec fails before the run
     settings = json.dumps(asdict(cfg), sort_keys=True, default=str)
     cfg_path = out_dir / "adaptive.json"
-    if cfg_path.is_file() and json.loads(cfg_path.read_text()) != json.loads(settings):
-        raise ValueError(f"{out_dir}: holds a run with other settings; use another --out")
+    old = json.loads(cfg_path.read_text()) if cfg_path.is_file() else None
+    if old is not None and old != json.loads(settings):
+        new = json.loads(settings)
+        changed = "; ".join(
+            f"{k}: {old.get(k)!r} -> {new.get(k)!r}"
+            for k in sorted(set(old) | set(new))
+            if old.get(k) != new.get(k)
+        )
+        raise ValueError(
+            f"{out_dir}: holds a run with other settings ({changed}); use another --name "
+            "or --out, or the run's settings to resume it"
+        )
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write(cfg_path, settings + "\n")
     K = expert.basis.K

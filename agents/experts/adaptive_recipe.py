@@ -13,6 +13,7 @@ import json
 import sys
 from pathlib import Path
 
+from bound_env import schema as check
 from bound_env.cache import atomic_write
 from bound_env.mismatch import as_spec
 
@@ -26,6 +27,114 @@ from .adaptive import AdaptiveConfig, train_adaptive
 ALGO = "adaptive-dagger"
 _RANDOMIZED = ("bound_env.wrappers.RandomizedPlant", "bound_env.randomized.RandomizedPlant")
 _SECTION_KEYS = ("algo", "env_wrapper", "env_kwargs", "adaptive")
+
+
+def _hidden(v, where: str) -> tuple:
+    if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)) or not 1 <= len(v) <= 16:
+        raise ValueError(f"{where} must be a list of 1 to 16 layer widths, got {v!r}")
+    return tuple(check.integer(h, f"{where}[{i}]", 1, 4096) for i, h in enumerate(v))
+
+
+def _flag(v, where: str) -> bool:
+    if not isinstance(v, bool):
+        raise ValueError(f"{where} must be true or false, got {v!r}")
+    return v
+
+
+def _spec(v, where: str, plants_only: bool = False) -> str:
+    try:
+        spec = as_spec(check.text(v, where))
+    except ValueError as e:
+        msg = str(e)
+        raise ValueError(msg if msg.startswith(where) else f"{where}: {msg}") from None
+    if spec.delay:
+        raise ValueError(
+            f"{where} {v!r}: algo {ALGO} draws plants and sensor noise, never an actuation "
+            "delay (its rollouts advance the stride map), so delay would be ignored"
+        )
+    if plants_only and spec.has_noise:
+        raise ValueError(f"{where} {v!r}: the validation hold draws plants only (no noise)")
+    return v
+
+
+def _teacher_expert(v, where: str) -> str:
+    return check.text(v, where)
+
+
+def _int(lo, hi):
+    return lambda v, where: check.integer(v, where, lo, hi)
+
+
+def _real(lo, hi, lo_open=False):
+    return lambda v, where: check.real(v, where, lo, hi, lo_open=lo_open)
+
+
+# every key of the ``adaptive`` block (`AdaptiveConfig` but ``mismatch`` and ``seed``): its
+# type and range, one line naming ``adaptive.KEY`` otherwise
+RECIPE_KEYS = {
+    "expert": _teacher_expert,  # an mpc spec: train_adaptive loads and checks it
+    "teacher": lambda v, where: check.text(v, where, ("cycle", "mpc")),
+    "gate_surprise": _real(0.0, 10.0, lo_open=True),
+    "summary": _flag,
+    "beta": _real(0.0, 1.0),
+    "k": _int(0, 64),
+    "rounds": _int(1, 100),
+    "episodes_first": _int(1, 1_000_000),
+    "episodes_round": _int(1, 1_000_000),
+    "strides": _int(1, 100_000),
+    "nominal_start_prob": _real(0.0, 1.0),
+    "r_max": _real(0.0, 1.0),
+    "hidden": _hidden,
+    "epochs": _int(1, 1_000_000),
+    "batch": _int(1, 10_000_000),
+    "lr": _real(0.0, 1.0, lo_open=True),
+    "aux_weight": _real(0.0, 1000.0),
+    "val_plants": _int(1, 4096),
+    "val_strides": _int(1, 100_000),
+    "val_mismatch": lambda v, where: _spec(v, where, plants_only=True),
+}
+# the options of ``bound-env train`` for PPO that DAgger has no use for: given, each is refused
+# (name, the attribute of the parsed arguments, its value when not given)
+PPO_ONLY = (
+    ("--n-timesteps", "n_timesteps", None),
+    ("--eval-freq", "eval_freq", None),
+    ("--n-eval-episodes", "n_eval_episodes", None),
+    ("--save-freq", "save_freq", None),
+    ("--export-from", "export_from", "final"),
+    ("--vec-env", "vec_env", "auto"),
+    ("--set", "set", None),
+    ("--seeds", "seeds", None),
+    ("--init-from", "init_from", None),
+)
+
+
+def check_recipe(block, where: str = "config") -> dict:
+    """The ``adaptive`` block of a section, every key typed and range-checked (`RECIPE_KEYS`);
+    a one-line ValueError naming ``adaptive.KEY`` and ``where`` otherwise."""
+    if block is None:
+        return {}
+    if not isinstance(block, dict):
+        raise ValueError(f"{where}: adaptive must be a mapping, got {block!r}")
+    out = {}
+    for key, v in block.items():
+        if key not in RECIPE_KEYS:
+            known = ", ".join(sorted(RECIPE_KEYS))
+            raise ValueError(f"{where}: adaptive.{key}: unknown; known: {known}")
+        out[key] = RECIPE_KEYS[key](v, f"{where}: adaptive.{key}")
+    return out
+
+
+def refuse_ppo_options(args) -> None:
+    """A ValueError naming the first option of `PPO_ONLY` given to a DAgger run (it would be
+    ignored)."""
+    for flag, attr, unset in PPO_ONLY:
+        value = getattr(args, attr, unset)
+        if value != unset and not (attr == "set" and not value):
+            shown = " ".join(value) if isinstance(value, list) else value
+            raise ValueError(
+                f"{flag} {shown}: not for algo {ALGO} (a PPO option; DAgger would ignore it: "
+                f"its settings are the config's adaptive block, --hp adaptive.KEY=VALUE)"
+            )
 
 
 def is_dagger_section(hp) -> bool:
@@ -45,8 +154,6 @@ def config_from_section(hp: dict, env_id: str, seed: int, where: str = "config")
     - ``adaptive``: any field of `AdaptiveConfig` but ``mismatch`` and ``seed``.
 
     Every bad key is a one-line ValueError naming it."""
-    from dataclasses import fields
-
     from bound_env import STRIDE_ENV_IDS
     from bound_env.control import load_controller as load_classical
 
@@ -60,24 +167,21 @@ def config_from_section(hp: dict, env_id: str, seed: int, where: str = "config")
             f"{where}: unknown key {unknown[0]!r} for algo {ALGO}; known: {_SECTION_KEYS}"
         )
     mismatch = "none"
-    for item in hp.get("env_wrapper") or []:
+    wrappers = hp.get("env_wrapper") or []
+    if not isinstance(wrappers, list):
+        raise ValueError(f"{where}: env_wrapper must be a list, got {wrappers!r}")
+    for item in wrappers:
         name, kw = (item, {}) if isinstance(item, str) else next(iter(dict(item).items()))
         if name not in _RANDOMIZED:
             raise ValueError(
                 f"{where}: env_wrapper {name!r}: algo {ALGO} takes RandomizedPlant only"
             )
         kw = kw or {}
-        if set(kw) - {"mismatch"}:
-            raise ValueError(f"{where}: RandomizedPlant takes mismatch only, got {sorted(kw)}")
-        mismatch = str(kw.get("mismatch", "pm5"))
+        if not isinstance(kw, dict) or set(kw) - {"mismatch"}:
+            raise ValueError(f"{where}: RandomizedPlant takes mismatch only, got {kw!r}")
+        mismatch = _spec(kw.get("mismatch", "pm5"), f"{where}: RandomizedPlant mismatch")
     as_spec(mismatch)
-    extra = dict(hp.get("adaptive") or {})
-    names = {f.name for f in fields(AdaptiveConfig)} - {"mismatch", "seed"}
-    for key in extra:
-        if key not in names:
-            raise ValueError(f"{where}: adaptive.{key}: unknown; known: {sorted(names)}")
-    if "hidden" in extra:
-        extra["hidden"] = tuple(int(h) for h in extra["hidden"])
+    extra = check_recipe(hp.get("adaptive", {}), where)
     cfg = AdaptiveConfig(mismatch=mismatch, seed=int(seed), **extra)
     expert = load_classical(cfg.expert)
     want = {
@@ -86,9 +190,14 @@ def config_from_section(hp: dict, env_id: str, seed: int, where: str = "config")
         "K": expert.basis.K,
         "max_torque": expert.max_torque,
     }
-    env_kwargs = dict(hp.get("env_kwargs") or {})
+    env_kwargs = check.mapping(hp.get("env_kwargs") or {}, f"{where}: env_kwargs")
     for key, value in env_kwargs.items():
-        if key in want and value != want[key]:
+        if key not in want:  # e.g. gait_overrides (train --set kc=300): the rollouts ignore it
+            raise ValueError(
+                f"{where}: env_kwargs.{key}: algo {ALGO} reads {', '.join(want)} only (the "
+                f"expert's), so {key} would be ignored"
+            )
+        if value != want[key]:
             raise ValueError(
                 f"{where}: env_kwargs.{key} = {value!r}, but the expert {cfg.expert!r} has "
                 f"{want[key]!r}"
@@ -97,17 +206,33 @@ def config_from_section(hp: dict, env_id: str, seed: int, where: str = "config")
 
 
 def train_from_config(
-    config, env_id: str, seed: int, name=None, runs_dir="runs", sets=None, progress=True
+    config,
+    env_id: str,
+    seed: int | None,
+    name=None,
+    runs_dir="runs",
+    sets=None,
+    progress=True,
+    resume: bool = False,
 ) -> Path:
     """``bound-env train`` of a section with ``algo: adaptive-dagger``: DAgger into
-    ``runs_dir/name`` (default ``adaptive_s<seed>``; resumed when it holds the same settings),
+    ``runs_dir/name`` (default ``adaptive_s<seed>``; resumed when it holds the same settings,
+    a ValueError naming each changed setting when it holds others; ``resume``: the run must
+    be there; ``seed`` None: the resumed run's, else 0),
     with the policy in ``policy/`` and its ``run.json``. Returns the run folder."""
     from ..common.config import apply_sets, load_hyperparams, resolve_config_path
     from .distill import write_run_info
 
     hp = apply_sets(load_hyperparams(config, env_id), sets)
+    run = Path(runs_dir) / (name or f"adaptive_s{0 if seed is None else seed}")
+    recorded = run / "adaptive.json"
+    if resume and not recorded.is_file():
+        raise ValueError(f"--resume: {run} holds no run of algo {ALGO} to resume")
+    if seed is None:  # --resume: the run's seed; else 0, as for PPO
+        seed = 0
+        if resume:
+            seed = check.integer(json.loads(recorded.read_text()).get("seed"), f"{recorded}: seed")
     cfg = config_from_section(hp, env_id, seed, str(resolve_config_path(config)))
-    run = Path(runs_dir) / (name or f"adaptive_s{seed}")
     summary = train_adaptive(cfg, run, progress=progress)
     rounds = summary["rounds"]
     write_run_info(
@@ -183,9 +308,7 @@ def train_recipe(args, sets) -> tuple[Path, Path | None]:
     its policy copied to ``--export-out``. Returns (run folder, export or None)."""
     from .distill import check_export, export_folder
 
-    for flag, value in (("--seeds", args.seeds), ("--init-from", args.init_from)):
-        if value is not None:
-            raise ValueError(f"{flag}: not for algo {ALGO} (one seed per run)")
+    refuse_ppo_options(args)
     check_export(args.export, args.force)
     run = train_from_config(
         args.config,
@@ -195,6 +318,7 @@ def train_recipe(args, sets) -> tuple[Path, Path | None]:
         runs_dir=args.runs_dir,
         sets=sets,
         progress=not args.no_progress,
+        resume=bool(getattr(args, "resume", False)),
     )
     return run, (export_folder(run / "policy", args.export) if args.export else None)
 

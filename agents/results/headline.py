@@ -134,6 +134,8 @@ def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
                 "label": label,
                 "what": what,
                 "policies": [rel(p) for p in g["policies"]],
+                # it reads the robot's true plant (bound_env.control.privileged): marked
+                "privileged": any(r.get("privileged") is True for r in runs),
                 "r50": headline_measure(
                     runs,
                     lambda r: r["basin_curve"]["r50"],
@@ -172,6 +174,8 @@ def headline_table(head: dict) -> str:
             else "r50: Wilson-based; σ: Poisson-based (one run's sampling error)"
         )
         name = row["role"] if row["role"] == row["label"] else f"{row['role']} ({row['label']})"
+        if row.get("privileged"):
+            name += " (privileged: reads the true plant)"
         lines.append(f"| **{name}** | {row['what']} | {cells[0]} | {cells[1]} | {kind} |")
     return "\n".join(lines)
 
@@ -314,6 +318,8 @@ def load_headline(path: Path = HEADLINE_JSON) -> dict:
     head = load_json_strict(path, {"budget": str, "seed": int, "rows": list})
     for i, row in enumerate(head["rows"]):
         check_keys(row, _ROW, str(path), f"rows[{i}].")
+        if not isinstance(row.get("privileged", False), bool):  # absent: an older file
+            raise ValueError(f"{path}: rows[{i}].privileged must be true or false")
     if not head["rows"]:
         raise ValueError(f"{path}: rows: empty (write it with bound-env compare --docs)")
     return head
@@ -328,11 +334,21 @@ def render_block(head: dict) -> str:
     )
 
 
-def update_readme(text: str, head: dict) -> str:
-    """``text`` with its headline block replaced (a ValueError if the markers are missing)."""
+def update_readme(text: str, head: dict, where: str = "README.md") -> str:
+    """``text`` with its headline block replaced: a ValueError naming ``where`` unless it
+    holds exactly one ``START`` and one ``END`` after it (a lost marker, or a second block,
+    would have the rewrite cut the text between them, or leave a stale copy)."""
+    starts, ends = text.count(START), text.count(END)
+    if not starts and not ends:
+        raise ValueError(f"{where}: no {START} ... {END} block")
+    if starts != 1 or ends != 1:
+        raise ValueError(
+            f"{where}: {starts} {START} and {ends} {END} markers (one block of each expected; "
+            "a lost or doubled marker: mend it by hand)"
+        )
     i, j = text.find(START), text.find(END)
-    if i < 0 or j < i:
-        raise ValueError(f"README.md: no {START} ... {END} block")
+    if j < i:
+        raise ValueError(f"{where}: {END} before {START}")
     return text[:i] + render_block(head) + text[j + len(END) :]
 
 
@@ -346,7 +362,7 @@ def main(argv=None) -> int:
         head = load_headline(Path(args.json))
         readme = Path(args.readme)
         old = readme.read_text()
-        new = update_readme(old, head)
+        new = update_readme(old, head, str(readme))
     except (OSError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

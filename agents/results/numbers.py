@@ -497,6 +497,46 @@ TABLES = {
 }
 
 
+# every opening and closing comment of a block, as the block patterns above read them
+MARKER = re.compile(
+    r"<!-- (?:n:[^>]*?|(?:table|numbers):[a-z0-9-]+) -->"
+    r"|<!-- /(?:n|table:[a-z0-9-]+|numbers:[a-z0-9-]+) -->"
+)
+NOT_FINITE = re.compile(r"(?<![A-Za-z])(?:nan|inf|-inf|Infinity|NaN)(?![A-Za-z])")
+
+
+def _closer(opening: str) -> str:
+    kind = opening[5:-4].split(":", 1)
+    return "<!-- /n -->" if kind[0] == "n" else f"<!-- /{kind[0]}:{kind[1]} -->"
+
+
+def check_markers(text: str, where: str = "") -> None:
+    """A ValueError of one line naming the file and the line when the block comments of
+    ``text`` are not pairs: a block opened and not closed before the next one (a lost
+    closing comment, which would make a rewrite swallow the words up to the next block's
+    end), a closing comment without its opening, a block inside another. Blocks do not
+    nest."""
+    opened = None  # (comment, line) of the block open at this point
+    for m in MARKER.finditer(text):
+        mark, line = m.group(0), text.count("\n", 0, m.start()) + 1
+        if mark.startswith("<!-- /"):
+            if opened is None or mark != _closer(opened[0]):
+                what = (
+                    f"inside {opened[0]} of line {opened[1]}" if opened else "without its opening"
+                )
+                raise ValueError(f"{where}:{line}: {mark} {what} (a lost or extra comment)")
+            opened = None
+        elif opened is not None:
+            raise ValueError(
+                f"{where}:{opened[1]}: {opened[0]} is not closed by {_closer(opened[0])} "
+                f"before {mark} of line {line}"
+            )
+        else:
+            opened = (mark, line)
+    if opened is not None:
+        raise ValueError(f"{where}:{opened[1]}: {opened[0]} is never closed ({_closer(opened[0])})")
+
+
 def parse_key(key: str) -> tuple[str, list[str]]:
     """(quantity, arguments) of a block's key; a ValueError naming the key otherwise."""
     m = KEY.match(key.strip())
@@ -539,7 +579,11 @@ def table(name: str, sources: Sources) -> str:
     """The text of the table block ``name`` (`TABLES`)."""
     if name not in TABLES:
         raise ValueError(f"<!-- table:{name} -->: no such table ({', '.join(TABLES)})")
-    return TABLES[name](sources)
+    text = TABLES[name](sources)
+    bad = NOT_FINITE.search(text)
+    if bad:
+        raise ValueError(f"<!-- table:{name} -->: not a finite number ({bad.group(0)!r})")
+    return text
 
 
 def update_text(text: str, sources: Sources, where: str = "", errors: list | None = None) -> str:

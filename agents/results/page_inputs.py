@@ -186,9 +186,38 @@ def _show(v) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+def check_mismatch_blocks(r, where) -> None:
+    """The model-error blocks of a margins result (``mismatch.SPEC``), as the page's tables
+    read them: each a JSON object with ``spec.name`` and ``hold`` (``k`` of ``n`` plants held:
+    integers, 0 <= k <= n, ``outcomes`` n of them); one line naming the key otherwise."""
+    mm = r.get("mismatch")
+    if mm is None:
+        return
+    if not isinstance(mm, dict):
+        raise ValueError(f"{where}: mismatch: must be a JSON object, got {_show(mm)}")
+    for name, b in mm.items():
+        key = f"mismatch.{name}"
+        check_fields(
+            b,
+            [(("spec",), "map"), (("spec", "name"), "str"), (("hold",), "map")],
+            f"{where}: {key}",
+        )
+        h = b["hold"]
+        check_fields(
+            h, [(("k",), "int"), (("n",), "int"), (("outcomes",), "list?")], f"{where}: {key}.hold"
+        )
+        if not 0 <= h["k"] <= h["n"]:
+            raise ValueError(f"{where}: {key}.hold: k {h['k']} of n {h['n']} plants (0 <= k <= n)")
+        if "outcomes" in h and len(h["outcomes"]) != h["n"]:
+            raise ValueError(
+                f"{where}: {key}.hold.outcomes: {len(h['outcomes'])} outcomes for n {h['n']}"
+            )
+
+
 def check_margins_result(r, where) -> dict:
     """``r`` (one column's ``margins.json``) if it holds every key the page reads."""
     check_fields(r, MARGINS_FIELDS, where)
+    check_mismatch_blocks(r, where)
     for parent, keys in SAME_LENGTH:
         lengths = {k: len(r[parent][k]) for k in keys}
         if len(set(lengths.values())) > 1:

@@ -22,6 +22,7 @@ from bound_env.schema import check_keys, read_json
 
 from .formatting import ROOT, num3
 from .headline import HEADLINE_JSON, load_headline
+from .numbers import NOT_FINITE, check_markers
 
 PAIRED_JSON = ROOT / "docs" / "paired.json"
 BLOCK = re.compile(r"<!-- numbers:([a-z0-9-]+) -->(.*?)<!-- /numbers:\1 -->", re.S)
@@ -147,8 +148,13 @@ def update_text(text: str, numbers: Numbers, where: str = "") -> str:
             raise ValueError(
                 f"{where}: <!-- numbers:{name} -->: no such block ({', '.join(BLOCKS)})"
             )
-        return f"<!-- numbers:{name} -->{BLOCKS[name](numbers)}<!-- /numbers:{name} -->"
+        sentence = BLOCKS[name](numbers)
+        bad = NOT_FINITE.search(sentence)
+        if bad:
+            raise ValueError(f"{where}: <!-- numbers:{name} -->: not a finite number ({bad[0]!r})")
+        return f"<!-- numbers:{name} -->{sentence}<!-- /numbers:{name} -->"
 
+    check_markers(text, where)
     return BLOCK.sub(fill, text)
 
 
@@ -166,25 +172,25 @@ def main(argv=None) -> int:
     try:
         numbers = load_numbers()
         sources = inline.Sources()
-        stale, missing = [], []
-        for f in doc_files():
+        new_text, missing = {}, []
+        for f in doc_files():  # every file made first: an error anywhere writes nothing
             old = f.read_text()
             new = inline.update_text(update_text(old, numbers, str(f)), sources, str(f), missing)
             if new != old:
-                stale.append(f)
-                if not args.check:
-                    atomic_write(f, new)
+                new_text[f] = new
     except (OSError, ValueError, KeyError, TypeError) as e:
         msg = str(e) if isinstance(e, (OSError, ValueError)) else f"a malformed key: {e!r}"
         print(f"error: {msg}", file=sys.stderr)
         return 2
-    for f in stale:
-        print(f"{f}: {'stale' if args.check else 'rewritten'}")
-    for e in dict.fromkeys(missing):  # blocks left as they were: their source lacks the value
+    for e in dict.fromkeys(missing):  # a block its source has no value for: nothing written
         print(f"error: {e}", file=sys.stderr)
     if missing:
         return 2
-    return 1 if stale and args.check else 0
+    for f, new in new_text.items():
+        if not args.check:
+            atomic_write(f, new)
+        print(f"{f}: {'stale' if args.check else 'rewritten'}")
+    return 1 if new_text and args.check else 0
 
 
 if __name__ == "__main__":

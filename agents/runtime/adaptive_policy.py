@@ -35,6 +35,7 @@ from bound_env.mismatch import EIGHT
 from ..common.mlp import mlp_forward
 from ..common.policy_files import FINGERPRINT_FILE, file_sha256, source_name
 from .choice_policy import expert_of, npz_bytes
+from .controllers import same_gait
 
 POLICY_FILE = "adaptive.npz"  # the network and its input statistics
 FACTOR_KEYS = EIGHT  # the factors the auxiliary head predicts
@@ -276,11 +277,21 @@ def load_adaptive_policy(folder, gait=None, force: bool = False) -> AdaptiveCont
     mismatch loads with a warning) and its arrays' shapes; ValueError naming the file."""
     folder = Path(folder)
     fp = folder / FINGERPRINT_FILE
+    want = None
     if fp.is_file():
         try:
             want = json.loads(fp.read_text())
         except ValueError:
             raise ValueError(f"{fp}: not valid JSON") from None
+    if not isinstance(want, dict) or not all(isinstance(want.get(n), str) for n in FINGERPRINTED):
+        # missing, {} or without an entry per file: its files cannot be checked
+        what = "missing" if want is None else "without the sha256 of " + ", ".join(FINGERPRINTED)
+        msg = f"{fp}: {what}: the policy's files cannot be checked against what was trained"
+        if not force:
+            raise ValueError(msg + "; pass --force to evaluate it as it is")
+        print(f"warning: {msg}", file=sys.stderr)
+        want = {}
+    if want:
         for name in FINGERPRINTED:
             p = folder / name
             if name in want and (not p.is_file() or file_sha256(p) != want.get(name)):
@@ -325,6 +336,12 @@ def load_adaptive_policy(folder, gait=None, force: bool = False) -> AdaptiveCont
             f"{where}: arrays do not fit k = {k}, K = {K} ({D} inputs; {K} coefficients and "
             f"{len(FACTOR_KEYS)} factors out), or hold non-finite values"
         )
+    trained = cfg["expert"].get("gait") if isinstance(cfg.get("expert"), dict) else None
+    if gait is not None and trained is not None and not same_gait(trained, gait):
+        msg = f"policy {folder} was trained on gait {trained!r}, not {str(gait)!r}"
+        if not force:  # its history and correction were learned on that gait's robot
+            raise ValueError(msg + "; pass --force to evaluate it there on purpose")
+        print(f"warning: {msg} (--force)", file=sys.stderr)
     expert = expert_of(cfg["expert"], gait)
     ctrl = make_controller(
         expert, layers, mu, sd, k, name=str(folder), gate_surprise=gs, summary=summary

@@ -152,6 +152,12 @@ def resolve_policy(spec: str | Path) -> str | Path:
     if not _on_disk(text) and archived_message(text):
         raise FileNotFoundError(archived_message(text))
     if not _on_disk(text):
+        for near in (SHIPPED_DIR / text, ARCHIVE_DIR / text, ARCHIVE_DIR / Path(text).name):
+            if near.is_dir() and Path(text).name not in ("", ".", ".."):  # the folder's name
+                raise FileNotFoundError(
+                    f"policy {text!r} does not exist here; did you mean {near}? (an archived "
+                    "policy loads by its path)"
+                )
         raise FileNotFoundError(
             f"policy {text!r} does not exist (give a name: {', '.join(policy_names())}; or a "
             "run or policy directory with model.zip, or a model .zip)"

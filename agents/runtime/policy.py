@@ -98,9 +98,17 @@ def load_controller(
     text = str(path)
     if unwrapped_name(text) != text:  # NAME+of: NAME held on the robot's own cycle
         from bound_env.control.offset_free import OffsetFree
+        from bound_env.control.privileged import is_privileged
 
         inner = wrapped_policy(text)
-        return OffsetFree(load_controller(inner, gait, force, env_id), name=text)
+        ctrl = load_controller(inner, gait, force, env_id)
+        if is_privileged(ctrl):  # OffsetFree never hands it the plant: it would run as mpc+of
+            raise ValueError(
+                f"{getattr(ctrl, 'name', inner)!r} is privileged: it is designed on the robot's "
+                f"true plant and aims at that plant's own cycle already, so {text!r} has no "
+                "offset to estimate (give it without +of)"
+            )
+        return OffsetFree(ctrl, name=text)
     if env_id is not None:
         check_env_id(env_id)
         if Path(str(path)).suffix in (".yaml", ".yml") or isinstance(resolve_policy(path), str):

@@ -46,7 +46,7 @@ import gymnasium as gym
 import numpy as np
 
 from bound_env import schema as check
-from bound_env.stride_protocol import OBS_TIME, OBS_Z, notify_apex
+from bound_env.stride_protocol import OBS_TIME, OBS_Z, notify_apex, reset_controller
 
 from ..common.wrappers import ObservationFilter, full_observation_names
 
@@ -220,6 +220,7 @@ class ResidualOver(gym.Wrapper):
             options = {**(options or {}), "apex_state": z}
         obs, info = self.env.reset(seed=seed, options=options)
         self.k = 0
+        reset_controller(self.base_ctrl)  # a base with memory starts each episode afresh
         if not self._apex(obs, info):  # a reset off an apex: the base reads the observation
             self.x, self.gate = self.gate_of(np.asarray(obs, dtype=float)[list(OBS_Z)])
         return self._observe(obs), info
@@ -254,6 +255,15 @@ class ResidualController:
 
     def __post_init__(self):
         self.gate_of = _Gate(self.base, self.ramp)
+
+    # stateful as its base: a base with memory (``adaptive/s0``) is reset with each episode;
+    # over a memoryless base the residual stays batched in the margins' loop
+    stateful = property(lambda self: getattr(self.base, "stateful", False) is True)
+
+    def reset(self) -> None:
+        """Forget the episode: the base's memory (`reset_controller`) and the last apex."""
+        reset_controller(self.base)
+        self._x, self._gate = None, 0.0
 
     # the base's record of who made each apex decision (margins' decision shares)
     decision_kinds = property(lambda self: getattr(self.base, "decision_kinds", None))

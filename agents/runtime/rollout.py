@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from bound_env.control.plain import FULL_OBS_DIM, PlainPolicy
+from bound_env.control.privileged import is_privileged
 
 from ..common.policy_files import find_policy_files, read_policy_section
 from .controllers import MLPController, check_gait
@@ -133,7 +134,9 @@ def rollout(
 ) -> dict:
     """One episode of ``strides`` strides (or until a fall); a JSON-able summary.
 
-    Keys: ``policy``, ``gait``, ``env_kwargs``, ``seed``, ``noise`` (the env's
+    Keys: ``policy``, ``privileged`` (true: the controller reads the robot's true plant,
+    `bound_env.control.privileged`: a reference, never deployable), ``gait``, ``env_kwargs``,
+    ``seed``, ``noise`` (the env's
     ``reset_noise_scale``), ``strides`` (completed), ``requested_strides``, ``fell`` and
     ``failure`` (the simulator's reason, or null), ``apex_error`` (per stride: the largest
     |z - z*| / apex_scales component, where z* is the gait's fixed point), ``mean_abs_tau``
@@ -200,6 +203,7 @@ def rollout(
         )
     return {
         "policy": str(policy),
+        "privileged": is_privileged(act.controller),
         "gait": str(make_env.env_kwargs.get("gait", "default")),
         "env_kwargs": _jsonable(make_env.env_kwargs),
         "seed": seed,
@@ -250,8 +254,11 @@ def summary_text(r: dict) -> str:
         apex = f"apex error (apex_scales units) last {err[-1]:.3g}, max {max(err):.3g}"
     else:  # no apex reached: there is no apex error to report (not "max nan")
         apex = "no apex reached, so no apex error"
+    mark = " (privileged: reads the robot's true plant, never deployable)" * bool(
+        r.get("privileged")
+    )
     return (
-        f"{r['policy']} on gait {r['gait']}: {r['strides']}/{r['requested_strides']} "
+        f"{r['policy']}{mark} on gait {r['gait']}: {r['strides']}/{r['requested_strides']} "
         f"strides, {fell}; {apex}; mean |tau| {r['mean_abs_tau']:.3g} N m "
         f"of {r['max_torque']:g}"
     )

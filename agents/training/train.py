@@ -192,6 +192,13 @@ def check_env_spec(env_id: str, spec: TrainSpec) -> None:
     except (TypeError, ValueError, gym.error.Error) as e:
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         msg = msg.split(" was raised from the environment creator")[0]  # gymnasium's wording
+        over = spec.env_kwargs.get("gait_overrides")
+        if over and "gait_overrides" in msg:  # train --set KEY=VALUE gave them
+            keys = ", ".join(f"{k}={v}" for k, v in dict(over).items())
+            raise ValueError(
+                f"--set {keys} (env_kwargs.gait_overrides): {env_id} takes no gait overrides; "
+                "give them to an env that takes them (PassiveBound-v0), or drop --set"
+            ) from None
         raise ValueError(f"cannot make {env_id} from its env_kwargs: {msg}") from None
     env.close()
 

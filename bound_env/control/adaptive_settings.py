@@ -28,8 +28,8 @@ ADAPTIVE_DEFAULTS = {
 ADAPTIVE_INTS = ("window", "identify", "iters", "trust_strides", "candidates", "search", "delays")
 ADAPTIVE_LIMITS = {
     "window": (1, 1000),
-    "prior": (0.0, 10.0),
-    "sigma": (0.0, 10.0),
+    "prior": (1e-6, 10.0),  # the fit divides by prior^2 and sigma^2: 1e-300 overflowed
+    "sigma": (1e-6, 10.0),
     "identify": (0, 100_000),
     "trust_error": (0.0, 100.0),
     "trust_strides": (1, 1000),
@@ -49,7 +49,14 @@ def check_adaptive(value, path) -> dict | None:
     """The ``adaptive`` block of an mpc spec: ``true`` (the defaults), ``false`` (none) or a
     mapping of some of `ADAPTIVE_DEFAULTS`, each checked (a one-line ValueError naming the file
     and the key)."""
-    return schema.settings_block(value, path, "adaptive", ADAPTIVE_DEFAULTS, _adaptive_value)
+    out = schema.settings_block(value, path, "adaptive", ADAPTIVE_DEFAULTS, _adaptive_value)
+    if out is not None and out["trust_strides"] > out["window"]:
+        raise ValueError(
+            f"{path}: adaptive.trust_strides {out['trust_strides']} is longer than "
+            f"adaptive.window {out['window']}: the fit never holds that many strides, so no "
+            "estimate would ever be trusted"
+        )
+    return out
 
 
 def _adaptive_value(key: str, v, where: str):
@@ -61,4 +68,4 @@ def _adaptive_value(key: str, v, where: str):
             v = float(v)
         except ValueError:
             raise ValueError(f"{where} must be a number, got {v!r}") from None
-    return schema.real(v, where, lo, hi, lo_open=key in ("prior", "sigma"))
+    return schema.real(v, where, lo, hi)

@@ -191,6 +191,9 @@ def load_spec(spec: str | Path) -> ControllerSpec:
                 f"{path}: unknown key {key!r} for a {kind} controller "
                 f"(allowed: {', '.join(allowed)})"
             )
+    for block in ("adaptive", "offset_free"):  # null would read as "absent": a plain mpc
+        if block in data and data[block] is None:
+            raise ValueError(f"{path}: {block} is null; give true, false or a mapping of settings")
     out = ControllerSpec(controller=kind, path=path)
     for key, value in data.items():
         setattr(out, key, value)

@@ -80,6 +80,8 @@ def _blocks(value) -> dict:
         return {value["spec"]["name"]: value}
     if isinstance(value, dict) and "mismatch" in value:
         return _blocks(value["mismatch"])
+    if not isinstance(value, (dict, list, tuple)):  # a string would recurse without end
+        return {}
     items = value.values() if isinstance(value, dict) else value
     out = {}
     for v in items:

@@ -209,6 +209,11 @@ def plot_margins(
     out_dir = Path(out_dir)
     paths = []
     labels = [r.get("label") or r["policy"] for r in results]
+    # a privileged column (it reads the robot's true plant) is marked in every legend
+    shown = {
+        lab: f"{lab} (privileged)" if r.get("privileged") is True else lab
+        for r, lab in zip(results, labels, strict=True)
+    }
     sty = column_styles(labels, styles)
     bold = set(HEADLINE_COLUMNS if emphasis is None else emphasis)
     if len(results) > 1:  # one result alone is always the one to see
@@ -227,7 +232,7 @@ def plot_margins(
             x + (k - (len(results) - 1) / 2) * wbar,
             vals,
             wbar,
-            label=lab,
+            label=shown[lab],
             color=st["color"],
             hatch=_HATCH.get(st["ls"]),
             edgecolor="white" if _HATCH.get(st["ls"]) else None,
@@ -249,7 +254,9 @@ def plot_margins(
     fig, ax = plt.subplots(figsize=(FIG_WIDTH, 4.6), dpi=FIG_DPI, layout="constrained")
     for r, lab in zip(results, labels, strict=True):
         c = r["basin_curve"]
-        line = ax.plot(c["sizes"], c["success"], marker="o", label=lab, ms=3, **_line(sty[lab]))[0]
+        line = ax.plot(
+            c["sizes"], c["success"], marker="o", label=shown[lab], ms=3, **_line(sty[lab])
+        )[0]
         if "ci_low" in c:
             ax.fill_between(
                 c["sizes"], c["ci_low"], c["ci_high"], color=line.get_color(), alpha=_band(sty[lab])
@@ -273,7 +280,7 @@ def plot_margins(
                 r["push"][kind]["success"],
                 marker="o",
                 ms=3,
-                label=lab,
+                label=shown[lab],
                 **_line(sty[lab]),
             )
         ax.set_xlabel(f"kick in {kind} [{unit}]")
@@ -289,7 +296,12 @@ def plot_margins(
         for r, lab in zip(results, labels, strict=True):
             t = r["terrain"]
             line = ax.plot(
-                t["sigmas_deg"], t["survival"], marker="o", label=lab, ms=3, **_line(sty[lab])
+                t["sigmas_deg"],
+                t["survival"],
+                marker="o",
+                label=shown[lab],
+                ms=3,
+                **_line(sty[lab]),
             )[0]
             ax.fill_between(
                 t["sigmas_deg"],
@@ -318,7 +330,7 @@ def plot_margins(
             sig = np.array([e["sigma_deg"] for e in m])
             val = np.array([e["mfpt"] for e in m], dtype=float)
             lb = np.array([e["lower_bound"] for e in m], dtype=bool)
-            line = ax.plot(sig, val, label=lab, **_line(sty[lab]))[0]
+            line = ax.plot(sig, val, label=shown[lab], **_line(sty[lab]))[0]
             ax.plot(sig[~lb], val[~lb], "o", ms=3, color=line.get_color())
             ax.plot(sig[lb], val[lb], "^", ms=5, mfc="none", color=line.get_color())
             lo = np.array([e["ci"][0] for e in m], dtype=float)
@@ -358,6 +370,11 @@ def summary_text(r: dict) -> str:
     lines = [
         f"policy {r['policy']}  gait {r['gait']}  budget {r['budget']}  seed {r.get('seed')}"
         f"  ({r['seconds']:.1f} s)",
+        *(
+            ["PRIVILEGED: reads the robot's true plant (an upper reference, never deployable)"]
+            if r.get("privileged") is True
+            else []
+        ),
         f"basin_min {r['basin_min']:.4g} ({r['basin_min_direction']}, "
         f"abs {r['basin_min_abs']:.4g})   cycle scale {r['basin_min_cycle']:.4g} "
         f"({r['basin_min_cycle_direction']})   share of ceiling "
