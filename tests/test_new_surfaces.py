@@ -34,7 +34,9 @@ def prose_on(tmp_path, monkeypatch):
 
     def run(name: str, edit=lambda text: text, change=lambda me: None, argv=()):
         docs = tmp_path / "docs"
-        shutil.copytree(ROOT / "docs", docs, ignore=shutil.ignore_patterns("*.md"), dirs_exist_ok=True)
+        shutil.copytree(
+            ROOT / "docs", docs, ignore=shutil.ignore_patterns("*.md"), dirs_exist_ok=True
+        )
         page = tmp_path / name
         page.write_text(edit((ROOT / "docs" / name).read_text()))
         me = json.loads((docs / "model_error.json").read_text())
