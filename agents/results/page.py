@@ -153,16 +153,18 @@ every column, every measure and how each was made follow.
 {repro}"""
 
 
-# The project's own page: how far its numbers moved on another machine (measured once)
+# What reproduces bit for bit, and what does not (docs/developers.md, "Same commit, same numbers")
 REPRODUCIBILITY = """\
-**Reproducibility.** Every number reproduces bit for bit on one machine (the same build of
-NumPy and Numba, the same Numba cache state), and across machines to its statistical
-precision: the controllers' own round-off differs from one CPU to another, `mpc` seeds its
-random candidates with the bytes of z, and rough terrain is chaotic, so a start near a basin
-edge can go either way. Measured: on another 2-core machine, from an empty cache, an earlier
-version of this page's code moved `mpc`'s r50 by +0.005, its σ50 by +0.06° and the MFPT's σ
-by −0.011° from that version's page on this machine, and `default`'s r50 by −0.0004 and the
-MFPT's σ by +0.003°.
+**Reproducibility.** The compiled kernels round in source order (no fast-math), so every
+number on this page except the wall-clock times reproduces bit for bit from the same commit on
+the same kind of machine: from a cold or a warm Numba cache and on 1 or 2 workers
+(`tests/test_same_numbers.py`). Before, fast-math made a function compiled with its callers
+round otherwise than one loaded from the cache, and `mpc`, which seeds its random candidates
+with the bytes of z, and the chaotic rough-terrain runs turned those last bits into other
+outcomes: a fresh clone of the same commit regenerated another `mpc` r50. Across CPUs or
+math libraries (glibc's FMA variants, BLAS kernels) last bits can still differ, and a start
+near a basin edge can then go either way. Decision times and run times are measured wall
+time and move with the load.
 
 """
 
