@@ -101,3 +101,53 @@ def render_like(v, text: str, unit: str = "") -> str:
     if m.group("sign") == "+" and v >= 0:
         out = "+" + out
     return out.replace("-", "−") if "−" in text else out
+
+
+PATH_PART = re.compile(r"\[(?P<sel>[^\]]*)\]|(?P<key>[^.\[\]]+)")
+
+
+def matches(item, conditions: list[tuple[str, str]]) -> bool:
+    """Whether the mapping ``item`` has each field of ``conditions`` at its value."""
+    if not isinstance(item, dict):
+        return False
+    for field, want in conditions:
+        have = item.get(field)
+        if isinstance(have, (int, float)) and not isinstance(have, bool):
+            try:
+                if float(want) != float(have):
+                    return False
+            except ValueError:
+                return False
+        elif str(have) != want:
+            return False
+    return True
+
+
+def data_lookup(data, path: str):
+    """The item of ``data`` at ``path``; a KeyError naming the part that is not there."""
+    pos, seen = 0, ""
+    path = path.strip()
+    while pos < len(path):
+        if path[pos] == ".":
+            pos += 1
+            continue
+        m = PATH_PART.match(path, pos)
+        if not m:
+            raise KeyError(f"{path}: cannot read at {path[pos:]!r}")
+        pos, part = m.end(), m.group(0)
+        seen += part if part.startswith("[") or not seen else "." + part
+        if m.group("sel") is not None:
+            conds = [c.split("=", 1) for c in m.group("sel").split(";")]
+            if any(len(c) != 2 for c in conds) or not isinstance(data, list):
+                raise KeyError(f"{seen}: a selector [field=value;...] of a list")
+            found = [x for x in data if matches(x, [(f.strip(), v.strip()) for f, v in conds])]
+            if len(found) != 1:
+                raise KeyError(f"{seen}: {len(found)} items match, not one")
+            data = found[0]
+        elif isinstance(data, list) and part.isdigit() and int(part) < len(data):
+            data = data[int(part)]
+        elif isinstance(data, dict) and part in data:
+            data = data[part]
+        else:
+            raise KeyError(f"{seen}: missing")
+    return data

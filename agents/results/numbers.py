@@ -42,7 +42,7 @@ import json
 import re
 from pathlib import Path
 
-from .formatting import ROOT, num3, render_like
+from .formatting import ROOT, data_lookup, num3, render_like
 
 INLINE = re.compile(r"<!-- n:(?P<key>[^>]*?) -->(?P<text>.*?)<!-- /n -->", re.S)
 KEY = re.compile(r"^(?P<q>[a-z0-9_]+)\((?P<args>[^()]*)\)$")
@@ -177,54 +177,6 @@ class Sources:
 
 
 DATA_FILE = re.compile(r"^(?:data/)?[A-Za-z0-9_.-]+\.jsonl?$")
-PATH_PART = re.compile(r"\[(?P<sel>[^\]]*)\]|(?P<key>[^.\[\]]+)")
-
-
-def _matches(item, conditions: list[tuple[str, str]]) -> bool:
-    """Whether the mapping ``item`` has each field of ``conditions`` at its value."""
-    if not isinstance(item, dict):
-        return False
-    for field, want in conditions:
-        have = item.get(field)
-        if isinstance(have, (int, float)) and not isinstance(have, bool):
-            try:
-                if float(want) != float(have):
-                    return False
-            except ValueError:
-                return False
-        elif str(have) != want:
-            return False
-    return True
-
-
-def data_lookup(data, path: str):
-    """The item of ``data`` at ``path``; a KeyError naming the part that is not there."""
-    pos, seen = 0, ""
-    path = path.strip()
-    while pos < len(path):
-        if path[pos] == ".":
-            pos += 1
-            continue
-        m = PATH_PART.match(path, pos)
-        if not m:
-            raise KeyError(f"{path}: cannot read at {path[pos:]!r}")
-        pos, part = m.end(), m.group(0)
-        seen += part if part.startswith("[") or not seen else "." + part
-        if m.group("sel") is not None:
-            conds = [c.split("=", 1) for c in m.group("sel").split(";")]
-            if any(len(c) != 2 for c in conds) or not isinstance(data, list):
-                raise KeyError(f"{seen}: a selector [field=value;...] of a list")
-            found = [x for x in data if _matches(x, [(f.strip(), v.strip()) for f, v in conds])]
-            if len(found) != 1:
-                raise KeyError(f"{seen}: {len(found)} items match, not one")
-            data = found[0]
-        elif isinstance(data, list) and part.isdigit() and int(part) < len(data):
-            data = data[int(part)]
-        elif isinstance(data, dict) and part in data:
-            data = data[part]
-        else:
-            raise KeyError(f"{seen}: missing")
-    return data
 
 
 def _data(s: Sources, name: str, path: str, unit: str = "", text: str = "") -> str:
@@ -497,44 +449,7 @@ TABLES = {
 }
 
 
-# every opening and closing comment of a block, as the block patterns above read them
-MARKER = re.compile(
-    r"<!-- (?:n:[^>]*?|(?:table|numbers):[a-z0-9-]+) -->"
-    r"|<!-- /(?:n|table:[a-z0-9-]+|numbers:[a-z0-9-]+) -->"
-)
 NOT_FINITE = re.compile(r"(?<![A-Za-z])(?:nan|inf|-inf|Infinity|NaN)(?![A-Za-z])")
-
-
-def _closer(opening: str) -> str:
-    kind = opening[5:-4].split(":", 1)
-    return "<!-- /n -->" if kind[0] == "n" else f"<!-- /{kind[0]}:{kind[1]} -->"
-
-
-def check_markers(text: str, where: str = "") -> None:
-    """A ValueError of one line naming the file and the line when the block comments of
-    ``text`` are not pairs: a block opened and not closed before the next one (a lost
-    closing comment, which would make a rewrite swallow the words up to the next block's
-    end), a closing comment without its opening, a block inside another. Blocks do not
-    nest."""
-    opened = None  # (comment, line) of the block open at this point
-    for m in MARKER.finditer(text):
-        mark, line = m.group(0), text.count("\n", 0, m.start()) + 1
-        if mark.startswith("<!-- /"):
-            if opened is None or mark != _closer(opened[0]):
-                what = (
-                    f"inside {opened[0]} of line {opened[1]}" if opened else "without its opening"
-                )
-                raise ValueError(f"{where}:{line}: {mark} {what} (a lost or extra comment)")
-            opened = None
-        elif opened is not None:
-            raise ValueError(
-                f"{where}:{opened[1]}: {opened[0]} is not closed by {_closer(opened[0])} "
-                f"before {mark} of line {line}"
-            )
-        else:
-            opened = (mark, line)
-    if opened is not None:
-        raise ValueError(f"{where}:{opened[1]}: {opened[0]} is never closed ({_closer(opened[0])})")
 
 
 def parse_key(key: str) -> tuple[str, list[str]]:

@@ -22,7 +22,46 @@ from bound_env.schema import check_keys, read_json
 
 from .formatting import ROOT, num3
 from .headline import HEADLINE_JSON, load_headline
-from .numbers import NOT_FINITE, check_markers
+from .numbers import NOT_FINITE
+
+# every opening and closing comment of a block, as the block patterns above read them
+MARKER = re.compile(
+    r"<!-- (?:n:[^>]*?|(?:table|numbers):[a-z0-9-]+) -->"
+    r"|<!-- /(?:n|table:[a-z0-9-]+|numbers:[a-z0-9-]+) -->"
+)
+
+
+def closer(opening: str) -> str:
+    kind = opening[5:-4].split(":", 1)
+    return "<!-- /n -->" if kind[0] == "n" else f"<!-- /{kind[0]}:{kind[1]} -->"
+
+
+def check_markers(text: str, where: str = "") -> None:
+    """A ValueError of one line naming the file and the line when the block comments of
+    ``text`` are not pairs: a block opened and not closed before the next one (a lost
+    closing comment, which would make a rewrite swallow the words up to the next block's
+    end), a closing comment without its opening, a block inside another. Blocks do not
+    nest."""
+    opened = None  # (comment, line) of the block open at this point
+    for m in MARKER.finditer(text):
+        mark, line = m.group(0), text.count("\n", 0, m.start()) + 1
+        if mark.startswith("<!-- /"):
+            if opened is None or mark != closer(opened[0]):
+                what = (
+                    f"inside {opened[0]} of line {opened[1]}" if opened else "without its opening"
+                )
+                raise ValueError(f"{where}:{line}: {mark} {what} (a lost or extra comment)")
+            opened = None
+        elif opened is not None:
+            raise ValueError(
+                f"{where}:{opened[1]}: {opened[0]} is not closed by {closer(opened[0])} "
+                f"before {mark} of line {line}"
+            )
+        else:
+            opened = (mark, line)
+    if opened is not None:
+        raise ValueError(f"{where}:{opened[1]}: {opened[0]} is never closed ({closer(opened[0])})")
+
 
 PAIRED_JSON = ROOT / "docs" / "paired.json"
 BLOCK = re.compile(r"<!-- numbers:([a-z0-9-]+) -->(.*?)<!-- /numbers:\1 -->", re.S)
