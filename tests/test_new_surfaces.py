@@ -308,7 +308,6 @@ def train_cli(tmp_path, monkeypatch, capsys):
     """``bound-env train --config adaptive ARGS`` in-process: the one-line error (training
     itself, should the arguments pass, fails the test)."""
     from agents.experts import adaptive_recipe
-    from bound_env.cli import main
 
     def never(*a, **k):
         raise AssertionError("training started: the arguments were accepted")
@@ -316,14 +315,8 @@ def train_cli(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(adaptive_recipe, "train_adaptive", never)
 
     def run(*args):
-        argv = ["train", "--config", "adaptive", "--out", str(tmp_path / "runs"), *args]
-        try:
-            code = main([str(a) for a in argv])
-        except SystemExit as e:
-            code = e.code
-        line = _one_line(capsys)
-        assert code not in (0, None), line
-        return line
+        argv = ["train", "--config", "adaptive", "--out", tmp_path / "runs", *args]
+        return _cli_line(argv, capsys)
 
     return run
 
