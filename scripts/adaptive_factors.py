@@ -71,18 +71,9 @@ def parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     ap = parser()
     args = ap.parse_args(argv)
-    from agents.runtime.policy import load_controller
-    from bound_env.mismatch import as_spec
+    from agents.runtime.policy_args import check_run_arguments
 
-    try:  # what the run needs, before it starts: one line naming the option
-        as_spec(args.mismatch)
-    except ValueError as e:
-        ap.error(f"--mismatch: {e}")
-    for p in args.policy:
-        try:
-            load_controller(p)
-        except (OSError, ValueError) as e:
-            ap.error(f"--policy {p}: {e}")
+    check_run_arguments(ap, args.policy, [args.mismatch])  # before the run starts
     from pathlib import Path
 
     from bound_env.cache import atomic_write

@@ -130,26 +130,6 @@ def privileged_entry(name: str, spec_text: str, seed: int) -> dict:
     }
 
 
-def check_arguments(ap, args) -> None:
-    """Every policy loads and every spec reads, before any run: else a usage error naming
-    the option (exit 2)."""
-    from agents.runtime.policy import load_controller
-    from bound_env.mismatch import as_spec
-
-    for spec in args.mismatch:
-        try:
-            as_spec(spec)
-        except ValueError as e:
-            ap.error(f"--mismatch {spec}: {e}")
-    for policy in args.policy:
-        if policy in PRIVILEGED:
-            continue
-        try:
-            load_controller(policy)
-        except (OSError, ValueError) as e:
-            ap.error(f"--policy {policy}: {e}")
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument(
@@ -159,7 +139,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=12345)
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
-    check_arguments(ap, args)
+    from agents.runtime.policy_args import check_run_arguments
+
+    check_run_arguments(ap, args.policy, args.mismatch, skip=PRIVILEGED)
     from bound_env.cache import atomic_write
 
     out = Path(args.out)

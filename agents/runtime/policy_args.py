@@ -27,3 +27,25 @@ def policy_label(policy: str) -> str:
     from .policy import policy_names
 
     return policy if policy in policy_names() else Path(policy).resolve().name
+
+
+def check_run_arguments(ap, policies, specs, skip=()) -> None:
+    """A script's ``--policy`` and ``--mismatch`` values, before any run: every policy loads
+    (but those in ``skip``) and every model-error spec reads, else ``ap.error`` naming the
+    option and the value (a one-line usage error, exit 2)."""
+    from bound_env.mismatch import as_spec
+
+    from .policy import load_controller
+
+    for spec in specs:
+        try:
+            as_spec(spec)
+        except ValueError as e:
+            ap.error(f"--mismatch {spec}: {e}")
+    for policy in policies:
+        if policy in skip:
+            continue
+        try:
+            load_controller(policy)
+        except (OSError, ValueError) as e:
+            ap.error(f"--policy {policy}: {e}")
