@@ -110,3 +110,126 @@ def provenance(g) -> list[str]:
     if group in LEARNED_SELECTION:
         lines.append(LEARNED_SELECTION[group])
     return lines
+
+
+# --------------------------------------------------------------------------------------------
+# The staleness check: is each committed column what its code and data make now?
+# --------------------------------------------------------------------------------------------
+
+PAGE_FILES = ("columns.json", "model_error.json")  # the committed page's files with columns
+PAGE_COMMAND = "bound-env compare --budget full --workers 2 --docs docs"
+AFTER = "then python -m agents.results.prose and python -m agents.results.headline"
+
+
+def committed_columns(docs=None) -> list[dict]:
+    """Every policy of every column of the committed page files (`PAGE_FILES` in ``docs``):
+    its file, label, gait, policy, recorded fingerprint, and the file's budget, seed and the
+    command its run recorded."""
+    docs = Path(docs) if docs is not None else ROOT / "docs"
+    out = []
+    for name in PAGE_FILES:
+        path = docs / name
+        if not path.is_file():
+            continue
+        data = json.loads(path.read_text())
+        command = (data.get("run") or {}).get("command") or PAGE_COMMAND
+        for col in data.get("columns") or []:
+            fps = col.get("fingerprints") or [None] * len(col["policies"])
+            for policy, fp in zip(col["policies"], fps, strict=True):
+                out.append(
+                    {
+                        "file": name,
+                        "label": col["label"],
+                        "gait": col["gait"],
+                        "policy": policy,
+                        "fingerprint": fp,
+                        "budget": data.get("budget"),
+                        "seed": data.get("seed"),
+                        "command": command,
+                    }
+                )
+    return out
+
+
+def needs_torch(policy: str) -> bool:
+    """Whether loading ``policy`` imports torch (a PPO model)."""
+    return (ROOT / policy / "model.zip").is_file() or str(policy).endswith(".zip")
+
+
+def column_staleness(row: dict, load: bool = True) -> list[str]:
+    """The stale parts of one committed column's policy (`committed_columns`): its recorded
+    fingerprint against what the code and data make now. ``load``: load the controller
+    (its data, ``config``, is then checked too); else only the hashes that need no
+    controller (the margins key's parts, the closure of the recorded roots, the files)."""
+    from bound_env.analysis.margins.fingerprint import (
+        CHECKED,
+        VERSION,
+        recorded_parts,
+        stale_parts,
+    )
+
+    from .margins import fingerprint_now, policy_files_sha
+
+    fp, gait, policy = row["fingerprint"], row["gait"], row["policy"]
+    if not isinstance(fp, dict) or fp.get("version") != VERSION:
+        return list(CHECKED)  # nothing recorded, or the first format: every part
+    budget = row["budget"] or "full"
+    if load:
+        now = fingerprint_now(policy, gait, budget, row["seed"])
+    else:
+        now = recorded_parts(fp, gait, budget, row["seed"], files=policy_files_sha(policy))
+    return stale_parts(fp, now)
+
+
+def staleness_message(row: dict, parts: list[str]) -> str:
+    """One line: the file, the column, the stale parts (what each is) and the command."""
+    from bound_env.analysis.margins.fingerprint import PARTS, VERSION
+
+    fp = row["fingerprint"]
+    if not isinstance(fp, dict):
+        why = "no fingerprint recorded"
+    elif fp.get("version") != VERSION:
+        why = f"its fingerprint is of an older format (version {fp.get('version', 1)})"
+    else:
+        why = "stale " + "; ".join(f"{p} ({PARTS[p]})" for p in parts)
+    return (
+        f"docs/{row['file']}: column {row['label']!r} ({row['policy']}): {why}; "
+        f"regenerate: {row['command']}"
+    )
+
+
+def stale_columns(rows=None, load=None) -> list[str]:
+    """One line per committed column's policy that is not what made it (`staleness_message`);
+    ``load(policy)``: whether to load it (default: unless it needs torch)."""
+    load = load or (lambda policy: not needs_torch(policy))
+    out = []
+    for row in committed_columns() if rows is None else rows:
+        parts = column_staleness(row, load=load(row["policy"]))
+        if parts:
+            out.append(staleness_message(row, parts))
+    return out
+
+
+def main(argv=None) -> int:
+    """``python -m agents.results.provenance [--load-all]``: the staleness check of the
+    committed page; exit 1 and one line per stale column when there is one."""
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(description="Is every committed page column up to date?")
+    ap.add_argument(
+        "--load-all", action="store_true", help="load the PPO policies too (imports torch)"
+    )
+    args = ap.parse_args(argv)
+    stale = stale_columns(load=(lambda p: True) if args.load_all else None)
+    for line in stale:
+        print(line, file=sys.stderr)
+    if stale:
+        print(AFTER, file=sys.stderr)
+        return 1
+    print(f"every column of {', '.join(PAGE_FILES)} is what its code and data make now")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

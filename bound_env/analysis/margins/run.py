@@ -34,10 +34,11 @@ from .budget import (
 )
 from .ceiling import CEILING_ES, task_ceiling
 from .closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TOL, Setup
+from .code_closure import file_code_hash, object_roots
 from .curve import task_curve
 from .cycle import FD_FLOOR, FD_REL, task_cycle
 from .decision_times import histogram
-from .fingerprint import column_fingerprint
+from .fingerprint import code_parts, column_fingerprint
 from .mismatch_tasks import (
     MISMATCH_BUDGETS,
     MISMATCH_SEED,
@@ -184,16 +185,18 @@ def source_files(extra=()) -> list[Path]:
 
 
 def source_hash(files=None) -> str:
-    """sha256 (16 hex digits) of the names and contents of ``files`` (default:
-    `source_files`): any change of the simulator, the task, the controllers or the margins
-    code gives a new cache key (no hand-kept version number)."""
+    """sha256 (16 hex digits) of the names and code of ``files`` (default: `source_files`):
+    each ``.py`` file's syntax tree without its docstrings (`code_closure.file_code_hash`:
+    an edited docstring or comment changes nothing), any other file's bytes. Any change of
+    the simulator, the task, the controllers or the margins code gives a new cache key (no
+    hand-kept version number)."""
     import hashlib
 
     h = hashlib.sha256()
     for f in files if files is not None else source_files():
         f = Path(f)
         h.update(f"{f.parent.name}/{f.name}\0".encode())
-        h.update(f.read_bytes())
+        h.update(file_code_hash(f).encode())
         h.update(b"\0")
     return h.hexdigest()[:16]
 
@@ -212,8 +215,9 @@ def setup_key(
     controller, gait: str, budget: Budget, seed: int = DEFAULT_SEED, extra_sources=()
 ) -> str:
     """Cache key of one evaluation: the controller's fingerprint and env kwargs, the gait
-    (name and file contents), the budget, the seed, `SETTINGS` and the `source_hash` of
-    bound_env/ and ``extra_sources``."""
+    (name and file contents), the budget, the seed, `SETTINGS`, the `source_hash` of
+    bound_env/ and ``extra_sources``, and the controller's code closure
+    (`fingerprint.code_parts`: the project code its objects reach, bound_env's and the rest)."""
     env_kwargs = getattr(controller, "env_kwargs", None) or {}
     return settings_hash(
         {
@@ -225,6 +229,7 @@ def setup_key(
             "settings": SETTINGS,
             "source": source_hash(source_files(extra_sources)),
             "env_kwargs": sorted((str(k), repr(v)) for k, v in env_kwargs.items()),
+            "closure": code_parts(object_roots(controller)),
         }
     )
 
@@ -281,6 +286,7 @@ def compute_margins(
     seed: int = DEFAULT_SEED,
     extra_sources=(),
     mismatch=None,
+    files: str | None = None,
 ) -> dict:
     """All margins of ``controller`` (an object with the controller protocol, package
     docstring) as a JSON-able dict.
@@ -298,6 +304,9 @@ def compute_margins(
     ``mismatch``: a model-error spec (`bound_env.mismatch.as_spec`: a preset, a YAML file or
     a `MismatchSpec`) or a list of them: the result then has the key ``mismatch`` too,
     {spec name: its block} (`mismatch_tasks`), each spec's tasks cached under `mismatch_key`.
+    ``files``: the sha256 of the controller's files (its spec, a policy's weights), recorded
+    in the result's ``fingerprint`` (`fingerprint.column_fingerprint`) by the caller that
+    resolved its name.
     """
     from bound_env.mismatch import as_spec, check_distinct
     from bound_env.params import load_gait
@@ -328,7 +337,14 @@ def compute_margins(
         key=setup_key(controller, gait, budget, seed, extra_sources),
         seed=seed,
     )
-    fingerprint = column_fingerprint(controller)
+    fingerprint = column_fingerprint(
+        controller,
+        gait=gait,
+        budget=budget,
+        seed=seed,
+        extra_sources=extra_sources,
+        files=files,
+    )
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
         if executor is None:
