@@ -55,7 +55,11 @@ def _strip(tree: ast.AST) -> ast.AST:
     return tree
 
 
+# memos, by the text's sha256 (a tree) or by a node of a memoized tree (its text, its names):
+# the trees live as long as the process, so a node's id is its own
 _TREES: dict[str, ast.Module] = {}
+_TEXTS: dict[int, str] = {}
+_CHAINS: dict[int, tuple] = {}
 
 
 def _tree(source: str) -> ast.Module:
@@ -67,7 +71,13 @@ def _tree(source: str) -> ast.Module:
 
 def code_text(source: str) -> str:
     """The code of ``source`` (module docstring): its syntax tree without docstrings, printed."""
-    return ast.unparse(_tree(source))
+    return _unparse(_tree(source))
+
+
+def _unparse(node) -> str:
+    if id(node) not in _TEXTS:
+        _TEXTS[id(node)] = ast.unparse(node)
+    return _TEXTS[id(node)]
 
 
 def file_code_hash(path) -> str:
@@ -95,7 +105,9 @@ def module_file(name: str) -> Path | None:
 
 class _Module:
     """A project module's top-level definitions (name -> statements that bind it), its
-    imports (alias -> (module, attribute or None)), star imports and other statements."""
+    imports (alias -> (module, attribute or None)), star imports and other statements
+    (``body``: what its import runs, its import statements included, so that a name imported
+    from elsewhere is another closure)."""
 
     def __init__(self, name: str, path: Path):
         self.name = name
@@ -110,8 +122,9 @@ class _Module:
         for s in stmts:
             if isinstance(s, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
                 self.defs.setdefault(s.name, []).append(s)
-            elif isinstance(s, (ast.Import, ast.ImportFrom)):
+            elif isinstance(s, (ast.Import, ast.ImportFrom)):  # hashed with the module's body
                 self.imports.update(imports_of(s, self.package, self.stars))
+                self.body.append(s)
             elif isinstance(s, (ast.Assign, ast.AnnAssign, ast.AugAssign)):
                 targets = s.targets if isinstance(s, ast.Assign) else [s.target]
                 names = [n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)]
@@ -201,9 +214,7 @@ class Closure:
         nodes = self.nodes(mod.name, name)
         local: dict = {}
         for node in nodes:
-            for n in ast.walk(node):
-                if isinstance(n, (ast.Import, ast.ImportFrom)):
-                    local.update(imports_of(n, mod.package))
+            local.update(_local_imports(node, mod.package))
         for node in nodes:
             for chain in _chains(node):
                 self.resolve(mod, chain, local)
@@ -246,8 +257,25 @@ class Closure:
                 self.in_module(module, [], depth + 1)  # not found: the whole module
 
 
-def _chains(node) -> list[list[str]]:
+def _local_imports(node, package: str) -> dict:
+    key = (id(node), package, "imports")
+    if key not in _CHAINS:
+        local: dict = {}
+        for n in ast.walk(node):
+            if isinstance(n, (ast.Import, ast.ImportFrom)):
+                local.update(imports_of(n, package))
+        _CHAINS[key] = local
+    return _CHAINS[key]
+
+
+def _chains(node) -> tuple:
     """Every dotted name the node uses (``a.b.c`` as [a, b, c]; a bare name as [a])."""
+    if id(node) not in _CHAINS:
+        _CHAINS[id(node)] = tuple(_find_chains(node))
+    return _CHAINS[id(node)]
+
+
+def _find_chains(node) -> list[list[str]]:
     out, inner = [], set()
     for n in ast.walk(node):
         if isinstance(n, ast.Attribute) and id(n) not in inner:
@@ -322,7 +350,7 @@ def closure_hashes(roots) -> dict:
         h = constants if is_constant and name != MODULE_BODY else code
         h.update(f"{module}:{name}\0".encode())
         for n in nodes:
-            h.update(ast.unparse(n).encode() + b"\0")
+            h.update(_unparse(n).encode() + b"\0")
     return {"code": code.hexdigest()[:16], "constants": constants.hexdigest()[:16]}
 
 
