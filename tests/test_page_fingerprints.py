@@ -294,7 +294,6 @@ def test_compare_records_the_new_fingerprint(tmp_path, monkeypatch):
     """What `compute_margins` records is what the check recomputes: a column made now is fresh
     (the core's fingerprint, without running a task: its assembly is replaced)."""
     import bound_env.analysis.margins.run as run
-
     from agents.results.margins import compute_margins
 
     class Stop(Exception):

@@ -233,3 +233,45 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+# --------------------------------------------------------------------------------------------
+# The rows of the resumable scripts (scripts/hold_vs_delta.py, hold_eval.py, adaptive_hold.py)
+# --------------------------------------------------------------------------------------------
+
+
+def row_fingerprint(policy, controller, gait="default", roots=(), **inputs) -> dict:
+    """The fingerprint a script's row records (`bound_env.analysis.margins.fingerprint.
+    run_fingerprint`): bound_env's sources, ``controller``'s code closure (and that of
+    ``roots``), its data and files (``policy``'s: `margins.policy_files_sha`), the gait file
+    and the row's ``inputs`` (a spec's contents, strides, robots, seed)."""
+    from bound_env.analysis.margins.fingerprint import run_fingerprint
+
+    from .margins import policy_files_sha
+
+    files = policy_files_sha(policy) if isinstance(policy, (str, Path)) else None
+    return run_fingerprint(controller, gait, files=files, roots=roots, **inputs)
+
+
+def reusable(rows, now: dict, what: str, log=None):
+    """The last of ``rows`` (a resumed row's earlier runs, oldest first) recorded under the
+    fingerprint ``now``, or None; when some row was there under another fingerprint (or
+    none), one line to ``log`` (stderr) says that ``what`` is recomputed, and which parts
+    differ."""
+    import sys
+
+    from bound_env.analysis.margins.fingerprint import differing
+
+    rows = list(rows)
+    for row in reversed(rows):
+        if not differing(row.get("fingerprint"), now):
+            return row
+    if rows:
+        fp = rows[-1].get("fingerprint")
+        why = (
+            "it was made without a fingerprint"
+            if not isinstance(fp, dict)
+            else f"its {', '.join(differing(fp, now))} changed"
+        )
+        print(f"note: recomputing {what}: {why}", file=log or sys.stderr, flush=True)
+    return None
