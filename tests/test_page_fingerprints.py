@@ -311,3 +311,27 @@ def test_compare_records_the_new_fingerprint(tmp_path, monkeypatch):
     assert seen["version"] == VERSION and seen["files"] and seen["margins_key"]
     assert stale_parts(seen, fingerprint_now("lqr", budget="quick")) == []
     json.dumps(seen)  # JSON-able, as columns.json holds it
+
+
+def test_every_quoted_data_file_records_a_current_fingerprint():
+    """docs/data/hold_vs_delta.json, adaptive_hold_test.json, adaptive_factors.json and
+    docs/hold_eval.jsonl: every row records the fingerprint of what made it, and it is what
+    the code and its policy's files make now."""
+    stale = provenance.stale_data()
+    assert not stale, "a data file the docs quote is stale:\n" + "\n".join(stale)
+
+
+def test_a_data_row_is_stale_after_a_code_edit_and_fresh_after_a_docstring_edit(monkeypatch):
+    from agents.runtime.policy import load_controller
+
+    fp = provenance.row_fingerprint("lqr", load_controller("lqr"), spec={"m1": 0.1}, strides=100)
+    row = {"policy": "lqr", "delta": 0.1, "seed": 777, "fingerprint": fp}
+    assert provenance.row_staleness(row) is None
+    assert provenance.row_staleness(dict(row, fingerprint=None)) == "no fingerprint recorded"
+    text = (ROOT / "bound_env/stride_map.py").read_text()
+    edit_source(monkeypatch, "bound_env/stride_map.py", '"""', '"""Edited. ')
+    assert provenance.row_staleness(row) is None
+    monkeypatch.undo()
+    edit_source(monkeypatch, "bound_env/stride_map.py", "EVAL_RTOL = 1e-10", "EVAL_RTOL = 1e-6")
+    assert provenance.row_staleness(row) == "its sources changed"
+    assert text == (ROOT / "bound_env/stride_map.py").read_text()  # the file itself untouched

@@ -210,9 +210,99 @@ def stale_columns(rows=None, load=None) -> list[str]:
     return out
 
 
+def _data_rows(docs: Path) -> dict:
+    """{file: (its rows, the command that regenerates it)} of the data files the docs quote."""
+    out = {}
+    path = docs / "data" / "hold_vs_delta.json"
+    if path.is_file():
+        data = json.loads(path.read_text())
+        rows = [r for c in data.get("columns", {}).values() for r in c.get("rows", [])]
+        out["data/hold_vs_delta.json"] = (rows, data.get("made_with"))
+    path = docs / "data" / "adaptive_hold_test.json"
+    if path.is_file():
+        rows = json.loads(path.read_text()).get("entries", [])
+        pols = " ".join(dict.fromkeys(r["policy"] for r in rows))
+        specs = " ".join(dict.fromkeys(r["spec_name"] for r in rows))
+        seeds = {r["seed"] for r in rows}
+        seed = f" --seed {seeds.pop()}" if len(seeds) == 1 else ""
+        out["data/adaptive_hold_test.json"] = (
+            rows,
+            f"python scripts/adaptive_hold.py --policy {pols} --mismatch {specs}{seed} "
+            f"--out {rel(str(path))}",
+        )
+    path = docs / "data" / "adaptive_factors.json"
+    if path.is_file():
+        rows = json.loads(path.read_text())
+        pols = " ".join(dict.fromkeys(r["policy"] for r in rows))
+        specs = sorted({str(r.get("spec")) for r in rows})
+        out["data/adaptive_factors.json"] = (
+            rows,
+            f"python scripts/adaptive_factors.py --policy {pols} --mismatch "
+            f"{specs[0] if len(specs) == 1 else 'pm10'} --out {rel(str(path))}",
+        )
+    path = docs / "hold_eval.jsonl"
+    if path.is_file():
+        latest = {}  # a rerun appends: the last row of each (policy, delta, seed, set, n)
+        for x in path.read_text().splitlines():
+            if x.strip():
+                r = json.loads(x)
+                latest[(r["policy"], r["delta"], r["seed"], r.get("set", ""), r["n"])] = r
+        rows = list(latest.values())
+        pols = " ".join(dict.fromkeys(r["policy"] for r in rows))
+        deltas = " ".join(f"{d:g}" for d in sorted({r["delta"] for r in rows}))
+        seeds = sorted({r["seed"] for r in rows})
+        out["hold_eval.jsonl"] = (
+            rows,
+            f"for s in {' '.join(map(str, seeds))}; do python scripts/hold_eval.py --policy "
+            f"{pols} --delta {deltas} --seed $s --out {rel(str(path))}; done",
+        )
+    return out
+
+
+def row_staleness(row: dict) -> str | None:
+    """Why a data file's row is not what the code makes now (its code: bound_env's sources
+    and its recorded closure; its policy's files), or None. Its inputs (spec, gait, strides)
+    are the run's: a resumed run compares them (`reusable`)."""
+    from bound_env.analysis.margins.fingerprint import VERSION, code_parts, margins_parts
+
+    from .margins import policy_files_sha
+
+    fp = row.get("fingerprint")
+    if not isinstance(fp, dict) or fp.get("version") != VERSION:
+        return "no fingerprint recorded"
+    now = {"sources": margins_parts()["sources"], **code_parts(fp.get("roots") or [])}
+    try:
+        files = policy_files_sha(row.get("policy"))
+    except (OSError, ValueError, TypeError):
+        files = None
+    if files is not None and fp.get("files") is not None:
+        now["files"] = files
+    parts = [k for k, v in now.items() if k != "roots" and fp.get(k) != v]
+    return f"its {', '.join(parts)} changed" if parts else None
+
+
+def stale_data(docs=None) -> list[str]:
+    """One line per data file the docs quote (`_data_rows`) with a row that is not what the
+    code and its policy's files make now: how many, the first, and the command."""
+    docs = Path(docs) if docs is not None else ROOT / "docs"
+    out = []
+    for name, (rows, command) in _data_rows(docs).items():
+        why = [(r, row_staleness(r)) for r in rows]
+        bad = [(r, w) for r, w in why if w]
+        if bad:
+            r, w = bad[0]
+            first = " ".join(str(r[k]) for k in ("policy", "delta", "spec_name", "seed") if k in r)
+            out.append(
+                f"docs/{name}: {len(bad)} of {len(rows)} rows stale ({first}: {w}); "
+                f"regenerate: {command or 'the command in its docs'}"
+            )
+    return out
+
+
 def main(argv=None) -> int:
-    """``python -m agents.results.provenance [--load-all]``: the staleness check of the
-    committed page; exit 1 and one line per stale column when there is one."""
+    """``python -m agents.results.provenance [--load-all] [--data]``: the staleness check of
+    the committed page (and of the data files the docs quote); exit 1 and one line per stale
+    column (or file) when there is one."""
     import argparse
     import sys
 
@@ -220,8 +310,10 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--load-all", action="store_true", help="load the PPO policies too (imports torch)"
     )
+    ap.add_argument("--data", action="store_true", help="check the quoted data files too")
     args = ap.parse_args(argv)
     stale = stale_columns(load=(lambda p: True) if args.load_all else None)
+    stale += stale_data() if args.data else []
     for line in stale:
         print(line, file=sys.stderr)
     if stale:
