@@ -400,7 +400,9 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
         if not dst.exists():
             shutil.copyfile(f, dst)
         copies.append(dst)
-    monkeypatch.setattr(margins_run, "source_files", lambda extra=(): copies + list(extra))
+    from bound_env.analysis.margins import keys
+
+    monkeypatch.setattr(keys, "source_files", lambda extra=(): copies + list(extra))
     k0 = setup_key(c, "default", q)
     fast = tmp_path / "bound_env" / "fast.py"
     fast.write_text(fast.read_text() + "\n# a comment\n")

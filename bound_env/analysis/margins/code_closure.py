@@ -4,7 +4,7 @@
 `code_text` is a module's syntax tree without its docstrings (and without bare string
 statements), printed back: an edited docstring or comment, or a reformatted line, does not
 change it; any code or constant edit, an import included, does. Every code hash of the margins
-reads through it: the cache key's `run.source_hash` and the closure below, and every file
+reads through it: the cache key's `keys.source_hash` and the closure below, and every file
 through `read_source` (the one place a test edits a source without touching the file).
 
 The closure is per object, definition by definition: its roots are the classes of a
@@ -358,3 +358,9 @@ def closure_items(roots) -> list[str]:
     """The closure's definitions as ``module:name`` (what `closure_hashes` hashes), sorted."""
     c = Closure().run([tuple(r.split(":", 1)) for r in roots])
     return sorted(f"{m}:{n}" for m, n in c.items)
+
+
+def code_parts(roots) -> dict:
+    """``roots`` (sorted ``module:Name``), ``code`` and ``constants`` of their closure."""
+    roots = sorted(str(r) for r in roots)
+    return {"roots": roots, **closure_hashes(roots)}

@@ -4,10 +4,10 @@ and the check that a recorded fingerprint is still what the code and data are (`
 A results page is true of the code and data that made it. Each column's result records, under
 ``fingerprint`` (``version`` 2), its checked parts (`CHECKED`, each a sha256 of 16 hex digits):
 
-- the margins cache key's parts (`run.setup_key`, recorded whole as ``margins_key``):
-  ``sources``, every bound_env source (`run.source_hash`: each file's code without its
+- the margins cache key's parts (`keys.setup_key`, recorded whole as ``margins_key``):
+  ``sources``, every bound_env source (`keys.source_hash`: each file's code without its
   docstrings, `code_closure.code_text`); ``margins_settings``, the margins' settings
-  (`run.SETTINGS`); ``budget``, the budget, the seed and its sample seeds; ``gait``, the gait
+  (`keys.SETTINGS`); ``budget``, the budget, the seed and its sample seeds; ``gait``, the gait
   file's contents;
 - the controller's code closure (`code_closure`): ``code`` and ``constants``, the definitions
   its objects' classes reach through imports within the project (bound_env and its sibling
@@ -37,11 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .code_closure import code_parts
+
 VERSION = 2  # the fingerprint's format (the first had no version)
 # the parts `stale_parts` compares, and what each is (the check's message names it)
 PARTS = {
     "sources": "bound_env's code (the margins cache key's source hash)",
-    "margins_settings": "the margins settings (run.SETTINGS)",
+    "margins_settings": "the margins settings (keys.SETTINGS)",
     "budget": "the budget and seed",
     "gait": "the gait file",
     "code": "the controller's code closure",
@@ -145,13 +147,13 @@ def git_commit(root: Path | None = None) -> tuple[str | None, bool | None]:
 
 
 def margins_parts(gait="default", budget=None, seed=None, extra_sources=()) -> dict:
-    """The parts of the margins cache key (`run.setup_key`) that are not the controller's:
+    """The parts of the margins cache key (`keys.setup_key`) that are not the controller's:
     ``sources``, ``margins_settings``, ``budget`` (None without a budget) and ``gait``."""
     from dataclasses import asdict
 
     from ...cache import settings_hash
     from .budget import DEFAULT_SEED, as_budget, check_seed, sample_seeds
-    from .run import SETTINGS, gait_key, source_files, source_hash
+    from .keys import SETTINGS, gait_key, source_files, source_hash
 
     seed = DEFAULT_SEED if seed is None else check_seed(seed)
     run = None
@@ -171,14 +173,6 @@ def _is_passive(controller) -> bool:
         or (isinstance(controller, str) and controller == PASSIVE)
         or getattr(controller, "fingerprint", None) is None
     )
-
-
-def code_parts(roots) -> dict:
-    """``roots`` (sorted ``module:Name``), ``code`` and ``constants`` of their closure."""
-    from .code_closure import closure_hashes
-
-    roots = sorted(str(r) for r in roots)
-    return {"roots": roots, **closure_hashes(roots)}
 
 
 def column_fingerprint(
@@ -214,7 +208,7 @@ def column_fingerprint(
     fp["margins_key"] = None
     if budget is not None and not _is_passive(controller):
         from .budget import DEFAULT_SEED, as_budget
-        from .run import setup_key
+        from .keys import setup_key
 
         seed = DEFAULT_SEED if seed is None else seed
         fp["margins_key"] = setup_key(controller, gait, as_budget(budget), seed, extra_sources)
