@@ -9,7 +9,9 @@ plant from the nominal z* through the one stride map; after strides 1, 3, 10 and
 the robot reaches) its factor head's estimate of m1, m2, I1, I2, kb, kf, kc and zeta is
 compared with the plant's true factor: per factor and stride, the Pearson correlation and
 the rms error (in the factor's units, 0.0577 being a constant guess at 1 for a ±10 %
-uniform draw). Written atomically to ``--out``.
+uniform draw). Written atomically to ``--out``, each entry with its ``fingerprint``
+(`agents.results.provenance.row_fingerprint`: the code, the policy's data and files, the
+spec's contents, the plants).
 """
 
 from __future__ import annotations
@@ -30,9 +32,20 @@ def factors_of(params, nominal, keys) -> np.ndarray:
 
 def run(policy: str, spec: str, n: int) -> dict:
     from agents.experts.adaptive import FACTOR_KEYS, true_map, validation_plants
+    from agents.results.provenance import row_fingerprint
     from agents.runtime.policy import load_controller
+    from bound_env.mismatch import as_spec
 
     ctrl = load_controller(policy)
+    # what made the entry (`agents.results.provenance.row_fingerprint`), before it is used
+    fp = row_fingerprint(
+        policy,
+        ctrl,
+        roots=("agents.experts.adaptive:true_map", "agents.experts.adaptive:validation_plants"),
+        spec=as_spec(spec).to_dict(),
+        plants=n,
+        checkpoints=list(CHECKPOINTS),
+    )
     plants = validation_plants(ctrl, spec, n)
     truth = np.array([factors_of(p, ctrl.params, FACTOR_KEYS) for p in plants])
     est = {s: np.full((n, len(FACTOR_KEYS)), np.nan) for s in CHECKPOINTS}
@@ -56,6 +69,7 @@ def run(policy: str, spec: str, n: int) -> dict:
             rms = float(np.sqrt(np.mean((t - e) ** 2))) if ok.any() else None
             row[k] = {"corr": r, "rms": rms}
         out["strides"][str(s)] = row
+    out["fingerprint"] = fp
     return out
 
 

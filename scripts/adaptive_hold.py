@@ -8,7 +8,10 @@ Each (policy, spec) runs the margins' own model-error task ``mm_hold``
 the seed's plants, 32 plants, 100 strides from the nominal z*, the quick budget's), so the
 plants, the noise streams and the outcomes are exactly those of ``margins --mismatch SPEC
 --seed SEED``'s ``hold`` block, without its other measures. Each finished entry is written to
-``--out`` (atomically) and skipped when already there, so a killed run resumes. Besides the
+``--out`` (atomically) with its ``fingerprint`` (`agents.results.provenance.row_fingerprint`:
+the code, the controller's data and files, the spec's contents and the seed) and skipped when
+already there under the same fingerprint, so a killed run resumes; an entry made under another
+(an edited spec or policy, other code) is recomputed in its place, and the run says so. Besides the
 held count: the outcomes per plant (for paired tests), the strides reached, the median
 effort of the held plants, and the controller's decision times (p50, p99) where it keeps them.
 """
@@ -26,7 +29,8 @@ import numpy as np
 from bound_env.cli_args import number
 
 
-def hold_entry(policy: str, spec_text: str, seed: int) -> dict:
+def hold_entry(policy: str, spec_text: str, seed: int, ctrl=None) -> dict:
+    """The ``mm_hold`` of ``policy`` (``ctrl``: it loaded) on ``spec_text`` (module docstring)."""
     from agents.runtime.policy import load_controller
     from bound_env.analysis.margins import as_budget
     from bound_env.analysis.margins.closed_loop import Setup
@@ -35,7 +39,7 @@ def hold_entry(policy: str, spec_text: str, seed: int) -> dict:
     from bound_env.params import load_gait
 
     spec = as_spec(spec_text)
-    ctrl = load_controller(policy)
+    ctrl = load_controller(policy) if ctrl is None else ctrl
     setup = Setup(
         controller=ctrl,
         gait="default",
@@ -130,6 +134,31 @@ def privileged_entry(name: str, spec_text: str, seed: int) -> dict:
     }
 
 
+# the code a privileged reference runs besides the mpc (`privileged_entry`)
+PRIVILEGED_ROOTS = (
+    "agents.experts.adaptive:CycleTeacher",
+    "agents.experts.adaptive:hold_on",
+    "agents.experts.adaptive:privileged_teacher",
+)
+
+
+def entry_fingerprint(policy: str, spec, seed: int):
+    """(the loaded controller or None, the fingerprint an entry of ``policy`` records)."""
+    from agents.results.provenance import row_fingerprint
+
+    inputs = {"spec": spec.to_dict(), "seed": seed, "budget": "quick"}
+    if policy in PRIVILEGED:
+        from bound_env.control import load_controller as classical
+
+        mpc = classical("mpc")
+        fp = row_fingerprint("mpc", mpc, roots=PRIVILEGED_ROOTS, reference=policy, **inputs)
+        return None, fp
+    from agents.runtime.policy import load_controller
+
+    ctrl = load_controller(policy)
+    return ctrl, row_fingerprint(policy, ctrl, **inputs)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument(
@@ -145,19 +174,27 @@ def main(argv=None) -> int:
     from bound_env.cache import atomic_write
 
     out = Path(args.out)
+    from agents.results.provenance import reusable
+    from bound_env.mismatch import as_spec
+
     data = json.loads(out.read_text()) if out.is_file() else {"entries": []}
-    done = {(e["policy"], e["spec_name"], e["seed"]) for e in data["entries"]}
+
+    def key(e):
+        return (e["policy"], e["spec_name"], e["seed"])
+
     for spec in args.mismatch:
         for policy in args.policy:
-            from bound_env.mismatch import as_spec
-
-            if (policy, as_spec(spec).name, args.seed) in done:
+            k = (policy, as_spec(spec).name, args.seed)
+            ctrl, fp = entry_fingerprint(policy, as_spec(spec), args.seed)
+            old = [e for e in data["entries"] if key(e) == k]
+            if reusable(old, fp, f"{policy} {k[1]} seed {args.seed}") is not None:
                 continue
             if policy in PRIVILEGED:
                 e = privileged_entry(policy, spec, args.seed)
             else:
-                e = hold_entry(policy, spec, args.seed)
-            data["entries"].append(e)
+                e = hold_entry(policy, spec, args.seed, ctrl)
+            e["fingerprint"] = fp
+            data["entries"] = [x for x in data["entries"] if key(x) != k] + [e]
             atomic_write(out, json.dumps(data, indent=1) + "\n")
             print(
                 f"{policy:28s} {e['spec_name']:8s} seed {args.seed}: "

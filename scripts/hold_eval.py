@@ -14,8 +14,12 @@ Every robot starts on the nominal z* and runs ``--strides`` strides through the 
 hold measure (`mismatch_tasks.task_mm_hold`: the step env, each stride restarted at its apex,
 every robot with a fresh controller state); hold = no fall. Reported: the held count and,
 over the held robots, the median of the mean |tau| over the last 10 strides (impulse / time).
-Each finished (policy, delta, seed) row is appended to ``--out`` (JSON lines) and skipped
-when already there, so a killed run resumes.
+Each finished (policy, delta, seed) row is appended to ``--out`` (JSON lines) with its
+``fingerprint`` (`agents.results.provenance.row_fingerprint`: the code, the controller's data
+and files, the gait, the spec, the robots, the strides and the settings) and skipped when
+already there under the same fingerprint, so a killed run resumes; a row made under another
+(an edited spec or policy, another gait or ``--strides``, other code) is recomputed, and the
+run says so.
 """
 
 from __future__ import annotations
@@ -167,12 +171,15 @@ def main(argv=None) -> int:
     tag = ",".join(
         f"{k}={v}" if isinstance(v, str) else f"{k}={v:g}" for k, v in sorted(overrides.items())
     )
-    seen = set()
+    from agents.results.provenance import reusable, row_fingerprint
+
+    seen: dict = {}  # (policy, delta, seed, set, n) -> its rows, oldest first
     if args.out is not None and args.out.exists():
         for line in args.out.read_text().splitlines():
             row = json.loads(line)
             if row.get("measure") == MEASURE:
-                seen.add((row["policy"], row["delta"], row["seed"], row.get("set", ""), row["n"]))
+                key = (row["policy"], row["delta"], row["seed"], row.get("set", ""), row["n"])
+                seen.setdefault(key, []).append(row)
     for name in args.policy:
         ctrl = load(name, args.gait)
         from bound_env.control import OffsetFree
@@ -186,7 +193,19 @@ def main(argv=None) -> int:
             print(f"note: {name} is not offset-free: --set does not apply to it", file=sys.stderr)
         for delta in args.delta:
             key = (name, delta, args.seed, row_tag, args.robots)
-            if key in seen:
+            fp = row_fingerprint(
+                name,
+                ctrl,
+                args.gait,
+                spec=spec_of(delta).to_dict(),
+                seed=args.seed,
+                robots=args.robots,
+                strides=args.strides,
+                tail=TAIL,
+                set=row_tag,
+            )
+            what = f"{name} delta={delta:g} seed={args.seed} {row_tag}".rstrip()
+            if reusable(seen.get(key, []), fp, what) is not None:
                 continue
             setup = setup_of(
                 ctrl, f"{name}/{row_tag}", delta, args.robots, args.strides, args.seed, args.gait
@@ -212,6 +231,7 @@ def main(argv=None) -> int:
                     "held": n_held,
                     "median_tail_effort": eff,
                     **res,
+                    "fingerprint": fp,
                 }
                 with args.out.open("a") as f:
                     f.write(json.dumps(row) + "\n")

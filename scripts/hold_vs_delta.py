@@ -7,12 +7,15 @@
 Each (policy, delta) is `bound_env.analysis.margins.hold_delta.hold_row`: the hold of
 ``bound-env margins --mismatch pmD --budget quick --seed SEED`` (32 plants, 100 strides from
 the nominal z*), with the median effort of the held plants and every apex decision's wall
-time. Finished rows are appended to ``OUT.jsonl`` (beside ``--out``) and skipped when already
-there, so a killed run resumes; the JSON (every row of the requested policies, deltas and
-seed) and the figure are written atomically at the end. A privileged controller (it reads
-the robot's true plant, `bound_env.control.privileged`) is marked so in the JSON, the figure
-and the table. Design and tuning read the validation seed 777; the test seed 12345 is run
-once, for the report.
+time. Finished rows are appended to ``OUT.jsonl`` (beside ``--out``), each with its
+``fingerprint`` (`agents.results.provenance.row_fingerprint`: the code, the controller's data
+and files, the gait, the spec and the seed), and reused when already there under the same
+fingerprint, so a killed run resumes; a row made under another fingerprint (an edited spec or
+policy, another gait, other code) is recomputed, and the run says so. The JSON (every row of
+the requested policies, deltas and seed) and the figure are written atomically at the end.
+A privileged controller (it reads the robot's true plant, `bound_env.control.privileged`) is
+marked so in the JSON, the figure and the table. Design and tuning read the validation seed
+777; the test seed 12345 is run once, for the report.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import sys
 import time
 from pathlib import Path
 
+from agents.results.provenance import reusable, row_fingerprint
 from bound_env.analysis.margins.hold_delta import (
     DELTAS,
     hold_delta_figure,
@@ -32,6 +36,7 @@ from bound_env.analysis.margins.hold_delta import (
 )
 from bound_env.cache import append_line, atomic_write, read_lines
 from bound_env.cli_args import number
+from bound_env.mismatch import as_spec
 
 
 def load(name: str, gait: str):
@@ -66,14 +71,15 @@ def main(argv=None) -> int:
         ap.error(f"--delta: {e}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     log = args.out.with_suffix(".jsonl")
-    done = {}
+    done: dict = {}  # (policy, delta, seed) -> its rows, oldest first
     for i, line in enumerate(read_lines(log) if log.exists() else [], 1):
         try:
             r = json.loads(line)
-            done[(r["policy"], r["delta"], r["seed"])] = r
+            key = (r["policy"], r["delta"], r["seed"])
         except (json.JSONDecodeError, KeyError, TypeError):
             print(f"error: {log}:{i}: not a row of this script ({line[:40]!r})", file=sys.stderr)
             return 2
+        done.setdefault(key, []).append(r)
     columns = {}
     for name in args.policy:
         try:
@@ -85,18 +91,28 @@ def main(argv=None) -> int:
         rows = []
         for d in deltas:
             key = (name, d, args.seed)
-            if key not in done:
+            fp = row_fingerprint(
+                name,
+                ctrl,
+                args.gait,
+                spec=as_spec(spec_name(d)).to_dict(),
+                seed=args.seed,
+                budget="quick",
+            )
+            r = reusable(done.get(key, []), fp, f"{name} ±{100 * d:g} % (seed {args.seed})")
+            if r is None:
                 t0 = time.perf_counter()
                 r = hold_row(ctrl, d, args.seed, args.gait)
                 r.update(policy=name, privileged=privileged, seconds=time.perf_counter() - t0)
+                r["fingerprint"] = fp
                 append_line(log, json.dumps(r))
-                done[key] = r
+                done.setdefault(key, []).append(r)
                 print(
                     f"{name} ±{100 * d:g} %: {r['k']}/{r['n']} held, effort "
                     f"{r['effort_median']} N m ({r['seconds']:.0f} s)",
                     flush=True,
                 )
-            rows.append(done[key])
+            rows.append(r)
         columns[name] = {"privileged": privileged, "rows": rows}
     data = {
         "what": "hold against model error (bound_env.analysis.margins.hold_delta)",

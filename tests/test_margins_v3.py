@@ -371,11 +371,21 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
     c = ZeroController()
     q = BUDGETS["quick"]
     k0 = setup_key(c, "default", q)
-    # the files of a controller's code outside bound_env/ (the agents front names them)
-    extra = policy_sources(c)
-    assert {f"{f.parent.name}/{f.name}" for f in extra} == set(POLICY_SOURCES)
+    # the agents code a controller runs is in the key through its code closure, object by
+    # object (`code_closure`), not as whole files: the front names none
+    assert policy_sources(c) == []
     assert {"runtime/policy.py", "runtime/controllers.py", "common/mlp.py"} <= set(POLICY_SOURCES)
-    assert all(f.is_file() and f.parent.parent.name == "agents" for f in extra)
+    from bound_env.analysis.margins import code_closure
+
+    mlp = (Path(code_closure.ROOT) / "agents" / "common" / "mlp.py").resolve()
+    real = code_closure.read_source
+    edited = real(mlp).replace("h = act(affine(h, W, b))", "h = act(affine(h, 0.9 * W, b))")
+    assert edited != real(mlp)
+    monkeypatch.setattr(
+        code_closure, "read_source", lambda p: edited if Path(p).resolve() == mlp else real(p)
+    )
+    assert setup_key(c, "default", q) == k0  # the zero controller runs no MLP
+    monkeypatch.undo()
     own = tmp_path / "own.py"
     own.write_text("GAIN = 1\n")
     k_own = setup_key(c, "default", q, extra_sources=[own])
@@ -390,10 +400,14 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
         if not dst.exists():
             shutil.copyfile(f, dst)
         copies.append(dst)
-    monkeypatch.setattr(margins_run, "source_files", lambda extra=(): copies + list(extra))
+    from bound_env.analysis.margins import keys
+
+    monkeypatch.setattr(keys, "source_files", lambda extra=(): copies + list(extra))
     k0 = setup_key(c, "default", q)
     fast = tmp_path / "bound_env" / "fast.py"
-    fast.write_text(fast.read_text() + "\n# a change\n")
+    fast.write_text(fast.read_text() + "\n# a comment\n")
+    assert setup_key(c, "default", q) == k0  # a comment is no code
+    fast.write_text(fast.read_text() + "\nA_CHANGE = 1\n")
     assert setup_key(c, "default", q) != k0
 
 

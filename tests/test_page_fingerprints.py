@@ -1,173 +1,337 @@
-"""The committed results page knows which code made it.
+"""The committed results page knows which code and data made it.
 
 Every column of ``docs/columns.json`` (and of ``docs/model_error.json``) records, per policy,
-the fingerprint of what decided its numbers when it was computed
-(`bound_env.analysis.margins.fingerprint`: the controller's data, its planning constants and
-its code, and the commit). A column whose controller is no longer that (a changed spec, gain,
-search setting, planning constant or controller code) makes the page stale: this test fails
-and names the command that regenerates the page. Columns whose policy loads torch (the PPO
-policies) are checked in the slow tier.
+the fingerprint of what decided its numbers (`bound_env.analysis.margins.fingerprint`: the
+margins cache key's parts, the controller's code closure and its data). The check
+(`agents.results.provenance.stale_columns`) compares hashes and reruns nothing; a column whose
+code or data is no longer what made it fails it, with a line naming the file, the column, the
+stale part and the command that regenerates the file. The PPO columns are checked in the fast
+tier by their hashes (their recorded closure roots, their files); the slow tier loads them
+(torch) to check their data too.
+
+Each audited edit below (issue 44) is made through the source-reading layer
+(`code_closure.read_source`), never on the files themselves.
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bound_env.analysis.margins.fingerprint import CHECKED, column_fingerprint, stale_parts
+from agents.results import provenance
+from agents.results.margins import fingerprint_now
+from bound_env.analysis.margins import code_closure
+from bound_env.analysis.margins.fingerprint import (
+    CHECKED,
+    VERSION,
+    code_parts,
+    column_fingerprint,
+    recorded_parts,
+    stale_parts,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
-DOCS = ROOT / "docs"
-FILES = ("columns.json", "model_error.json")
-PAGE = "bound-env compare --budget full --workers 2 --docs docs"
-REGENERATE = f"{PAGE} (then python -m agents.results.prose and python -m agents.results.headline)"
+BUDGET, SEED = "full", 12345
+# the columns the audit named (passive, lqr, mpc, fine-tuned, mpc-adaptive)
+AUDITED = ("passive", "lqr", "mpc", "agents/policies/finetuned/s0", "mpc-adaptive")
 
 
-def regenerate_hint() -> str:
-    """How to regenerate each committed file: the command its run recorded (``run.command``;
-    the model-error section is its own `compare --mismatch` run), then the prose."""
-    lines = []
-    for name in FILES:
-        path = DOCS / name
-        run = json.loads(path.read_text()).get("run") or {} if path.is_file() else {}
-        lines.append(f"  docs/{name}: {run.get('command') or PAGE}")
-    return (
-        "regenerate it with the command each file recorded:\n"
-        + "\n".join(lines)
-        + "\n  then python -m agents.results.prose and python -m agents.results.headline"
+def test_every_committed_column_is_what_its_code_and_data_make_now():
+    """Every column of the committed page files, the PPO ones by their hashes."""
+    rows = provenance.committed_columns()
+    assert {r["file"] for r in rows} == {"columns.json", "model_error.json"}
+    stale = provenance.stale_columns(rows)
+    assert not stale, (
+        "the committed page is stale (after a change of the code or data, regenerate it):\n"
+        + "\n".join(stale)
+        + "\n"
+        + provenance.AFTER
     )
 
 
-def committed_columns():
-    """(file, label, gait, policy, recorded fingerprint) of every committed column."""
-    out = []
-    for name in FILES:
-        path = DOCS / name
-        if not path.is_file():
-            continue
-        for col in json.loads(path.read_text()).get("columns") or []:
-            fps = col.get("fingerprints") or [None] * len(col["policies"])
-            for policy, fp in zip(col["policies"], fps, strict=True):
-                out.append((name, col["label"], col["gait"], policy, fp))
-    return out
+@pytest.mark.slow  # loads torch for the PPO policies' columns: their data too
+def test_every_committed_ppo_column_is_what_its_policy_is_now():
+    rows = [r for r in provenance.committed_columns() if provenance.needs_torch(r["policy"])]
+    assert rows
+    stale = provenance.stale_columns(rows, load=lambda policy: True)
+    assert not stale, "the committed page is stale:\n" + "\n".join(stale)
 
 
-def _needs_torch(policy: str) -> bool:
-    return (ROOT / policy / "model.zip").is_file() or policy.endswith(".zip")
-
-
-def stale_columns(rows) -> list[str]:
-    """One line per committed column whose controller is not what made it."""
+@pytest.fixture(scope="module")
+def loaded():
+    """The audited columns' controllers, loaded once, and their fingerprints as recorded."""
     from agents.runtime.policy import load_controller
 
-    found = []
-    for name, label, gait, policy, fp in rows:
-        ctrl = load_controller(policy, gait=gait)  # passive: the zero controller
-        parts = stale_parts(fp, ctrl)
-        if parts:
-            why = "no fingerprint recorded" if fp is None else f"its {', '.join(parts)} changed"
-            found.append(f"docs/{name}: column {label!r} ({policy}): {why}")
-    return found
+    ctrls = {p: load_controller(p, gait="default") for p in AUDITED}
+    recorded = {p: record(p, ctrls[p]) for p in AUDITED}
+    return ctrls, recorded
 
 
-def _check(rows):
-    assert (DOCS / "columns.json").is_file(), (
-        f"docs/columns.json is missing: the committed page predates column fingerprints; "
-        f"regenerate it: {REGENERATE}"
+def record(policy, ctrl, gait="default"):
+    return fingerprint_now(policy, gait, BUDGET, SEED, controller=ctrl)
+
+
+def edit_source(monkeypatch, rel: str, old: str, new: str) -> None:
+    """``rel`` (a project file) as the hashes read it: ``old`` replaced by ``new`` once."""
+    path = (ROOT / rel).resolve()
+    text = path.read_text()
+    assert text.count(old) >= 1, f"{rel} no longer has {old!r}: update the audited edit"
+    edited = text.replace(old, new, 1)
+    assert edited != text
+    real = code_closure.read_source
+
+    def read(p):
+        return edited if Path(p).resolve() == path else real(p)
+
+    monkeypatch.setattr(code_closure, "read_source", read)
+
+
+def stale_after(loaded) -> dict:
+    ctrls, recorded = loaded
+    return {p: stale_parts(recorded[p], record(p, ctrls[p])) for p in AUDITED}
+
+
+def test_the_audited_columns_are_fresh_as_recorded(loaded):
+    assert stale_after(loaded) == {p: [] for p in AUDITED}
+
+
+# (file, old, new, {column: the parts it must name}; every other audited column: "sources")
+AUDITED_EDITS = {
+    "stride_map.EVAL_RTOL 1e-10 -> 1e-6": (
+        "bound_env/stride_map.py",
+        "EVAL_RTOL = 1e-10",
+        "EVAL_RTOL = 1e-6",
+        {"mpc": ["sources", "constants"], "mpc-adaptive": ["sources", "constants"]},
+    ),
+    "stride_map.RETURN_TOL": (
+        "bound_env/stride_map.py",
+        "RETURN_TOL = 1e-4",
+        "RETURN_TOL = 1e-3",
+        {},
+    ),
+    "task._ANGLE_BOUND (the fall criterion)": (
+        "bound_env/task.py",
+        "_ANGLE_BOUND = 2.0 * math.pi",
+        "_ANGLE_BOUND = 1.5 * math.pi",
+        {"mpc": ["sources", "constants"]},
+    ),
+    "budget.MFPT_LEVEL 100 -> 50": (
+        "bound_env/analysis/margins/budget.py",
+        "MFPT_LEVEL = 100.0",
+        "MFPT_LEVEL = 50.0",
+        {},
+    ),
+    "identify.LM_MU0": (
+        "bound_env/control/identify.py",
+        "LM_MU0 = 1e-3",
+        "LM_MU0 = 1e-2",
+        {"mpc-adaptive": ["sources", "constants"]},
+    ),
+    "plant_design.MAX_SHIFT": (
+        "bound_env/control/plant_design.py",
+        "MAX_SHIFT = 4.0",
+        "MAX_SHIFT = 3.0",
+        {"mpc-adaptive": ["sources", "constants"]},
+    ),
+    "mpc's StrideMap swapped for another class": (
+        "bound_env/control/mpc.py",
+        "from ..stride_map import StrideMap\n",
+        "from ..stride_map import Strides as StrideMap\n",
+        {"mpc": ["sources", "code"], "mpc-adaptive": ["sources", "code"]},
+    ),
+}
+
+
+@pytest.mark.parametrize("edit", sorted(AUDITED_EDITS))
+def test_an_audited_edit_makes_every_column_that_uses_it_stale(loaded, monkeypatch, edit):
+    """Every bound_env edit stales every column through the margins key's ``sources`` (every
+    bound_env source decides the margins); one in a controller's closure names its
+    ``constants`` or ``code`` too."""
+    rel, old, new, named = AUDITED_EDITS[edit]
+    edit_source(monkeypatch, rel, old, new)
+    stale = stale_after(loaded)
+    for policy in AUDITED:
+        assert "sources" in stale[policy], (policy, stale[policy])
+        for part in named.get(policy, []):
+            assert part in stale[policy], (policy, part, stale[policy])
+    # the check's line names the column, the part and the command
+    row = {
+        "file": "columns.json",
+        "label": "mpc",
+        "gait": "default",
+        "policy": "mpc",
+        "fingerprint": loaded[1]["mpc"],
+        "budget": BUDGET,
+        "seed": SEED,
+        "command": provenance.PAGE_COMMAND,
+    }
+    (line,) = provenance.stale_columns([row])
+    assert line.startswith("docs/columns.json: column 'mpc' (mpc): stale sources (bound_env")
+    assert line.endswith("regenerate: " + provenance.PAGE_COMMAND)
+
+
+def test_the_hidden_layers_of_mlp_forward_stale_the_learned_columns_only(loaded, monkeypatch):
+    """agents code is not in the margins key's sources: the learned column's closure sees it,
+    the classical and passive columns do not use it."""
+    mlp = code_parts(["agents.runtime.controllers:MLPController"])
+    edit_source(
+        monkeypatch,
+        "agents/common/mlp.py",
+        "        h = act(affine(h, W, b))",
+        "        h = act(affine(h, 0.9 * W, b))",
     )
-    stale = stale_columns(rows)
-    assert not stale, "the committed page is stale:\n" + "\n".join(stale) + "\n" + regenerate_hint()
+    stale = stale_after(loaded)
+    assert stale["agents/policies/finetuned/s0"] == ["code"]
+    assert stale["passive"] == stale["lqr"] == stale["mpc"] == stale["mpc-adaptive"] == []
+    # a PPO column (MLPController), checked from its recorded roots without torch
+    assert code_parts(["agents.runtime.controllers:MLPController"])["code"] != mlp["code"]
 
 
-def test_every_committed_column_is_what_its_controller_is_now():
-    _check([r for r in committed_columns() if not _needs_torch(r[3])])
+def test_editing_mlp_controller_leaves_passive_fresh(loaded, monkeypatch):
+    """ZeroController and MLPController share a module; the closure is per object."""
+    ppo = {"roots": ["agents.runtime.controllers:MLPController"]}
+    ppo.update(recorded_parts(ppo, "default", BUDGET, SEED))
+    edit_source(
+        monkeypatch,
+        "agents/runtime/controllers.py",
+        "        return float(np.clip(out[0], -1.0, 1.0))",
+        "        return float(np.clip(out[0], -0.9, 0.9))",
+    )
+    stale = stale_after(loaded)
+    assert stale["passive"] == []
+    assert stale_parts(ppo, recorded_parts(ppo, "default", BUDGET, SEED)) == ["code"]
 
 
-@pytest.mark.slow  # loads torch for the PPO policies' columns
-def test_every_committed_ppo_column_is_what_its_policy_is_now():
-    _check([r for r in committed_columns() if _needs_torch(r[3])])
+def test_passive_on_two_gaits_has_two_fingerprints(loaded):
+    ctrls, recorded = loaded
+    literal = record("passive", ctrls["passive"], gait="literal-cycle")
+    assert stale_parts(recorded["passive"], literal) == ["gait"]
 
 
-def test_a_changed_mpc_makes_its_column_stale(monkeypatch, tmp_path):
-    """The check fails on a changed planning constant, search setting or controller code."""
-    import bound_env.analysis.margins.fingerprint as fpmod
-    import bound_env.control.mpc as mpc
+def test_a_docstring_or_comment_edit_stales_nothing(loaded, monkeypatch):
+    text = (ROOT / "bound_env/stride_map.py").read_text()
+    first = text.index('"""') + 3
+    edited = text[:first] + "Edited. " + text[first:]
+    edited = edited.replace("EVAL_RTOL = 1e-10  #", "EVAL_RTOL = 1e-10  # edited comment;", 1)
+    edited = edited.replace('    """', '    """Edited: ', 1)  # a function's docstring
+    assert edited != text
+    edit_source(monkeypatch, "bound_env/stride_map.py", text, edited)
+    assert stale_after(loaded) == {p: [] for p in AUDITED}
+
+
+def test_an_edit_of_a_module_no_column_uses_stales_none(loaded, monkeypatch):
+    """agents/runtime/residual.py (step-level residual PPO) is no audited column's code."""
+    text = (ROOT / "agents/runtime/residual.py").read_text()
+    edit_source(monkeypatch, "agents/runtime/residual.py", text, text + "\nEDITED = 1\n")
+    assert stale_after(loaded) == {p: [] for p in AUDITED}
+
+
+def test_the_first_format_and_nothing_recorded_read_as_stale():
+    rows = provenance.committed_columns()
+    old = {"controller": "passive", "config": "x", "constants": "y", "code": "z"}
+    row = dict(rows[0], fingerprint=old, policy="passive", gait="default")
+    assert provenance.column_staleness(row) == list(CHECKED)
+    (line,) = provenance.stale_columns([row])
+    assert "older format (version 1)" in line and "regenerate: " in line
+    (line,) = provenance.stale_columns([dict(row, fingerprint=None)])
+    assert "no fingerprint recorded" in line
+    assert stale_parts(None, None) == list(CHECKED)
+    fp = column_fingerprint("passive", commit=False)
+    assert fp["controller"] == "passive" and "commit" not in fp and fp["version"] == VERSION
+
+
+def test_a_changed_spec_or_weight_is_stale_data(tmp_path, loaded):
+    """A search setting of a spec (a copy with horizon 13) changes the data and the files; a
+    weight changed in its 6th digit changes the data."""
     from bound_env.control import load_controller
 
-    ctrl = load_controller("mpc")
-    recorded = column_fingerprint(ctrl)
-    rows = [("columns.json", "mpc", "default", "mpc", recorded)]
-    assert stale_parts(recorded, ctrl) == []
-    assert stale_columns(rows) == []
-    # a planning constant
-    monkeypatch.setattr(mpc, "BEST_SCORE_STRIDES", mpc.BEST_SCORE_STRIDES + 1)
-    assert stale_parts(recorded, ctrl) == ["constants"]
-    assert stale_columns(rows) == ["docs/columns.json: column 'mpc' (mpc): its constants changed"]
-    monkeypatch.undo()
-    # a search setting of its spec: the same controller with horizon 13
     spec = (ROOT / "configs" / "controllers" / "mpc.yaml").read_text()
     assert "horizon: 12" in spec
+    (tmp_path / "mpc.yaml").write_text(spec)
+    before = fingerprint_now(tmp_path / "mpc.yaml", budget=BUDGET, seed=SEED)
     (tmp_path / "mpc.yaml").write_text(spec.replace("horizon: 12", "horizon: 13"))
-    assert stale_parts(recorded, load_controller(tmp_path / "mpc.yaml")) == ["config"]
-    # its code (the module's syntax tree; a docstring or a comment does not count)
-    source = Path(mpc.__file__).read_text()
-    monkeypatch.setattr(fpmod, "_code_tree", lambda text: fpmod.ast.dump(fpmod.ast.parse(text)))
-    assert "code" in stale_parts(recorded, ctrl)
-    monkeypatch.undo()
-    edited = source.replace('"""Model-predictive', '"""Edited: model-predictive', 1)
-    assert fpmod._code_tree(edited) == fpmod._code_tree(source)
-    assert fpmod._code_tree(source.replace("horizon + 2.0", "horizon + 3.0")) != (
-        fpmod._code_tree(source)
-    )
-
-
-def test_nothing_recorded_is_stale_and_the_passive_gait_is_itself():
-    assert stale_parts(None, None) == list(CHECKED)
-    assert stale_parts(column_fingerprint(None), None) == []
-    fp = column_fingerprint("passive", commit=False)
-    assert fp["controller"] == "passive" and "commit" not in fp
-
-
-def test_the_config_ignores_the_last_bits_of_a_design_but_not_a_change():
-    """A gain designed on another machine (or with a cold compiler cache) differs in its last
-    bits: the same config; a gain changed in its 6th digit is another config."""
-    from bound_env.control import load_controller
-
+    after = fingerprint_now(tmp_path / "mpc.yaml", budget=BUDGET, seed=SEED)
+    assert stale_parts(before, after) == ["config", "files"]
     ctrl = load_controller("lqr")
     before = column_fingerprint(ctrl, commit=False)
-    ctrl.gain = ctrl.gain * (1 + 1e-15)
-    assert column_fingerprint(ctrl, commit=False)["config"] == before["config"]
+    ctrl.gain = ctrl.gain * (1 + 1e-15)  # the last bits of a design: the same data
+    assert stale_parts(before, ctrl) == []
     ctrl.gain = ctrl.gain * (1 + 1e-6)
-    assert column_fingerprint(ctrl, commit=False)["config"] != before["config"]
+    assert stale_parts(before, ctrl) == ["config"]
 
 
-def test_a_column_reads_the_same_config_from_any_checkout_and_after_use(tmp_path):
+def test_a_column_reads_the_same_fingerprint_from_any_checkout_and_after_use(tmp_path):
     """A policy folder loaded by its relative path, by its absolute path or from a copy in
     another folder (another checkout), and an offset-free controller after it ran (its
-    estimator's state moved), have one config: what a fresh clone reads is what was recorded.
-    A changed weight is another config."""
-    import shutil
-
+    estimator's state moved), have one fingerprint: what a fresh clone reads is what was
+    recorded. A changed weight is another config."""
     from agents.runtime.policy import load_controller
 
     rel = "agents/policies/finetuned/s0"
     copy = tmp_path / "elsewhere" / rel
     shutil.copytree(ROOT / rel, copy)
-    configs = {
-        column_fingerprint(load_controller(p), commit=False)["config"]
-        for p in (rel, str(ROOT / rel), str(copy))
-    }
-    assert len(configs) == 1
+    fps = [fingerprint_now(p, budget=BUDGET, seed=SEED) for p in (rel, str(ROOT / rel), copy)]
+    assert all(stale_parts(fps[0], f) == [] for f in fps[1:])
     of = load_controller("lqr-of")
-    before = column_fingerprint(of, commit=False)["config"]
+    before = column_fingerprint(of, commit=False)
     of.state.d += 0.01  # the estimator after three updates on a plant off the model
     of.state.count += 3
     assert np.all(of.state.d != 0.0)
-    assert column_fingerprint(of, commit=False)["config"] == before
+    assert stale_parts(before, of) == []
     ctrl = load_controller(rel)
     W, b = ctrl.layers[0]
     ctrl.layers[0] = (W * (1 + 1e-5), b)
-    assert column_fingerprint(ctrl, commit=False)["config"] not in configs
+    assert stale_parts(fps[0], fingerprint_now(rel, budget=BUDGET, seed=SEED, controller=ctrl)) == [
+        "config"
+    ]
+
+
+def test_compare_records_the_new_fingerprint(tmp_path, monkeypatch):
+    """What `compute_margins` records is what the check recomputes: a column made now is fresh
+    (the core's fingerprint, without running a task: its assembly is replaced)."""
+    import bound_env.analysis.margins.run as run
+    from agents.results.margins import compute_margins
+
+    class Stop(Exception):
+        pass
+
+    seen, real = {}, run.column_fingerprint
+
+    def capture(ctrl, **kw):
+        seen.update(real(ctrl, **kw))
+        raise Stop
+
+    monkeypatch.setattr(run, "column_fingerprint", capture)
+    with pytest.raises(Stop):
+        compute_margins("lqr", budget="quick", out=tmp_path)
+    assert seen["version"] == VERSION and seen["files"] and seen["margins_key"]
+    assert stale_parts(seen, fingerprint_now("lqr", budget="quick")) == []
+    json.dumps(seen)  # JSON-able, as columns.json holds it
+
+
+def test_every_quoted_data_file_records_a_current_fingerprint():
+    """docs/data/hold_vs_delta.json, adaptive_hold_test.json, adaptive_factors.json and
+    docs/hold_eval.jsonl: every row records the fingerprint of what made it, and it is what
+    the code and its policy's files make now."""
+    stale = provenance.stale_data()
+    assert not stale, "a data file the docs quote is stale:\n" + "\n".join(stale)
+
+
+def test_a_data_row_is_stale_after_a_code_edit_and_fresh_after_a_docstring_edit(monkeypatch):
+    from agents.runtime.policy import load_controller
+
+    fp = provenance.row_fingerprint("lqr", load_controller("lqr"), spec={"m1": 0.1}, strides=100)
+    row = {"policy": "lqr", "delta": 0.1, "seed": 777, "fingerprint": fp}
+    assert provenance.row_staleness(row) is None
+    assert provenance.row_staleness(dict(row, fingerprint=None)) == "no fingerprint recorded"
+    text = (ROOT / "bound_env/stride_map.py").read_text()
+    edit_source(monkeypatch, "bound_env/stride_map.py", '"""', '"""Edited. ')
+    assert provenance.row_staleness(row) is None
+    monkeypatch.undo()
+    edit_source(monkeypatch, "bound_env/stride_map.py", "EVAL_RTOL = 1e-10", "EVAL_RTOL = 1e-6")
+    assert provenance.row_staleness(row) == "its sources changed"
+    assert text == (ROOT / "bound_env/stride_map.py").read_text()  # the file itself untouched

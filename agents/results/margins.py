@@ -5,8 +5,11 @@ are `bound_env.analysis.margins`, whose docstring is the reference. This module 
 ``policy`` (`as_controller`): ``"passive"``, a classical controller's name or spec .yaml
 (`bound_env.control`, through `agents.runtime.policy.load_controller`; no torch), a shipped policy's
 name or a trained policy's path (`agents.runtime.policy.load_controller`, torch only while it
-loads), or a controller object as it is; and it names the agents files whose code such a controller
-runs (`policy_sources`), which the core hashes into its cache key besides bound_env/.
+loads), or a controller object as it is; and it names the files that define it
+(`policy_files_sha`: a spec, a policy's weights and settings), which the core records in the
+column's fingerprint. The agents code a controller runs is in the core's cache key and
+fingerprint through its code closure (`bound_env.analysis.margins.code_closure`), object by
+object, rather than as whole files (`policy_sources`, now empty).
 
 The names this module used to define (``ClosedLoop``, ``random_directions``, ``BUDGETS``,
 ``summary_text``, ...) stay importable from here for users' scripts; the project's own code
@@ -64,12 +67,53 @@ def as_controller(policy, gait=None):
 
 
 def policy_sources(controller) -> list[Path]:
-    """The files of `POLICY_SOURCES`, the core's ``extra_sources`` for ``controller``; none
-    for a controller of bound_env (a classical one), whose code the core hashes already."""
-    if type(controller).__module__.split(".")[0] == "bound_env":
-        return []
-    agents = Path(__file__).resolve().parents[1]
-    return [agents / name for name in POLICY_SOURCES]
+    """The core's ``extra_sources`` for ``controller``: none. The agents code it runs is in
+    the core's cache key and fingerprint through its code closure, object by object (the
+    zero controller's closure is not ``MLPController``'s, though one module holds both);
+    `POLICY_SOURCES` stays for older imports."""
+    return []
+
+
+def policy_files_sha(policy) -> str | None:
+    """sha256 (16 hex digits) of the files that define ``policy`` (a name or a path:
+    `agents.common.policy_files.policy_content_sha256`, its spec or its policy folder's
+    weights and settings; ``NAME+of``: NAME's, tagged), None for a controller object or a
+    name that resolves to no file."""
+    if not isinstance(policy, (str, Path)):
+        return None
+    from ..common.policy_files import policy_content_sha256
+    from ..runtime.names import resolve_policy, wrapped_policy
+
+    text, tag = str(policy), ""
+    try:
+        resolved = resolve_policy(text)
+    except (OSError, ValueError):
+        if not text.endswith("+of"):
+            return None
+        text, tag = wrapped_policy(text), "+of"
+        try:
+            resolved = resolve_policy(text)
+        except (OSError, ValueError):
+            return None
+    return policy_content_sha256(resolved)[:16] + tag
+
+
+def fingerprint_now(policy, gait="default", budget=None, seed=None, controller=None) -> dict:
+    """``policy``'s fingerprint as `compute_margins` would record it now
+    (`bound_env.analysis.margins.fingerprint.column_fingerprint`; ``controller``: the policy
+    already loaded), without the commit."""
+    from bound_env.analysis.margins.fingerprint import column_fingerprint
+
+    ctrl = controller if controller is not None else as_controller(policy, gait)
+    return column_fingerprint(
+        ctrl,
+        commit=False,
+        gait=gait,
+        budget=budget,
+        seed=seed,
+        extra_sources=policy_sources(ctrl),
+        files=policy_files_sha(policy),
+    )
 
 
 def compute_margins(
@@ -86,8 +130,8 @@ def compute_margins(
     mismatch=None,
 ) -> dict:
     """`bound_env.analysis.margins.compute_margins` of ``policy`` (``"passive"``, a name, a
-    path or a controller: `as_controller`), with `policy_sources` in its cache key. The other
-    arguments are the core's."""
+    path or a controller: `as_controller`), with its files' hash (`policy_files_sha`) in its
+    fingerprint. The other arguments are the core's."""
     # the arguments' errors come before a policy is loaded
     as_budget(budget)
     if workers < 1:
@@ -107,6 +151,7 @@ def compute_margins(
         seed=seed,
         extra_sources=policy_sources(controller),
         mismatch=mismatch,
+        files=policy_files_sha(policy),
     )
 
 

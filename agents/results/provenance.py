@@ -110,3 +110,260 @@ def provenance(g) -> list[str]:
     if group in LEARNED_SELECTION:
         lines.append(LEARNED_SELECTION[group])
     return lines
+
+
+# --------------------------------------------------------------------------------------------
+# The staleness check: is each committed column what its code and data make now?
+# --------------------------------------------------------------------------------------------
+
+PAGE_FILES = ("columns.json", "model_error.json")  # the committed page's files with columns
+PAGE_COMMAND = "bound-env compare --budget full --workers 2 --docs docs"
+AFTER = "then python -m agents.results.prose and python -m agents.results.headline"
+
+
+def committed_columns(docs=None) -> list[dict]:
+    """Every policy of every column of the committed page files (`PAGE_FILES` in ``docs``):
+    its file, label, gait, policy, recorded fingerprint, and the file's budget, seed and the
+    command its run recorded."""
+    docs = Path(docs) if docs is not None else ROOT / "docs"
+    out = []
+    for name in PAGE_FILES:
+        path = docs / name
+        if not path.is_file():
+            continue
+        data = json.loads(path.read_text())
+        command = (data.get("run") or {}).get("command") or PAGE_COMMAND
+        for col in data.get("columns") or []:
+            fps = col.get("fingerprints") or [None] * len(col["policies"])
+            for policy, fp in zip(col["policies"], fps, strict=True):
+                out.append(
+                    {
+                        "file": name,
+                        "label": col["label"],
+                        "gait": col["gait"],
+                        "policy": policy,
+                        "fingerprint": fp,
+                        "budget": data.get("budget"),
+                        "seed": data.get("seed"),
+                        "command": command,
+                    }
+                )
+    return out
+
+
+def needs_torch(policy: str) -> bool:
+    """Whether loading ``policy`` imports torch (a PPO model)."""
+    return (ROOT / policy / "model.zip").is_file() or str(policy).endswith(".zip")
+
+
+def column_staleness(row: dict, load: bool = True) -> list[str]:
+    """The stale parts of one committed column's policy (`committed_columns`): its recorded
+    fingerprint against what the code and data make now. ``load``: load the controller
+    (its data, ``config``, is then checked too); else only the hashes that need no
+    controller (the margins key's parts, the closure of the recorded roots, the files)."""
+    from bound_env.analysis.margins.fingerprint import (
+        CHECKED,
+        VERSION,
+        recorded_parts,
+        stale_parts,
+    )
+
+    from .margins import fingerprint_now, policy_files_sha
+
+    fp, gait, policy = row["fingerprint"], row["gait"], row["policy"]
+    if not isinstance(fp, dict) or fp.get("version") != VERSION:
+        return list(CHECKED)  # nothing recorded, or the first format: every part
+    budget = row["budget"] or "full"
+    if load:
+        now = fingerprint_now(policy, gait, budget, row["seed"])
+    else:
+        now = recorded_parts(fp, gait, budget, row["seed"], files=policy_files_sha(policy))
+    return stale_parts(fp, now)
+
+
+def staleness_message(row: dict, parts: list[str]) -> str:
+    """One line: the file, the column, the stale parts (what each is) and the command."""
+    from bound_env.analysis.margins.fingerprint import PARTS, VERSION
+
+    fp = row["fingerprint"]
+    if not isinstance(fp, dict):
+        why = "no fingerprint recorded"
+    elif fp.get("version") != VERSION:
+        why = f"its fingerprint is of an older format (version {fp.get('version', 1)})"
+    else:
+        why = "stale " + "; ".join(f"{p} ({PARTS[p]})" for p in parts)
+    return (
+        f"docs/{row['file']}: column {row['label']!r} ({row['policy']}): {why}; "
+        f"regenerate: {row['command']}"
+    )
+
+
+def stale_columns(rows=None, load=None) -> list[str]:
+    """One line per committed column's policy that is not what made it (`staleness_message`);
+    ``load(policy)``: whether to load it (default: unless it needs torch)."""
+    load = load or (lambda policy: not needs_torch(policy))
+    out = []
+    for row in committed_columns() if rows is None else rows:
+        parts = column_staleness(row, load=load(row["policy"]))
+        if parts:
+            out.append(staleness_message(row, parts))
+    return out
+
+
+def _data_rows(docs: Path) -> dict:
+    """{file: (its rows, the command that regenerates it)} of the data files the docs quote."""
+    out = {}
+    path = docs / "data" / "hold_vs_delta.json"
+    if path.is_file():
+        data = json.loads(path.read_text())
+        rows = [r for c in data.get("columns", {}).values() for r in c.get("rows", [])]
+        out["data/hold_vs_delta.json"] = (rows, data.get("made_with"))
+    path = docs / "data" / "adaptive_hold_test.json"
+    if path.is_file():
+        rows = json.loads(path.read_text()).get("entries", [])
+        pols = " ".join(dict.fromkeys(r["policy"] for r in rows))
+        specs = " ".join(dict.fromkeys(r["spec_name"] for r in rows))
+        seeds = {r["seed"] for r in rows}
+        seed = f" --seed {seeds.pop()}" if len(seeds) == 1 else ""
+        out["data/adaptive_hold_test.json"] = (
+            rows,
+            f"python scripts/adaptive_hold.py --policy {pols} --mismatch {specs}{seed} "
+            f"--out {rel(str(path))}",
+        )
+    path = docs / "data" / "adaptive_factors.json"
+    if path.is_file():
+        rows = json.loads(path.read_text())
+        pols = " ".join(dict.fromkeys(r["policy"] for r in rows))
+        specs = sorted({str(r.get("spec")) for r in rows})
+        out["data/adaptive_factors.json"] = (
+            rows,
+            f"python scripts/adaptive_factors.py --policy {pols} --mismatch "
+            f"{specs[0] if len(specs) == 1 else 'pm10'} --out {rel(str(path))}",
+        )
+    path = docs / "hold_eval.jsonl"
+    if path.is_file():
+        latest = {}  # a rerun appends: the last row of each (policy, delta, seed, set, n)
+        for x in path.read_text().splitlines():
+            if x.strip():
+                r = json.loads(x)
+                latest[(r["policy"], r["delta"], r["seed"], r.get("set", ""), r["n"])] = r
+        rows = list(latest.values())
+        pols = " ".join(dict.fromkeys(r["policy"] for r in rows))
+        deltas = " ".join(f"{d:g}" for d in sorted({r["delta"] for r in rows}))
+        seeds = sorted({r["seed"] for r in rows})
+        out["hold_eval.jsonl"] = (
+            rows,
+            f"for s in {' '.join(map(str, seeds))}; do python scripts/hold_eval.py --policy "
+            f"{pols} --delta {deltas} --seed $s --out {rel(str(path))}; done",
+        )
+    return out
+
+
+def row_staleness(row: dict) -> str | None:
+    """Why a data file's row is not what the code makes now (its code: bound_env's sources
+    and its recorded closure; its policy's files), or None. Its inputs (spec, gait, strides)
+    are the run's: a resumed run compares them (`reusable`)."""
+    from bound_env.analysis.margins.fingerprint import VERSION, code_parts, margins_parts
+
+    from .margins import policy_files_sha
+
+    fp = row.get("fingerprint")
+    if not isinstance(fp, dict) or fp.get("version") != VERSION:
+        return "no fingerprint recorded"
+    now = {"sources": margins_parts()["sources"], **code_parts(fp.get("roots") or [])}
+    try:
+        files = policy_files_sha(row.get("policy"))
+    except (OSError, ValueError, TypeError):
+        files = None
+    if files is not None and fp.get("files") is not None:
+        now["files"] = files
+    parts = [k for k, v in now.items() if k != "roots" and fp.get(k) != v]
+    return f"its {', '.join(parts)} changed" if parts else None
+
+
+def stale_data(docs=None) -> list[str]:
+    """One line per data file the docs quote (`_data_rows`) with a row that is not what the
+    code and its policy's files make now: how many, the first, and the command."""
+    docs = Path(docs) if docs is not None else ROOT / "docs"
+    out = []
+    for name, (rows, command) in _data_rows(docs).items():
+        why = [(r, row_staleness(r)) for r in rows]
+        bad = [(r, w) for r, w in why if w]
+        if bad:
+            r, w = bad[0]
+            first = " ".join(str(r[k]) for k in ("policy", "delta", "spec_name", "seed") if k in r)
+            out.append(
+                f"docs/{name}: {len(bad)} of {len(rows)} rows stale ({first}: {w}); "
+                f"regenerate: {command or 'the command in its docs'}"
+            )
+    return out
+
+
+def main(argv=None) -> int:
+    """``python -m agents.results.provenance [--load-all] [--data]``: the staleness check of
+    the committed page (and of the data files the docs quote); exit 1 and one line per stale
+    column (or file) when there is one."""
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(description="Is every committed page column up to date?")
+    ap.add_argument(
+        "--load-all", action="store_true", help="load the PPO policies too (imports torch)"
+    )
+    ap.add_argument("--data", action="store_true", help="check the quoted data files too")
+    args = ap.parse_args(argv)
+    stale = stale_columns(load=(lambda p: True) if args.load_all else None)
+    stale += stale_data() if args.data else []
+    for line in stale:
+        print(line, file=sys.stderr)
+    if stale:
+        print(AFTER, file=sys.stderr)
+        return 1
+    print(f"every column of {', '.join(PAGE_FILES)} is what its code and data make now")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
+
+
+# --------------------------------------------------------------------------------------------
+# The rows of the resumable scripts (scripts/hold_vs_delta.py, hold_eval.py, adaptive_hold.py)
+# --------------------------------------------------------------------------------------------
+
+
+def row_fingerprint(policy, controller, gait="default", roots=(), **inputs) -> dict:
+    """The fingerprint a script's row records (`bound_env.analysis.margins.fingerprint.
+    run_fingerprint`): bound_env's sources, ``controller``'s code closure (and that of
+    ``roots``), its data and files (``policy``'s: `margins.policy_files_sha`), the gait file
+    and the row's ``inputs`` (a spec's contents, strides, robots, seed)."""
+    from bound_env.analysis.margins.fingerprint import run_fingerprint
+
+    from .margins import policy_files_sha
+
+    files = policy_files_sha(policy) if isinstance(policy, (str, Path)) else None
+    return run_fingerprint(controller, gait, files=files, roots=roots, **inputs)
+
+
+def reusable(rows, now: dict, what: str, log=None):
+    """The last of ``rows`` (a resumed row's earlier runs, oldest first) recorded under the
+    fingerprint ``now``, or None; when some row was there under another fingerprint (or
+    none), one line to ``log`` (stderr) says that ``what`` is recomputed, and which parts
+    differ."""
+    import sys
+
+    from bound_env.analysis.margins.fingerprint import differing
+
+    rows = list(rows)
+    for row in reversed(rows):
+        if not differing(row.get("fingerprint"), now):
+            return row
+    if rows:
+        fp = rows[-1].get("fingerprint")
+        why = (
+            "it was made without a fingerprint"
+            if not isinstance(fp, dict)
+            else f"its {', '.join(differing(fp, now))} changed"
+        )
+        print(f"note: recomputing {what}: {why}", file=log or sys.stderr, flush=True)
+    return None

@@ -103,9 +103,11 @@ Measures (JSON keys)
   section `mismatch_report`.
 - ``seconds``, ``tasks``: the run's wall time and how many of its tasks it took from the cache
   (``cached``) and ``computed`` (a run that computed nothing timed only the assembly).
-- ``fingerprint``: what decided these numbers (`fingerprint.column_fingerprint`): the
-  controller's ``fingerprint()`` and ``config``, hashes of its planning constants and of its
-  code, and the git ``commit`` (``dirty`` if a tracked .py file differed from it).
+- ``fingerprint``: what decided these numbers (`fingerprint.column_fingerprint`, version 2):
+  the cache key (``margins_key``) and its parts (``sources``, ``margins_settings``,
+  ``budget``, ``gait``), the controller's code closure (``code``, ``constants``, from its
+  ``roots``: `code_closure`), its data (``config``, ``files``), its own ``fingerprint()``
+  and ``settings``, and the git ``commit`` (``dirty`` if a tracked .py file differed from it).
 
 Controllers
 -----------
@@ -128,10 +130,11 @@ object with ``submit`` returning futures can be passed to `compute_margins`). Ev
 result is cached in ``<out>/cache.jsonl`` under a key (`setup_key`) of the controller's
 fingerprint and env kwargs, the gait's name and file contents, the budget, the seed, every
 module setting that changes a result (`SETTINGS`: tolerances, seeds of the push and MFPT
-samples, the ceiling search's settings) and a hash of the source (`source_hash`: every .py
-file of bound_env/, this package included, and the files the caller passes as
-``extra_sources``: the code of a controller that lives outside bound_env/, e.g. a learned
-policy's modules), so an interrupted run resumes and a changed setting or code never returns a
+samples, the ceiling search's settings), a hash of the source (`source_hash`: the code, without
+docstrings and comments, of every .py file of bound_env/, this package included, and of the
+files the caller passes as ``extra_sources``: code outside the project) and the controller's
+code closure (`code_closure`: the project code its objects reach, e.g. a learned policy's
+agents modules), so an interrupted run resumes and a changed setting or code never returns a
 stale result.
 
 Modules
@@ -145,12 +148,14 @@ Modules
 - the measures, one task each (run in worker processes): `cycle` (fixed point, multipliers,
   effort), `basin` (per axis), `ceiling`, `curve` (basin stability), `terrain` (survival and
   MFPT), `windows` (slope and k_c), `push`;
-- `run`: `TASKS`, `run_task`, the cache key (`SETTINGS`, `source_hash`, `setup_key`) and
-  `compute_margins`;
+- `run`: `TASKS`, `run_task` and `compute_margins`; `keys`: the cache key (`SETTINGS`,
+  `source_hash`, `setup_key`, `mismatch_key`);
 - `assemble`: the JSON result from the tasks' results;
 - `report`: margins.json, the CSV tables, the plots and `summary_text`;
 - `stats`: Wilson and Student-t intervals, crossings on a grid, the MFPT estimate.
-- `fingerprint`: what decided a column's numbers (`column_fingerprint`, `stale_parts`).
+- `fingerprint`: what decided a column's numbers (`column_fingerprint`, `stale_parts`), and a
+  script's row (`run_fingerprint`); `code_closure`: a controller's code closure and the code
+  text every code hash reads (`read_source`, `code_text`).
 - `mismatch_tasks`: the model-error measures (``mm_hold``, ``mm_curve``, ``mm_mfpt``) and
   `mismatch_tasks.plant_runs`; `mismatch_report`: `mismatch_text`, `mismatch_markdown`.
 """

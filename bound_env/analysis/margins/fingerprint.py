@@ -1,37 +1,57 @@
-"""What decided a column's numbers (`column_fingerprint`), recorded in its ``margins.json``.
+"""What decided a column's numbers (`column_fingerprint`), recorded in its ``margins.json``,
+and the check that a recorded fingerprint is still what the code and data are (`stale_parts`).
 
-A results page is true of the code that made it. Each column's result records, under
-``fingerprint``:
+A results page is true of the code and data that made it. Each column's result records, under
+``fingerprint`` (``version`` 2), its checked parts (`CHECKED`, each a sha256 of 16 hex digits):
 
-- ``config``: a hash of the controller's data (`controller_data`: gains, weights, search
-  settings, model parameters, and those of the controllers it holds), its reals rounded to
-  `DIGITS` significant digits, so that the last bits of a gain designed on one machine (or
-  with a cold compiler cache) do not count; ``settings``: its ``settings()`` where it has
-  them (readable); ``controller``: its own ``fingerprint()`` (the margins' cache key, exact);
-- ``constants``: a hash of the planning constants, the module-level UPPER_CASE values of every
-  module that defines the controller's classes and those of the controllers it holds (an
-  MPC's LQR, a wrapper's inner controller, a residual's base), read when the column is made;
-- ``code``: a hash of those modules' code (their syntax tree without docstrings and imports,
-  so an edited docstring or comment, or a module moved to another package, changes nothing);
-- ``commit``: the checkout's git commit (``dirty``: a tracked ``.py`` file differed from it).
+- the margins cache key's parts (`keys.setup_key`, recorded whole as ``margins_key``):
+  ``sources``, every bound_env source (`keys.source_hash`: each file's code without its
+  docstrings, `code_closure.code_text`); ``margins_settings``, the margins' settings
+  (`keys.SETTINGS`); ``budget``, the budget, the seed and its sample seeds; ``gait``, the gait
+  file's contents;
+- the controller's code closure (`code_closure`): ``code`` and ``constants``, the definitions
+  its objects' classes reach through imports within the project (bound_env and its sibling
+  packages), per object, imports kept, docstrings and comments left out; its roots are
+  recorded (``roots``), so that the check needs no controller loaded;
+- its data: ``config``, the controller's data (`controller_data`: gains, weights, search
+  settings, model parameters, and those of the controllers it holds), reals rounded to `DIGITS`
+  significant digits, so that the last bits of a gain designed on another machine do not
+  count; ``files``, the sha256 of the files that define it (its spec, a policy's weights and
+  settings), given by the caller that resolved its name.
 
-`stale_parts` compares a recorded fingerprint with a controller as it is now: the parts that
-differ (``config``, ``constants``, ``code``; the exact ``controller`` and the commit are a
-record, not a check).
-tests/test_page_fingerprints.py runs it on every column of the committed page.
+Beside them, a record, not checked: ``controller`` (its own exact ``fingerprint()``),
+``settings`` (its ``settings()``, readable), ``commit`` and ``dirty`` (a tracked ``.py`` file
+differed from the commit). An edited docstring or comment changes no part; any code or
+constant edit in bound_env changes ``sources``, and in the controller's closure ``code`` or
+``constants``; an edit of a module (or a class) the controller does not reach changes neither
+part of its closure. A fingerprint of the first format (no ``version``: ``config``,
+``constants`` and ``code`` of the controller's own modules, imports stripped) reads as stale.
+tests/test_page_fingerprints.py runs the check on every column of the committed page.
 """
 
 from __future__ import annotations
 
-import ast
 import hashlib
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
-CHECKED = ("config", "constants", "code")  # the parts `stale_parts` compares
+from .code_closure import code_parts
+
+VERSION = 2  # the fingerprint's format (the first had no version)
+# the parts `stale_parts` compares, and what each is (the check's message names it)
+PARTS = {
+    "sources": "bound_env's code (the margins cache key's source hash)",
+    "margins_settings": "the margins settings (keys.SETTINGS)",
+    "budget": "the budget and seed",
+    "gait": "the gait file",
+    "code": "the controller's code closure",
+    "constants": "the constants of the controller's code closure",
+    "config": "the controller's data (gains, weights, settings)",
+    "files": "the controller's files (spec, weights)",
+}
+CHECKED = tuple(PARTS)
 PASSIVE = "passive"  # no controller: zero torque
 DIGITS = 8  # significant digits of a real in `controller_data`
 # attributes that are not the data a controller acts on: its record or state of use, its label
@@ -44,67 +64,6 @@ RUNTIME = frozenset(
     {"decision_seconds", "decision_kinds", "searches", "given_up", "state", "name"}
     | {"design", "model", "P_d"}
 )
-
-
-def _held(controller, depth: int = 3) -> list:
-    """The controller and every controller it holds (attributes with ``fingerprint()``)."""
-    out, todo = [], [(controller, 0)]
-    while todo:
-        c, d = todo.pop(0)
-        if any(c is o for o in out):
-            continue
-        out.append(c)
-        if d < depth:
-            for v in getattr(c, "__dict__", {}).values():
-                if callable(getattr(v, "fingerprint", None)) and not isinstance(v, type):
-                    todo.append((v, d + 1))
-    return out
-
-
-def controller_modules(controller) -> list:
-    """The modules whose code decides ``controller``'s actions: those of its classes (and
-    their bases') and of the controllers it holds, in a stable order."""
-    names = []
-    for c in _held(controller):
-        for cls in type(c).__mro__:
-            m = cls.__module__
-            if m != "builtins" and m not in names and m in sys.modules:
-                names.append(m)
-    return [sys.modules[m] for m in sorted(names)]
-
-
-def _constant(value):
-    """A constant's value as hashable text, or None if it is no planning constant."""
-    if isinstance(value, (bool, int, float, str, bytes, type(None))):
-        return repr(value)
-    if isinstance(value, np.ndarray) and value.dtype != object:
-        return f"array{value.shape}{value.dtype}:" + hashlib.sha256(value.tobytes()).hexdigest()
-    if isinstance(value, (tuple, list, frozenset)):
-        items = [
-            _constant(v)
-            for v in (sorted(value, key=repr) if isinstance(value, frozenset) else value)
-        ]
-        return (
-            None if any(i is None for i in items) else f"{type(value).__name__}({','.join(items)})"
-        )
-    if isinstance(value, dict):
-        items = [(repr(k), _constant(v)) for k, v in value.items()]
-        if any(v is None for _, v in items):
-            return None
-        return "dict(" + ",".join(f"{k}:{v}" for k, v in sorted(items)) + ")"
-    return None
-
-
-def planning_constants(controller) -> dict:
-    """{module.NAME: value text} of the UPPER_CASE module constants of `controller_modules`."""
-    out = {}
-    for mod in controller_modules(controller):
-        for name, value in sorted(vars(mod).items()):
-            if name.isupper() and not name.startswith("_"):
-                text = _constant(value)
-                if text is not None:
-                    out[f"{mod.__name__.rsplit('.', 1)[-1]}.{name}"] = text
-    return out
 
 
 def _real(x: float) -> str:
@@ -157,38 +116,6 @@ def controller_data(controller) -> str:
     return type(controller).__name__ + _fields(controller, 3)
 
 
-def _code_tree(source: str) -> str:
-    """The module's syntax tree without docstrings and imports, as text."""
-    tree = ast.parse(source)
-    for node in ast.walk(tree):
-        body = getattr(node, "body", None)
-        if not isinstance(body, list):
-            continue
-        body[:] = [
-            n
-            for n in body
-            if not isinstance(n, (ast.Import, ast.ImportFrom))
-            and not (
-                isinstance(n, ast.Expr)
-                and isinstance(getattr(n, "value", None), ast.Constant)
-                and isinstance(n.value.value, str)
-            )
-        ] or [ast.Pass()]
-    return ast.dump(tree, annotate_fields=False, include_attributes=False)
-
-
-def code_hash(controller) -> str:
-    """sha256 (16 hex digits) of the code of `controller_modules` (`_code_tree`)."""
-    h = hashlib.sha256()
-    for mod in controller_modules(controller):
-        path = getattr(mod, "__file__", None)
-        if not path or not Path(path).is_file():
-            continue
-        h.update(mod.__name__.rsplit(".", 1)[-1].encode() + b"\0")
-        h.update(_code_tree(Path(path).read_text()).encode())
-    return h.hexdigest()[:16]
-
-
 def _sha(obj) -> str:
     return hashlib.sha256(repr(obj).encode()).hexdigest()[:16]
 
@@ -219,29 +146,94 @@ def git_commit(root: Path | None = None) -> tuple[str | None, bool | None]:
     return head or None, bool(status)
 
 
-def column_fingerprint(controller, commit: bool = True) -> dict:
-    """What decides ``controller``'s numbers (module docstring); ``None`` or ``"passive"``
-    is the passive gait. ``commit=False`` leaves the commit out (a comparison needs none)."""
-    if (
+def margins_parts(gait="default", budget=None, seed=None, extra_sources=()) -> dict:
+    """The parts of the margins cache key (`keys.setup_key`) that are not the controller's:
+    ``sources``, ``margins_settings``, ``budget`` (None without a budget) and ``gait``."""
+    from dataclasses import asdict
+
+    from ...cache import settings_hash
+    from .budget import DEFAULT_SEED, as_budget, check_seed, sample_seeds
+    from .keys import SETTINGS, gait_key, source_files, source_hash
+
+    seed = DEFAULT_SEED if seed is None else check_seed(seed)
+    run = None
+    if budget is not None:
+        run = {"budget": asdict(as_budget(budget)), "seed": seed, "samples": sample_seeds(seed)}
+    return {
+        "sources": source_hash(source_files(extra_sources)),
+        "margins_settings": settings_hash(SETTINGS),
+        "budget": None if run is None else settings_hash(run),
+        "gait": gait_key(gait)["file_sha256"][:16],
+    }
+
+
+def _is_passive(controller) -> bool:
+    return (
         controller is None
-        or controller == PASSIVE
+        or (isinstance(controller, str) and controller == PASSIVE)
         or getattr(controller, "fingerprint", None) is None
-    ):
-        fp = {"controller": PASSIVE, "settings": None}
-        fp.update(dict.fromkeys(CHECKED, PASSIVE))
+    )
+
+
+def column_fingerprint(
+    controller,
+    commit: bool = True,
+    gait="default",
+    budget=None,
+    seed=None,
+    extra_sources=(),
+    files: str | None = None,
+) -> dict:
+    """What decides ``controller``'s numbers (module docstring) on ``gait`` with ``budget``
+    and ``seed`` (no budget: ``budget`` and ``margins_key`` are None); ``None`` or
+    ``"passive"`` is the passive gait. ``files``: the sha256 of the controller's files, from
+    the caller that resolved its name (None: not known). ``commit=False`` leaves the commit
+    out (a comparison needs none)."""
+    from .code_closure import object_roots
+
+    fp: dict = {"version": VERSION}
+    if _is_passive(controller):
+        fp.update(controller=PASSIVE, settings=None, config=PASSIVE, **code_parts([]))
     else:
         settings = getattr(controller, "settings", None)
         settings = settings() if callable(settings) else None
-        fp = {
-            "controller": str(controller.fingerprint()),
-            "settings": {str(k): _jsonable(v) for k, v in settings.items()} if settings else None,
-            "config": _sha(controller_data(controller)),
-            "constants": _sha(sorted(planning_constants(controller).items())),
-            "code": code_hash(controller),
-        }
+        fp.update(
+            controller=str(controller.fingerprint()),
+            settings={str(k): _jsonable(v) for k, v in settings.items()} if settings else None,
+            config=_sha(controller_data(controller)),
+            **code_parts(object_roots(controller)),
+        )
+    fp["files"] = files
+    fp.update(margins_parts(gait, budget, seed, extra_sources))
+    fp["margins_key"] = None
+    if budget is not None and not _is_passive(controller):
+        from .budget import DEFAULT_SEED, as_budget
+        from .keys import setup_key
+
+        seed = DEFAULT_SEED if seed is None else seed
+        fp["margins_key"] = setup_key(controller, gait, as_budget(budget), seed, extra_sources)
     if commit:
         fp["commit"], fp["dirty"] = git_commit()
     return fp
+
+
+def recorded_parts(
+    recorded: dict,
+    gait="default",
+    budget=None,
+    seed=None,
+    extra_sources=(),
+    files: str | None = None,
+) -> dict:
+    """The checked parts as they are now for a recorded fingerprint, without loading its
+    controller: the margins parts, the closure of its recorded ``roots`` and ``files``
+    (``config`` is None: only a loaded controller has it)."""
+    roots = recorded.get("roots") if isinstance(recorded, dict) else None
+    now = {"config": None, "files": files}
+    now.update(margins_parts(gait, budget, seed, extra_sources))
+    if isinstance(roots, list):
+        now.update(code_parts(roots))
+    return now
 
 
 def _jsonable(v):
@@ -252,10 +244,41 @@ def _jsonable(v):
     return repr(v)
 
 
-def stale_parts(recorded: dict | None, controller) -> list[str]:
+def stale_parts(recorded: dict | None, now) -> list[str]:
     """The parts of `CHECKED` in which ``recorded`` (a column's ``fingerprint``) differs from
-    ``controller`` as it is now; every part when nothing was recorded."""
+    ``now`` (a fingerprint as `column_fingerprint` or `recorded_parts` make it now, or a
+    controller: its `column_fingerprint` without a budget); a part that ``now`` cannot know
+    (None) is not compared. Every part when nothing was recorded."""
     if not isinstance(recorded, dict):
         return list(CHECKED)
-    now = column_fingerprint(controller, commit=False)
-    return [k for k in CHECKED if recorded.get(k) != now[k]]
+    if not isinstance(now, dict):
+        now = column_fingerprint(now, commit=False)
+    return [k for k in CHECKED if now.get(k) is not None and recorded.get(k) != now[k]]
+
+
+def differing(recorded, now: dict) -> list[str]:
+    """The keys of ``now`` (a row's fingerprint: `run_fingerprint`) whose value ``recorded``
+    does not have; every key when nothing was recorded."""
+    if not isinstance(recorded, dict):
+        return sorted(now)
+    return sorted(k for k, v in now.items() if recorded.get(k) != v)
+
+
+def run_fingerprint(
+    controller, gait="default", files: str | None = None, roots=(), **inputs
+) -> dict:
+    """The fingerprint of one row of a resumable script (a hold count, a factor estimate):
+    bound_env's ``sources``, the controller's closure (and that of ``roots``, ``module:Name``:
+    code the script runs besides the controller) and data (``config``, ``files``), the
+    ``gait`` file and the row's ``inputs`` (a spec's contents, the strides, the robots: one
+    hash, ``inputs``). A resumed row is reused only under the same one (`differing`)."""
+    from ...cache import settings_hash
+    from .code_closure import object_roots
+
+    fp = column_fingerprint(controller, commit=False, gait=gait, files=files)
+    own = object_roots(controller) if not _is_passive(controller) else []
+    fp.update(code_parts(set(own) | {str(r) for r in roots}))
+    keep = ("version", "sources", "gait", "code", "constants", "roots", "config", "files")
+    out = {k: fp[k] for k in keep}
+    out["inputs"] = settings_hash(inputs)
+    return out

@@ -1,6 +1,7 @@
-"""Running a margins evaluation: the task table (`TASKS`, `run_task`, run in worker processes),
-the task cache's keys (`setup_key`: `SETTINGS`, the gait file, the controller's fingerprint and
-`source_hash`) and the core entry `compute_margins`, which takes a loaded controller."""
+"""Running a margins evaluation: the task table (`TASKS`, `run_task`, run in worker processes)
+and the core entry `compute_margins`, which takes a loaded controller. The task cache's keys
+(`setup_key`: `SETTINGS`, the gait file, the controller's fingerprint and code closure, and
+`source_hash`) are `keys`', importable from here."""
 
 from __future__ import annotations
 
@@ -8,40 +9,42 @@ import contextlib
 import json
 import math
 import time
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from bound_env.cache import TaskCache, settings_hash
+from bound_env.cache import TaskCache
 from bound_env.parallel import TasksFailed, open_pool, run_tasks
 
 from ..apex_loop import CLOCK
 from .assemble import assemble, controller_name
-from .basin import BASIN_CAP, BASIN_GROUPS, BASIN_HI, BASIN_LO, task_basin, task_basins
+from .basin import BASIN_GROUPS, task_basin, task_basins
 from .budget import (
-    CURVE_SEED,
     DEFAULT_SEED,
     MFPT_CHUNK,
-    MFPT_SEED,
-    PUSH_SEED,
-    TERRAIN_SEED,
-    WINDOW_SCAN,
     Budget,
     as_budget,
     check_seed,
-    sample_seeds,
 )
-from .ceiling import CEILING_ES, task_ceiling
-from .closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TOL, Setup
+from .ceiling import task_ceiling
+from .closed_loop import EVAL_RTOL, Setup
 from .curve import task_curve
-from .cycle import FD_FLOOR, FD_REL, task_cycle
+from .cycle import task_cycle
 from .decision_times import histogram
 from .fingerprint import column_fingerprint
+from .keys import (  # noqa: F401 - the cache key's parts, importable from here as before
+    CYCLE_RECORD_DT,
+    MISMATCH_SETTINGS,
+    SETTINGS,
+    gait_key,
+    mismatch_key,
+    setup_key,
+    source_files,
+    source_hash,
+)
 from .mismatch_tasks import (
     MISMATCH_BUDGETS,
-    MISMATCH_SEED,
-    SETTLE_NOISE,
     assemble_mismatch,
     mismatch_jobs,
     task_mm_curve,
@@ -52,9 +55,6 @@ from .push import task_push
 from .report import Z_LABELS, Z_UNITS, write_outputs
 from .terrain import task_mfpt, task_terrain
 from .windows import task_window
-
-CYCLE_RECORD_DT = 1e-3  # sampling of the passive stride for the cycle scale [s]
-
 
 TASKS = {
     "cycle": task_cycle,
@@ -148,100 +148,6 @@ def _run_all(
     return results
 
 
-# Every module setting that changes a result: part of each cache key (with the budget, the
-# seed, the gait file's contents, the controller's fingerprint and the source hash below).
-SETTINGS = {
-    "rtol": EVAL_RTOL,
-    "return_tol": RETURN_TOL,
-    "basin_lo": BASIN_LO,
-    "basin_hi": BASIN_HI,
-    "basin_cap": BASIN_CAP,
-    "fd_rel": FD_REL,
-    "fd_floor": FD_FLOOR.tolist(),
-    "curve_seed": CURVE_SEED,
-    "terrain_seed": TERRAIN_SEED,
-    "push_seed": PUSH_SEED,
-    "mfpt_seed": MFPT_SEED,
-    "mfpt_chunk": MFPT_CHUNK,
-    "profile_seg": PROFILE_SEG,
-    "profile_span": PROFILE_SPAN,
-    "ceiling_es": CEILING_ES,
-    "ceiling_rng": "default_rng([component, sign > 0, round(s * 1e9) % 2**32])",
-    "window_scan": WINDOW_SCAN,
-    "env_id": ENV_ID,
-    "cycle_record_dt": CYCLE_RECORD_DT,
-}
-# The model-error tasks' settings (with the spec: `mismatch_key`).
-MISMATCH_SETTINGS = {"mismatch_seed": MISMATCH_SEED, "settle_noise": SETTLE_NOISE}
-
-
-def source_files(extra=()) -> list[Path]:
-    """Every .py file under bound_env/ (the simulator, the task, the classical controllers and
-    this package), then the ``extra`` files: the code of a controller that lives outside
-    bound_env/, named by the caller (`compute_margins`' ``extra_sources``)."""
-    pkg = Path(__file__).resolve().parents[2]  # bound_env/
-    return sorted(pkg.rglob("*.py")) + [Path(f) for f in extra]
-
-
-def source_hash(files=None) -> str:
-    """sha256 (16 hex digits) of the names and contents of ``files`` (default:
-    `source_files`): any change of the simulator, the task, the controllers or the margins
-    code gives a new cache key (no hand-kept version number)."""
-    import hashlib
-
-    h = hashlib.sha256()
-    for f in files if files is not None else source_files():
-        f = Path(f)
-        h.update(f"{f.parent.name}/{f.name}\0".encode())
-        h.update(f.read_bytes())
-        h.update(b"\0")
-    return h.hexdigest()[:16]
-
-
-def gait_key(gait) -> dict:
-    """The gait's name and the sha256 of its file's contents (a changed file, a new key)."""
-    import hashlib
-
-    from bound_env.params import resolve_gait_path
-
-    digest = hashlib.sha256(resolve_gait_path(gait).read_bytes()).hexdigest()
-    return {"name": str(gait), "file_sha256": digest}
-
-
-def setup_key(
-    controller, gait: str, budget: Budget, seed: int = DEFAULT_SEED, extra_sources=()
-) -> str:
-    """Cache key of one evaluation: the controller's fingerprint and env kwargs, the gait
-    (name and file contents), the budget, the seed, `SETTINGS` and the `source_hash` of
-    bound_env/ and ``extra_sources``."""
-    env_kwargs = getattr(controller, "env_kwargs", None) or {}
-    return settings_hash(
-        {
-            "controller": controller.fingerprint(),
-            "gait": gait_key(gait),
-            "budget": asdict(budget),
-            "seed": check_seed(seed),
-            "samples": sample_seeds(seed),
-            "settings": SETTINGS,
-            "source": source_hash(source_files(extra_sources)),
-            "env_kwargs": sorted((str(k), repr(v)) for k, v in env_kwargs.items()),
-        }
-    )
-
-
-def mismatch_key(key: str, spec, budget: Budget) -> str:
-    """Cache key of the model-error tasks: the evaluation's key (`setup_key`), the spec, its
-    budget and `MISMATCH_SETTINGS`."""
-    return settings_hash(
-        {
-            "setup": key,
-            "mismatch": spec.to_dict(),
-            "mismatch_budget": asdict(MISMATCH_BUDGETS[budget.name]),
-            "settings": MISMATCH_SETTINGS,
-        }
-    )
-
-
 def check_controller(controller):
     """``controller`` if it has the controller protocol (``__call__`` and ``fingerprint()``,
     see the package docstring), else ValueError. Names and paths are loaded by the caller."""
@@ -281,6 +187,7 @@ def compute_margins(
     seed: int = DEFAULT_SEED,
     extra_sources=(),
     mismatch=None,
+    files: str | None = None,
 ) -> dict:
     """All margins of ``controller`` (an object with the controller protocol, package
     docstring) as a JSON-able dict.
@@ -298,6 +205,9 @@ def compute_margins(
     ``mismatch``: a model-error spec (`bound_env.mismatch.as_spec`: a preset, a YAML file or
     a `MismatchSpec`) or a list of them: the result then has the key ``mismatch`` too,
     {spec name: its block} (`mismatch_tasks`), each spec's tasks cached under `mismatch_key`.
+    ``files``: the sha256 of the controller's files (its spec, a policy's weights), recorded
+    in the result's ``fingerprint`` (`fingerprint.column_fingerprint`) by the caller that
+    resolved its name.
     """
     from bound_env.mismatch import as_spec, check_distinct
     from bound_env.params import load_gait
@@ -328,7 +238,14 @@ def compute_margins(
         key=setup_key(controller, gait, budget, seed, extra_sources),
         seed=seed,
     )
-    fingerprint = column_fingerprint(controller)
+    fingerprint = column_fingerprint(
+        controller,
+        gait=gait,
+        budget=budget,
+        seed=seed,
+        extra_sources=extra_sources,
+        files=files,
+    )
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
         if executor is None:
