@@ -337,3 +337,44 @@ def test_censored_crossings_are_named():
     d = bootstrap_delta_x50(xs, a, b, n_boot=200)
     assert d["censored"] is None and d["censored_ref"] is None and 0.0 <= d["censored_share"]
     assert delta_text(d, xs).startswith(f"{d['delta']:+.3g} [")
+
+
+# -- the margins' closed loop starts every stride afresh -------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["lqr-of", "mpc-adaptive"])
+def test_a_closed_loop_stride_forgets_the_strides_asked_before(name):
+    """``ClosedLoop.stride`` is the map of a fresh controller: the strides asked before it
+    (the fixed point's iterates and finite-difference probes) teach a stateful controller
+    nothing; ``next_stride`` continues an episode."""
+    from bound_env.analysis.margins import ClosedLoop
+
+    heavy = {"m1": float(NOMINAL.m1) * 1.05}
+    ctrl = load_controller(name)
+    assert ctrl.stateful
+    loop = ClosedLoop(ctrl, "default", heavy)
+    first = loop.stride(Z_STAR).z1
+    probe = Z_STAR * (1.0 + 0.02 * np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0]))
+    for z in (probe, Z_STAR, probe):
+        assert loop.stride(z).z1 is not None
+    np.testing.assert_array_equal(loop.stride(Z_STAR).z1, first)
+    # continuing: the controller remembers the stride before (and acts differently)
+    loop.stride(probe)
+    assert not np.array_equal(loop.next_stride(Z_STAR).z1, first)
+
+
+def test_the_fixed_point_of_mpc_adaptive_on_the_nominal_plant_is_mpcs(mpc):
+    """The nominal fixed-point task (iterates and central-difference probes) leaves
+    mpc-adaptive untaught: its cycle and multipliers are mpc's, bit for bit."""
+    from bound_env.analysis.margins import ClosedLoop, fd_steps
+    from bound_env.analysis.numerics import map_fixed_point
+
+    ctrl = load_controller("mpc-adaptive")
+    loop = ClosedLoop(ctrl, "default")
+    got = map_fixed_point(loop.map, Z_STAR, fd_steps(Z_STAR), settle=4, newton_iters=2)
+    want = map_fixed_point(
+        ClosedLoop(mpc, "default").map, Z_STAR, fd_steps(Z_STAR), settle=4, newton_iters=2
+    )
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not ctrl.trusted and ctrl.fit is None and ctrl.strides == 0
