@@ -378,3 +378,21 @@ def test_the_fixed_point_of_mpc_adaptive_on_the_nominal_plant_is_mpcs(mpc):
     for a, b in zip(got, want, strict=True):
         np.testing.assert_array_equal(a, b)
     assert not ctrl.trusted and ctrl.fit is None and ctrl.strides == 0
+
+
+def test_the_adaptive_and_privileged_mpcs_share_one_design_and_one_set_of_defaults(privileged):
+    """One base (`RedesignedMPC`: the spec's mpc, the designer, the protocol) and the
+    adaptive defaults written once (the shipped spec says ``adaptive: true``)."""
+    from bound_env.control.adaptive_settings import ADAPTIVE_DEFAULTS
+    from bound_env.control.plant_design import RedesignedMPC
+    from bound_env.control.spec import load_spec
+
+    assert load_spec("mpc-adaptive").adaptive == ADAPTIVE_DEFAULTS
+    ctrl = AdaptiveMPC()
+    for c in (ctrl, privileged):
+        assert isinstance(c, RedesignedMPC) and c.mpc is c.base and c.z_ref is c.base.z_ref
+    assert ctrl.base.fingerprint() == privileged.base.fingerprint()
+    with pytest.raises(ValueError, match="an adaptive controller re-designs an mpc spec"):
+        AdaptiveMPC(spec="lqr")
+    with pytest.raises(ValueError, match="a privileged controller re-designs an mpc spec"):
+        PrivilegedMPC(spec="lqr")

@@ -31,9 +31,7 @@ loops step it through the env, one robot per copy.
 
 from __future__ import annotations
 
-import hashlib
 import time
-from dataclasses import replace
 
 import numpy as np
 
@@ -41,7 +39,7 @@ from ..mismatch import EIGHT
 from ..stride_protocol import grid_times, interval_actions_of
 from .controllers import OBS_TIME, OBS_Z
 from .identify import PlantIdentifier
-from .plant_design import PlantDesigner
+from .plant_design import RedesignedMPC
 
 NAME = "mpc-adaptive"
 from .adaptive_settings import (  # noqa: E402  (the spec's ``adaptive`` block)
@@ -50,36 +48,21 @@ from .adaptive_settings import (  # noqa: E402  (the spec's ``adaptive`` block)
 )
 
 
-class AdaptiveMPC:
+class AdaptiveMPC(RedesignedMPC):
     """The shipped mpc identifying its plant online and re-designing on the estimate (module
-    docstring). ``spec``: an mpc spec (name, path or `ControllerSpec`; default
-    ``mpc-adaptive``); ``gait``: default the spec's; the keyword arguments: `ADAPTIVE_DEFAULTS`
-    (default: the spec's ``adaptive`` block)."""
+    docstring; the design is `RedesignedMPC`'s). ``spec``: an mpc spec (name, path or
+    `ControllerSpec`; default ``mpc-adaptive``); ``gait``: default the spec's; the keyword
+    arguments: `ADAPTIVE_DEFAULTS` (default: the spec's ``adaptive`` block)."""
 
+    NAME = NAME
+    ROLE = "an adaptive controller"
     stateful = True  # the estimate is the episode's: reset() forgets it
     privileged = False
 
     def __init__(self, gait=None, spec=NAME, name: str | None = None, **settings):
-        from .build import design_controller
-        from .spec import ControllerSpec, load_spec, weights
-
-        s = spec if isinstance(spec, ControllerSpec) else load_spec(spec)
-        if s.controller != "mpc":
-            raise ValueError(
-                f"{s.path}: an adaptive controller re-designs an mpc spec, got {s.controller!r}"
-            )
-        cfg = dict(s.adaptive or ADAPTIVE_DEFAULTS)
-        if settings:
-            checked = check_adaptive(settings, "AdaptiveMPC")
-            cfg.update({k: checked[k] for k in settings})
-        self.config = cfg
-        s = replace(s, privileged=False, adaptive=None)
-        self.base = design_controller(s, gait)
-        self.name = str(name) if name is not None else (s.name if s.path else NAME)
-        b = self.base
-        self.designer = PlantDesigner(
-            b.lqr, weights(s.path, "Q", s.Q, 6), weights(s.path, "R", s.R, b.basis.K)
-        )
+        self._settings = settings
+        super().__init__(gait, spec, name)
+        b, cfg = self.base, self.config
         self.identifier = PlantIdentifier(
             b.gait, b.dt, b.max_torque, b.rtol, cfg["prior"], cfg["sigma"], cfg["candidates"]
         )
@@ -87,6 +70,15 @@ class AdaptiveMPC:
         self.decision_seconds: list = []  # every apex decision, identification included
         self.decision_kinds: list = []
         self.reset()
+
+    def _configure(self, spec) -> None:
+        """The settings: the spec's ``adaptive`` block (else the defaults), updated by the
+        keyword arguments (checked)."""
+        cfg = dict(spec.adaptive or ADAPTIVE_DEFAULTS)
+        if self._settings:
+            checked = check_adaptive(self._settings, "AdaptiveMPC")
+            cfg.update({k: checked[k] for k in self._settings})
+        self.config = cfg
 
     # -- the episode -------------------------------------------------------------------------------
     def reset(self) -> None:
@@ -172,11 +164,7 @@ class AdaptiveMPC:
             return
         hint = self.design.z_ref if self.design is not None else None
         d = self.designer.design(self.identifier.overrides(self.theta), z_hint=hint)
-        b = self.base
-        fb = self.designer.feedback(d, name=b.lqr.name)
-        mpc = replace(b, lqr=fb, decision_seconds=[], decision_kinds=[])
-        mpc.model = self.designer.plant_map(d.overrides, b.rtol, b.segments)
-        self.mpc, self.design, self.designed_theta = mpc, d, self.theta.copy()
+        self.mpc, self.design, self.designed_theta = self.redesigned(d), d, self.theta.copy()
 
     def _decide(self, z) -> np.ndarray:
         t0 = time.perf_counter()
@@ -192,16 +180,7 @@ class AdaptiveMPC:
         self.decision_seconds.append(time.perf_counter() - t0)
         return u
 
-    # -- the protocol of bound_env.control.controllers ---------------------------------------------
-    gait = property(lambda self: self.base.gait)
-    max_torque = property(lambda self: self.base.max_torque)
-    dt = property(lambda self: self.base.dt)
-    basis = property(lambda self: self.base.basis)
-    env_kwargs = property(lambda self: self.base.env_kwargs)
-    stride_env_kwargs = property(lambda self: self.base.stride_env_kwargs)
-    z_ref = property(lambda self: self.mpc.z_ref)  # the current target
-    snaps_time = True
-
+    # -- the protocol of bound_env.control.controllers (the rest: RedesignedMPC's) ----------------
     def stride_action(self, z) -> np.ndarray:
         """The action of PassiveBoundStride-v1 at the apex z (one call per stride, in order:
         each call ends the last stride and starts the next)."""
@@ -228,10 +207,7 @@ class AdaptiveMPC:
         return {**self.base.settings(), "adaptive": dict(self.config)}
 
     def fingerprint(self) -> str:
-        h = hashlib.sha256(b"adaptive")
-        h.update(self.base.fingerprint().encode())
-        h.update(repr(sorted(self.config.items())).encode())
-        return h.hexdigest()[:16]
+        return self._fingerprint(b"adaptive", repr(sorted(self.config.items())))
 
     def __repr__(self) -> str:
         return f"AdaptiveMPC({self.name!r}, strides={self.strides}, trusted={self.trusted})"
