@@ -396,3 +396,21 @@ def test_the_adaptive_and_privileged_mpcs_share_one_design_and_one_set_of_defaul
         AdaptiveMPC(spec="lqr")
     with pytest.raises(ValueError, match="a privileged controller re-designs an mpc spec"):
         PrivilegedMPC(spec="lqr")
+
+
+def test_the_adaptive_and_privileged_mpcs_are_the_shipped_mpc_underneath(mpc, nominal_map):
+    """Their base is the shipped mpc (settings and fingerprint, its search's early exit,
+    screen and hopeless included), and off the cycle on the nominal plant mpc-adaptive's
+    searched decisions are mpc's, bit for bit."""
+    for name in ("mpc-adaptive", "mpc-privileged"):
+        base = load_controller(name).base
+        assert base.settings() == mpc.settings() and base.fingerprint() == mpc.fingerprint()
+    ctrl = AdaptiveMPC()
+    z = Z_STAR * (1.0 + 0.08 * np.array([1.0, -1.0, 0.5, -0.5, 1.0, -1.0]))
+    for _ in range(8):
+        assert np.array_equal(ctrl.stride_action(z), mpc.plan(z))
+        r = nominal_map.run(z[None], ctrl.last_actions[None])
+        assert r.ok[0]
+        z = r.z1[0]
+    assert "lqr" in ctrl.decision_kinds  # the search ran (and kept the LQR plan)
+    assert np.all(ctrl.theta == 0.0) and ctrl.mpc is ctrl.base
