@@ -189,7 +189,7 @@ def test_adaptive_identifies_holds_and_resets_per_episode(privileged, nominal_ma
     ctrl = AdaptiveMPC()
     aux = make_aux(PLANT.to_array())[None]
     z = Z_STAR.copy()
-    for _ in range(12):
+    for _ in range(30):  # the fit and the design spread over the decisions
         u = ctrl.stride_action(z)
         r = nominal_map.run(z[None], ctrl.last_actions[None], aux=aux)
         assert r.ok[0]
@@ -414,3 +414,51 @@ def test_the_adaptive_and_privileged_mpcs_are_the_shipped_mpc_underneath(mpc, no
         z = r.z1[0]
     assert "lqr" in ctrl.decision_kinds  # the search ran (and kept the LQR plan)
     assert np.all(ctrl.theta == 0.0) and ctrl.mpc is ctrl.base
+
+
+def test_every_decision_runs_within_its_budget_and_the_work_is_the_same_spread_or_not():
+    """Identification and design run ``budget`` stride evaluations per apex decision at most
+    (spread over the strides); spread or in one go, the fit and the design are the same, bit
+    for bit; a budget below one design Jacobian is refused, naming the key."""
+    from bound_env.control.anytime import Slices
+
+    aux = make_aux(PLANT.to_array())[None]
+    nominal = StrideMap("default", None, 0.01, 80.0, EVAL_RTOL)
+    runs = {}
+    for budget in (32, 0):
+        ctrl = AdaptiveMPC(budget=budget)
+        z = Z_STAR.copy()
+        for _ in range(30):
+            ctrl.stride_action(z)
+            r = nominal.run(z[None], ctrl.last_actions[None], aux=aux)
+            assert r.ok[0]
+            z = r.z1[0]
+        runs[budget] = ctrl
+    spread = runs[32]
+    assert max(spread.decision_work) <= 32 and sum(w > 0 for w in spread.decision_work) > 5
+    assert spread.trusted and spread.design is not None
+    # the same fit, in slices or in one go
+    idf = spread.identifier
+    Z, A, Z1 = spread.applied(0, 10)
+
+    def fit(slices, chunk):
+        import copy
+
+        i = copy.copy(idf)
+        i.map, i.chunk = slices.meter(idf.map), chunk
+        return i.fit(Z, A, Z1, None, 4, 2)
+
+    whole = Slices(lambda s: fit(s, None), 0)
+    assert whole.advance()
+    parts = Slices(lambda s: fit(s, 32), 32)
+    n = 1
+    while not parts.advance():
+        assert parts.spent <= 32
+        n += 1
+    assert n > 3 and parts.total == whole.total
+    np.testing.assert_array_equal(parts.result.theta, whole.result.theta)
+    np.testing.assert_array_equal(parts.result.cov, whole.result.cov)
+    with pytest.raises(ValueError, match="adaptive.budget must be 0 or at least 29"):
+        AdaptiveMPC(budget=20)
+    with pytest.raises(ValueError, match="adaptive.budget"):
+        check_adaptive({"budget": -1}, "f.yaml")

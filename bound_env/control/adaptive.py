@@ -31,12 +31,14 @@ loops step it through the env, one robot per copy.
 
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
 
 from ..mismatch import EIGHT
 from ..stride_protocol import grid_times, interval_actions_of
+from .anytime import Slices
 from .controllers import OBS_TIME, OBS_Z
 from .identify import PlantIdentifier
 from .plant_design import RedesignedMPC
@@ -63,12 +65,19 @@ class AdaptiveMPC(RedesignedMPC):
         self._settings = settings
         super().__init__(gait, spec, name)
         b, cfg = self.base, self.config
+        batch = 13 + 2 * b.basis.K  # the design's largest batch of strides (its Jacobian)
+        if 0 < cfg["budget"] < batch:
+            raise ValueError(
+                f"{self.name}: adaptive.budget must be 0 or at least {batch} (the strides of "
+                f"one design Jacobian), got {cfg['budget']}"
+            )
         self.identifier = PlantIdentifier(
             b.gait, b.dt, b.max_torque, b.rtol, cfg["prior"], cfg["sigma"], cfg["candidates"]
         )
         self._times = grid_times(b.dt)
         self.decision_seconds: list = []  # every apex decision, identification included
         self.decision_kinds: list = []
+        self.decision_work: list = []  # stride evaluations of identification and design
         self.reset()
 
     def _configure(self, spec) -> None:
@@ -98,6 +107,14 @@ class AdaptiveMPC(RedesignedMPC):
         self._z = None  # the apex the current stride started from
         self.last_actions = None  # its planned interval actions
         self._commanded: list = []  # the actions __call__ returned in it (the step protocol)
+        self._end_work()
+
+    def _end_work(self) -> None:
+        """Drop the work in flight (a fit or a design being computed across decisions)."""
+        job = getattr(self, "job", None)
+        if job is not None:
+            job.cancel()
+        self.job, self.job_kind, self.job_theta = None, None, None
 
     @property
     def factors(self) -> dict:
@@ -124,53 +141,106 @@ class AdaptiveMPC(RedesignedMPC):
         return Z, A, Z1
 
     def _observe(self, z) -> None:
-        """A stride ended at the apex z: record it, check the estimate, re-identify."""
+        """A stride ended at the apex z: record it, check the estimate on it (a stride it was
+        not fitted to), trust it or fall back, and start a fit when one is wanted."""
         if self._z is None:
             return
         cfg = self.config
         c = np.array(self._commanded) if self._commanded else self.last_actions
         self._record.append((self._z, np.asarray(c, dtype=float), z))
         self.strides += 1
-        w = cfg["window"]
-        Z, A, Z1 = self.applied(self.delay, w)
-        e = float(np.max(np.abs(self.identifier.residuals(Z[-1:], A[-1:], Z1[-1:], self.theta))))
+        Z, A, Z1 = self.applied(self.delay, 1)
+        e = float(np.max(np.abs(self.identifier.residuals(Z, A, Z1, self.theta))))
         self.innovations.append(e)
         if e <= cfg["deadband"]:
             return
         good = e <= cfg["trust_error"]
         if self.fit is not None:  # a fitted estimate met a stride it was not fitted to
-            self.trusted = good
+            was = self.trusted
+            self.trusted = good and self.fit.pred_std <= cfg["trust_std"]
+            if was and not good:  # the model is wrong: back to the shipped mpc, refit
+                self.mpc, self.design, self.designed_theta = self.base, None, np.zeros(len(EIGHT))
+                if self.job_kind == "design":
+                    self._end_work()
         settled = self.trusted and e <= cfg["settle"]
-        if self.strides <= cfg["identify"] and not settled:
-            search = 0 if self.trusted or self.searches >= cfg["searches"] else cfg["search"]
-            self.searches += bool(search)
-            # while searching, every delay hypothesis: the cheapest fit wins
-            delays = range(cfg["delays"] + 1) if search and self._commanded else [self.delay]
+        listening = self.strides <= cfg["identify"] or not good
+        if self.job is None and listening and not settled:
+            self._start_fit()
+
+    def _start_fit(self) -> None:
+        """Start the fit of the last ``window`` strides, warm-started from the estimate; while
+        it is not trusted (at most ``searches`` times per episode) it also searches, under
+        every delay hypothesis (the cheapest fit wins)."""
+        cfg = self.config
+        search = 0 if self.trusted or self.searches >= cfg["searches"] else cfg["search"]
+        self.searches += bool(search)
+        delays = range(cfg["delays"] + 1) if search and self._commanded else [self.delay]
+        data = [(d, self.applied(d, cfg["window"])) for d in delays]
+        theta0, iters, ident, chunk = self.theta.copy(), cfg["iters"], self.identifier, None
+        if cfg["budget"] > 0:
+            chunk = cfg["budget"]
+
+        def fit(slices):
+            idf = copy.copy(ident)
+            idf.map, idf.chunk = slices.meter(ident.map), chunk
             best = None
-            for d in delays:
-                Z, A, Z1 = self.applied(d, w)
-                f = self.identifier.fit(Z, A, Z1, self.theta, cfg["iters"], search)
+            for d, (Z, A, Z1) in data:
+                f = idf.fit(Z, A, Z1, theta0, iters, search)
                 if best is None or f.cost < best[0].cost:
                     best = (f, d)
-            self.fit, self.delay = best
-            self.theta = self.fit.theta
-            if len(Z) >= cfg["trust_strides"] and self.fit.rms <= cfg["trust_rms"]:
-                self.trusted = True  # enough strides, fitted consistently
+            return best
 
-    def _redesign(self) -> None:
-        if not self.trusted:
-            return
-        if np.max(np.abs(self.theta - self.designed_theta)) <= self.config["redesign"]:
-            return
+        self._start(fit, "fit", theta0)
+
+    def _start_design(self) -> None:
+        """Start the design on the trusted estimate (`RedesignedMPC.redesigned` once ready)."""
         hint = self.design.z_ref if self.design is not None else None
-        d = self.designer.design(self.identifier.overrides(self.theta), z_hint=hint)
-        self.mpc, self.design, self.designed_theta = self.redesigned(d), d, self.theta.copy()
+        overrides, designer = self.identifier.overrides(self.theta), self.designer
+
+        def design(slices):
+            dz = copy.copy(designer)
+            dz.meter = slices.meter
+            return dz.design(overrides, z_hint=hint)
+
+        self._start(design, "design", self.theta.copy())
+
+    def _start(self, fn, kind: str, theta) -> None:
+        self.job, self.job_kind, self.job_theta = Slices(fn, self.config["budget"]), kind, theta
+
+    def _work(self) -> int:
+        """This decision's slice of the work in flight (a design is started once a trusted
+        estimate moved more than ``redesign`` from the acting design); its result taken once
+        ready. Returns the stride evaluations spent."""
+        if self.job is None and self.trusted:
+            if np.max(np.abs(self.theta - self.designed_theta)) > self.config["redesign"]:
+                self._start_design()
+        job = self.job
+        if job is None:
+            return 0
+        done = job.advance()
+        spent = job.spent
+        if done:
+            kind, theta = self.job_kind, self.job_theta
+            self.job, self.job_kind, self.job_theta = None, None, None
+            if job.error is not None:
+                raise job.error
+            if kind == "fit":
+                self.fit, self.delay = job.result
+                self.theta = self.fit.theta
+                cfg = self.config
+                if cfg["trust_rms"] > 0.0 and self.fit.transitions >= cfg["trust_strides"]:
+                    if self.fit.rms <= cfg["trust_rms"]:  # the in-sample rule (off: 0)
+                        self.trusted = True
+            else:
+                d = job.result
+                self.mpc, self.design, self.designed_theta = self.redesigned(d), d, theta
+        return spent
 
     def _decide(self, z) -> np.ndarray:
         t0 = time.perf_counter()
         z = np.asarray(z, dtype=float)
         self._observe(z)
-        self._redesign()
+        self.decision_work.append(self._work())
         u = self.mpc.plan(z)
         self.decision_kinds.append(self.mpc._kind)
         self._z = z.copy()
@@ -208,6 +278,19 @@ class AdaptiveMPC(RedesignedMPC):
 
     def fingerprint(self) -> str:
         return self._fingerprint(b"adaptive", repr(sorted(self.config.items())))
+
+    def __getstate__(self):
+        """A copy (the batched loops' per-robot copies, a worker's pickle) starts without the
+        work in flight (a copy is made at an episode's start)."""
+        state = dict(self.__dict__)
+        state.update(job=None, job_kind=None, job_theta=None)
+        return state
+
+    def __del__(self):
+        try:
+            self._end_work()
+        except Exception:  # noqa: BLE001  (interpreter shutdown)
+            pass
 
     def __repr__(self) -> str:
         return f"AdaptiveMPC({self.name!r}, strides={self.strides}, trusted={self.trusted})"

@@ -133,11 +133,13 @@ class PlantDesigner:
         b = lqr.basis
         self.W = interval_weights(b.edges, b.phi, lqr.dt)  # interval actions a = W u
         self.z_nominal = np.asarray(lqr.z_ref, dtype=float)
+        self.meter = None  # None, or a wrapper of every map it designs on (`anytime.Slices`)
 
     def plant_map(self, overrides: dict, rtol: float = EVAL_RTOL, segments=False) -> StrideMap:
         """The plant's stride map (the step env's, on the plant's parameters)."""
         lqr = self.lqr
-        return StrideMap(lqr.gait, overrides or None, lqr.dt, lqr.max_torque, rtol, segments)
+        m = StrideMap(lqr.gait, overrides or None, lqr.dt, lqr.max_torque, rtol, segments)
+        return m if self.meter is None else self.meter(m)
 
     # -- the pieces ------------------------------------------------------------------------------
     def _steps(self, z) -> np.ndarray:
