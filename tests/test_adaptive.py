@@ -430,7 +430,7 @@ def test_every_decision_runs_within_its_budget_and_the_work_is_the_same_spread_o
     nominal = StrideMap("default", None, 0.01, 80.0, EVAL_RTOL)
     runs = {}
     for budget in (32, 0):
-        ctrl = AdaptiveMPC(budget=budget)
+        ctrl = AdaptiveMPC(spec="mpc-adaptive-bounded", budget=budget)
         z = Z_STAR.copy()
         for _ in range(30):
             ctrl.stride_action(z)
