@@ -30,6 +30,7 @@ from bound_env.analysis.numerics import map_fixed_point
 from bound_env.cache import atomic_write
 from bound_env.cli_args import check_writable
 from bound_env.params import load_gait
+from bound_env.stride_protocol import reset_controller
 
 SIZES = (0.02, 0.05)  # relative perturbation sizes (the passive basin_min is ~0.02)
 N_DIRS = 12
@@ -40,8 +41,9 @@ DEFAULT_POLICIES = ("passive", "agents/policies/archive/ppo-v1", "lqr", "deadbea
 def recovery(loop: ClosedLoop, z0, z_cl) -> tuple[float, bool]:
     """(time-averaged |tau| over the first STRIDES strides, returned within 100 strides)."""
     z, impulse, time_total = np.asarray(z0, dtype=float), 0.0, 0.0
+    reset_controller(loop.controller)  # one episode
     for n in range(100):
-        out = loop.stride(z)
+        out = loop.next_stride(z)
         if out.z1 is None:
             return (impulse / time_total if time_total else float("nan")), False
         if n < STRIDES:

@@ -189,7 +189,7 @@ def test_adaptive_identifies_holds_and_resets_per_episode(privileged, nominal_ma
     ctrl = AdaptiveMPC()
     aux = make_aux(PLANT.to_array())[None]
     z = Z_STAR.copy()
-    for _ in range(12):
+    for _ in range(30):  # the fit and the design spread over the decisions
         u = ctrl.stride_action(z)
         r = nominal_map.run(z[None], ctrl.last_actions[None], aux=aux)
         assert r.ok[0]
@@ -337,3 +337,132 @@ def test_censored_crossings_are_named():
     d = bootstrap_delta_x50(xs, a, b, n_boot=200)
     assert d["censored"] is None and d["censored_ref"] is None and 0.0 <= d["censored_share"]
     assert delta_text(d, xs).startswith(f"{d['delta']:+.3g} [")
+
+
+# -- the margins' closed loop starts every stride afresh -------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["lqr-of", "mpc-adaptive"])
+def test_a_closed_loop_stride_forgets_the_strides_asked_before(name):
+    """``ClosedLoop.stride`` is the map of a fresh controller: the strides asked before it
+    (the fixed point's iterates and finite-difference probes) teach a stateful controller
+    nothing; ``next_stride`` continues an episode."""
+    from bound_env.analysis.margins import ClosedLoop
+
+    heavy = {"m1": float(NOMINAL.m1) * 1.05}
+    ctrl = load_controller(name)
+    assert ctrl.stateful
+    loop = ClosedLoop(ctrl, "default", heavy)
+    first = loop.stride(Z_STAR).z1
+    probe = Z_STAR * (1.0 + 0.02 * np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0]))
+    for z in (probe, Z_STAR, probe):
+        assert loop.stride(z).z1 is not None
+    np.testing.assert_array_equal(loop.stride(Z_STAR).z1, first)
+    # continuing: the controller remembers the stride before (and acts differently)
+    loop.stride(probe)
+    z1 = loop.next_stride(Z_STAR).z1
+    if name == "mpc-adaptive":  # it saw a stride (one stride is not enough to trust a fit)
+        assert ctrl.strides == 1 and ctrl.innovations[0] > ctrl.config["deadband"]
+    else:
+        assert not np.array_equal(z1, first)
+
+
+def test_the_fixed_point_of_mpc_adaptive_on_the_nominal_plant_is_mpcs(mpc):
+    """The nominal fixed-point task (iterates and central-difference probes) leaves
+    mpc-adaptive untaught: its cycle and multipliers are mpc's, bit for bit."""
+    from bound_env.analysis.margins import ClosedLoop, fd_steps
+    from bound_env.analysis.numerics import map_fixed_point
+
+    ctrl = load_controller("mpc-adaptive")
+    loop = ClosedLoop(ctrl, "default")
+    got = map_fixed_point(loop.map, Z_STAR, fd_steps(Z_STAR), settle=4, newton_iters=2)
+    want = map_fixed_point(
+        ClosedLoop(mpc, "default").map, Z_STAR, fd_steps(Z_STAR), settle=4, newton_iters=2
+    )
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not ctrl.trusted and ctrl.fit is None and ctrl.strides == 0
+
+
+def test_the_adaptive_and_privileged_mpcs_share_one_design_and_one_set_of_defaults(privileged):
+    """One base (`RedesignedMPC`: the spec's mpc, the designer, the protocol) and the
+    adaptive defaults written once (the shipped spec says ``adaptive: true``)."""
+    from bound_env.control.adaptive_settings import ADAPTIVE_DEFAULTS
+    from bound_env.control.plant_design import RedesignedMPC
+    from bound_env.control.spec import load_spec
+
+    assert load_spec("mpc-adaptive").adaptive == ADAPTIVE_DEFAULTS
+    ctrl = AdaptiveMPC()
+    for c in (ctrl, privileged):
+        assert isinstance(c, RedesignedMPC) and c.mpc is c.base and c.z_ref is c.base.z_ref
+    assert ctrl.base.fingerprint() == privileged.base.fingerprint()
+    with pytest.raises(ValueError, match="an adaptive controller re-designs an mpc spec"):
+        AdaptiveMPC(spec="lqr")
+    with pytest.raises(ValueError, match="a privileged controller re-designs an mpc spec"):
+        PrivilegedMPC(spec="lqr")
+
+
+def test_the_adaptive_and_privileged_mpcs_are_the_shipped_mpc_underneath(mpc, nominal_map):
+    """Their base is the shipped mpc (settings and fingerprint, its search's early exit,
+    screen and hopeless included), and off the cycle on the nominal plant mpc-adaptive's
+    searched decisions are mpc's, bit for bit."""
+    for name in ("mpc-adaptive", "mpc-privileged"):
+        base = load_controller(name).base
+        assert base.settings() == mpc.settings() and base.fingerprint() == mpc.fingerprint()
+    ctrl = AdaptiveMPC()
+    z = Z_STAR * (1.0 + 0.08 * np.array([1.0, -1.0, 0.5, -0.5, 1.0, -1.0]))
+    for _ in range(8):
+        assert np.array_equal(ctrl.stride_action(z), mpc.plan(z))
+        r = nominal_map.run(z[None], ctrl.last_actions[None])
+        assert r.ok[0]
+        z = r.z1[0]
+    assert "lqr" in ctrl.decision_kinds  # the search ran (and kept the LQR plan)
+    assert np.all(ctrl.theta == 0.0) and ctrl.mpc is ctrl.base
+
+
+def test_every_decision_runs_within_its_budget_and_the_work_is_the_same_spread_or_not():
+    """Identification and design run ``budget`` stride evaluations per apex decision at most
+    (spread over the strides); spread or in one go, the fit and the design are the same, bit
+    for bit; a budget below one design Jacobian is refused, naming the key."""
+    from bound_env.control.anytime import Slices
+
+    aux = make_aux(PLANT.to_array())[None]
+    nominal = StrideMap("default", None, 0.01, 80.0, EVAL_RTOL)
+    runs = {}
+    for budget in (32, 0):
+        ctrl = AdaptiveMPC(spec="mpc-adaptive-bounded", budget=budget)
+        z = Z_STAR.copy()
+        for _ in range(30):
+            ctrl.stride_action(z)
+            r = nominal.run(z[None], ctrl.last_actions[None], aux=aux)
+            assert r.ok[0]
+            z = r.z1[0]
+        runs[budget] = ctrl
+    spread = runs[32]
+    assert max(spread.decision_work) <= 32 and sum(w > 0 for w in spread.decision_work) > 5
+    assert spread.trusted and spread.design is not None
+    # the same fit, in slices or in one go
+    idf = spread.identifier
+    Z, A, Z1 = spread.applied(0, 10)
+
+    def fit(slices, chunk):
+        import copy
+
+        i = copy.copy(idf)
+        i.map, i.chunk = slices.meter(idf.map), chunk
+        return i.fit(Z, A, Z1, None, 4, 2)
+
+    whole = Slices(lambda s: fit(s, None), 0)
+    assert whole.advance()
+    parts = Slices(lambda s: fit(s, 32), 32)
+    n = 1
+    while not parts.advance():
+        assert parts.spent <= 32
+        n += 1
+    assert n > 3 and parts.total == whole.total
+    np.testing.assert_array_equal(parts.result.theta, whole.result.theta)
+    np.testing.assert_array_equal(parts.result.cov, whole.result.cov)
+    with pytest.raises(ValueError, match="adaptive.budget must be 0 or at least 29"):
+        AdaptiveMPC(budget=20)
+    with pytest.raises(ValueError, match="adaptive.budget"):
+        check_adaptive({"budget": -1}, "f.yaml")

@@ -135,7 +135,7 @@ def test_step_protocol_holds_the_same_cycle_as_the_batched_one(lqr, nominal):
     of.reset()
     z = Z_STAR.copy()
     for _ in range(100):
-        out = loop.stride(z)
+        out = loop.next_stride(z)  # one episode (``stride`` starts each afresh)
         assert out.z1 is not None
         z = out.z1
     zs, eff, _ = run(OffsetFree(lqr), nominal, 100, heavy_aux())

@@ -128,7 +128,7 @@ def _run(controller, gait, z0, z_star, show_after: int = 0) -> dict:
     if returned and show_after > 0:
         z = rec.last_apex_z
         for _ in range(show_after):
-            out = loop.stride(z)
+            out = loop.next_stride(z)  # the same episode, continued
             if out.z1 is None:
                 break
             z = out.z1

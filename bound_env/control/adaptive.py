@@ -31,17 +31,17 @@ loops step it through the env, one robot per copy.
 
 from __future__ import annotations
 
-import hashlib
+import copy
 import time
-from dataclasses import replace
 
 import numpy as np
 
 from ..mismatch import EIGHT
 from ..stride_protocol import grid_times, interval_actions_of
+from .anytime import Slices
 from .controllers import OBS_TIME, OBS_Z
 from .identify import PlantIdentifier
-from .plant_design import PlantDesigner
+from .plant_design import RedesignedMPC
 
 NAME = "mpc-adaptive"
 from .adaptive_settings import (  # noqa: E402  (the spec's ``adaptive`` block)
@@ -50,43 +50,44 @@ from .adaptive_settings import (  # noqa: E402  (the spec's ``adaptive`` block)
 )
 
 
-class AdaptiveMPC:
+class AdaptiveMPC(RedesignedMPC):
     """The shipped mpc identifying its plant online and re-designing on the estimate (module
-    docstring). ``spec``: an mpc spec (name, path or `ControllerSpec`; default
-    ``mpc-adaptive``); ``gait``: default the spec's; the keyword arguments: `ADAPTIVE_DEFAULTS`
-    (default: the spec's ``adaptive`` block)."""
+    docstring; the design is `RedesignedMPC`'s). ``spec``: an mpc spec (name, path or
+    `ControllerSpec`; default ``mpc-adaptive``); ``gait``: default the spec's; the keyword
+    arguments: `ADAPTIVE_DEFAULTS` (default: the spec's ``adaptive`` block)."""
 
+    NAME = NAME
+    ROLE = "an adaptive controller"
     stateful = True  # the estimate is the episode's: reset() forgets it
     privileged = False
 
     def __init__(self, gait=None, spec=NAME, name: str | None = None, **settings):
-        from .build import design_controller
-        from .spec import ControllerSpec, load_spec, weights
-
-        s = spec if isinstance(spec, ControllerSpec) else load_spec(spec)
-        if s.controller != "mpc":
+        self._settings = settings
+        super().__init__(gait, spec, name)
+        b, cfg = self.base, self.config
+        batch = 13 + 2 * b.basis.K  # the design's largest batch of strides (its Jacobian)
+        if 0 < cfg["budget"] < batch:
             raise ValueError(
-                f"{s.path}: an adaptive controller re-designs an mpc spec, got {s.controller!r}"
+                f"{self.name}: adaptive.budget must be 0 or at least {batch} (the strides of "
+                f"one design Jacobian), got {cfg['budget']}"
             )
-        cfg = dict(s.adaptive or ADAPTIVE_DEFAULTS)
-        if settings:
-            checked = check_adaptive(settings, "AdaptiveMPC")
-            cfg.update({k: checked[k] for k in settings})
-        self.config = cfg
-        s = replace(s, privileged=False, adaptive=None)
-        self.base = design_controller(s, gait)
-        self.name = str(name) if name is not None else (s.name if s.path else NAME)
-        b = self.base
-        self.designer = PlantDesigner(
-            b.lqr, weights(s.path, "Q", s.Q, 6), weights(s.path, "R", s.R, b.basis.K)
-        )
         self.identifier = PlantIdentifier(
             b.gait, b.dt, b.max_torque, b.rtol, cfg["prior"], cfg["sigma"], cfg["candidates"]
         )
         self._times = grid_times(b.dt)
         self.decision_seconds: list = []  # every apex decision, identification included
         self.decision_kinds: list = []
+        self.decision_work: list = []  # stride evaluations of identification and design
         self.reset()
+
+    def _configure(self, spec) -> None:
+        """The settings: the spec's ``adaptive`` block (else the defaults), updated by the
+        keyword arguments (checked)."""
+        cfg = dict(spec.adaptive or ADAPTIVE_DEFAULTS)
+        if self._settings:
+            checked = check_adaptive(self._settings, "AdaptiveMPC")
+            cfg.update({k: checked[k] for k in self._settings})
+        self.config = cfg
 
     # -- the episode -------------------------------------------------------------------------------
     def reset(self) -> None:
@@ -106,6 +107,14 @@ class AdaptiveMPC:
         self._z = None  # the apex the current stride started from
         self.last_actions = None  # its planned interval actions
         self._commanded: list = []  # the actions __call__ returned in it (the step protocol)
+        self._end_work()
+
+    def _end_work(self) -> None:
+        """Drop the work in flight (a fit or a design being computed across decisions)."""
+        job = getattr(self, "job", None)
+        if job is not None:
+            job.cancel()
+        self.job, self.job_kind, self.job_theta = None, None, None
 
     @property
     def factors(self) -> dict:
@@ -132,57 +141,106 @@ class AdaptiveMPC:
         return Z, A, Z1
 
     def _observe(self, z) -> None:
-        """A stride ended at the apex z: record it, check the estimate, re-identify."""
+        """A stride ended at the apex z: record it, check the estimate on it (a stride it was
+        not fitted to), trust it or fall back, and start a fit when one is wanted."""
         if self._z is None:
             return
         cfg = self.config
         c = np.array(self._commanded) if self._commanded else self.last_actions
         self._record.append((self._z, np.asarray(c, dtype=float), z))
         self.strides += 1
-        w = cfg["window"]
-        Z, A, Z1 = self.applied(self.delay, w)
-        e = float(np.max(np.abs(self.identifier.residuals(Z[-1:], A[-1:], Z1[-1:], self.theta))))
+        Z, A, Z1 = self.applied(self.delay, 1)
+        e = float(np.max(np.abs(self.identifier.residuals(Z, A, Z1, self.theta))))
         self.innovations.append(e)
         if e <= cfg["deadband"]:
             return
         good = e <= cfg["trust_error"]
         if self.fit is not None:  # a fitted estimate met a stride it was not fitted to
-            self.trusted = good
+            was = self.trusted
+            self.trusted = good and self.fit.pred_std <= cfg["trust_std"]
+            if was and not good:  # the model is wrong: back to the shipped mpc, refit
+                self.mpc, self.design, self.designed_theta = self.base, None, np.zeros(len(EIGHT))
+                if self.job_kind == "design":
+                    self._end_work()
         settled = self.trusted and e <= cfg["settle"]
-        if self.strides <= cfg["identify"] and not settled:
-            search = 0 if self.trusted or self.searches >= cfg["searches"] else cfg["search"]
-            self.searches += bool(search)
-            # while searching, every delay hypothesis: the cheapest fit wins
-            delays = range(cfg["delays"] + 1) if search and self._commanded else [self.delay]
+        listening = self.strides <= cfg["identify"] or not good
+        if self.job is None and listening and not settled:
+            self._start_fit()
+
+    def _start_fit(self) -> None:
+        """Start the fit of the last ``window`` strides, warm-started from the estimate; while
+        it is not trusted (at most ``searches`` times per episode) it also searches, under
+        every delay hypothesis (the cheapest fit wins)."""
+        cfg = self.config
+        search = 0 if self.trusted or self.searches >= cfg["searches"] else cfg["search"]
+        self.searches += bool(search)
+        delays = range(cfg["delays"] + 1) if search and self._commanded else [self.delay]
+        data = [(d, self.applied(d, cfg["window"])) for d in delays]
+        theta0, iters, ident, chunk = self.theta.copy(), cfg["iters"], self.identifier, None
+        if cfg["budget"] > 0:
+            chunk = cfg["budget"]
+
+        def fit(slices):
+            idf = copy.copy(ident)
+            idf.map, idf.chunk = slices.meter(ident.map), chunk
             best = None
-            for d in delays:
-                Z, A, Z1 = self.applied(d, w)
-                f = self.identifier.fit(Z, A, Z1, self.theta, cfg["iters"], search)
+            for d, (Z, A, Z1) in data:
+                f = idf.fit(Z, A, Z1, theta0, iters, search)
                 if best is None or f.cost < best[0].cost:
                     best = (f, d)
-            self.fit, self.delay = best
-            self.theta = self.fit.theta
-            if len(Z) >= cfg["trust_strides"] and self.fit.rms <= cfg["trust_rms"]:
-                self.trusted = True  # enough strides, fitted consistently
+            return best
 
-    def _redesign(self) -> None:
-        if not self.trusted:
-            return
-        if np.max(np.abs(self.theta - self.designed_theta)) <= self.config["redesign"]:
-            return
+        self._start(fit, "fit", theta0)
+
+    def _start_design(self) -> None:
+        """Start the design on the trusted estimate (`RedesignedMPC.redesigned` once ready)."""
         hint = self.design.z_ref if self.design is not None else None
-        d = self.designer.design(self.identifier.overrides(self.theta), z_hint=hint)
-        b = self.base
-        fb = self.designer.feedback(d, name=b.lqr.name)
-        mpc = replace(b, lqr=fb, decision_seconds=[], decision_kinds=[])
-        mpc.model = self.designer.plant_map(d.overrides, b.rtol, b.segments)
-        self.mpc, self.design, self.designed_theta = mpc, d, self.theta.copy()
+        overrides, designer = self.identifier.overrides(self.theta), self.designer
+
+        def design(slices):
+            dz = copy.copy(designer)
+            dz.meter = slices.meter
+            return dz.design(overrides, z_hint=hint)
+
+        self._start(design, "design", self.theta.copy())
+
+    def _start(self, fn, kind: str, theta) -> None:
+        self.job, self.job_kind, self.job_theta = Slices(fn, self.config["budget"]), kind, theta
+
+    def _work(self) -> int:
+        """This decision's slice of the work in flight (a design is started once a trusted
+        estimate moved more than ``redesign`` from the acting design); its result taken once
+        ready. Returns the stride evaluations spent."""
+        if self.job is None and self.trusted:
+            if np.max(np.abs(self.theta - self.designed_theta)) > self.config["redesign"]:
+                self._start_design()
+        job = self.job
+        if job is None:
+            return 0
+        done = job.advance()
+        spent = job.spent
+        if done:
+            kind, theta = self.job_kind, self.job_theta
+            self.job, self.job_kind, self.job_theta = None, None, None
+            if job.error is not None:
+                raise job.error
+            if kind == "fit":
+                self.fit, self.delay = job.result
+                self.theta = self.fit.theta
+                cfg = self.config
+                if cfg["trust_rms"] > 0.0 and self.fit.transitions >= cfg["trust_strides"]:
+                    if self.fit.rms <= cfg["trust_rms"]:  # the in-sample rule (off: 0)
+                        self.trusted = True
+            else:
+                d = job.result
+                self.mpc, self.design, self.designed_theta = self.redesigned(d), d, theta
+        return spent
 
     def _decide(self, z) -> np.ndarray:
         t0 = time.perf_counter()
         z = np.asarray(z, dtype=float)
         self._observe(z)
-        self._redesign()
+        self.decision_work.append(self._work())
         u = self.mpc.plan(z)
         self.decision_kinds.append(self.mpc._kind)
         self._z = z.copy()
@@ -192,16 +250,7 @@ class AdaptiveMPC:
         self.decision_seconds.append(time.perf_counter() - t0)
         return u
 
-    # -- the protocol of bound_env.control.controllers ---------------------------------------------
-    gait = property(lambda self: self.base.gait)
-    max_torque = property(lambda self: self.base.max_torque)
-    dt = property(lambda self: self.base.dt)
-    basis = property(lambda self: self.base.basis)
-    env_kwargs = property(lambda self: self.base.env_kwargs)
-    stride_env_kwargs = property(lambda self: self.base.stride_env_kwargs)
-    z_ref = property(lambda self: self.mpc.z_ref)  # the current target
-    snaps_time = True
-
+    # -- the protocol of bound_env.control.controllers (the rest: RedesignedMPC's) ----------------
     def stride_action(self, z) -> np.ndarray:
         """The action of PassiveBoundStride-v1 at the apex z (one call per stride, in order:
         each call ends the last stride and starts the next)."""
@@ -228,10 +277,20 @@ class AdaptiveMPC:
         return {**self.base.settings(), "adaptive": dict(self.config)}
 
     def fingerprint(self) -> str:
-        h = hashlib.sha256(b"adaptive")
-        h.update(self.base.fingerprint().encode())
-        h.update(repr(sorted(self.config.items())).encode())
-        return h.hexdigest()[:16]
+        return self._fingerprint(b"adaptive", repr(sorted(self.config.items())))
+
+    def __getstate__(self):
+        """A copy (the batched loops' per-robot copies, a worker's pickle) starts without the
+        work in flight (a copy is made at an episode's start)."""
+        state = dict(self.__dict__)
+        state.update(job=None, job_kind=None, job_theta=None)
+        return state
+
+    def __del__(self):
+        try:
+            self._end_work()
+        except Exception:  # noqa: BLE001  (interpreter shutdown)
+            pass
 
     def __repr__(self) -> str:
         return f"AdaptiveMPC({self.name!r}, strides={self.strides}, trusted={self.trusted})"

@@ -12,20 +12,27 @@ ADAPTIVE_DEFAULTS = {
     "window": 10,  # strides in the fit
     "prior": 0.1,  # prior standard deviation of each log factor
     "sigma": 0.01,  # assumed error of a one-stride prediction (normalized apex units)
-    "identify": 20,  # strides from the start over which it identifies (then: frozen)
-    "trust_error": 0.15,  # an estimate is trusted after predicting a stride this well
-    "trust_strides": 1,  # ... or once it fits at least this many strides
-    "trust_rms": 0.05,  # ... with an rms residual at most this (normalized)
+    "identify": 20,  # strides from the start over which it fits (then: when the model is wrong)
+    "trust_error": 0.15,  # an estimate is trusted after predicting an unseen stride this well
+    "trust_std": 0.05,  # ... and its predicted apex's posterior std (normalized) is this small
+    "trust_strides": 1,  # in-sample trust (off with trust_rms 0): once it fits this many ...
+    "trust_rms": 0.0,  # ... strides with an rms residual at most this (normalized)
     "deadband": 1e-5,  # innovations at most this: no update (the nominal plant)
     "settle": 0.05,  # a trusted estimate is not refitted after innovations at most this
     "redesign": 0.005,  # a trusted estimate this far (max |log f|) from the design: redesign
-    "iters": 10,  # Levenberg-Marquardt steps per fit (at most)
+    "iters": 10,  # Levenberg-Marquardt steps per fit (at most; the next fit continues)
     "candidates": 128,  # starting points of the search for the fit's global minimum
     "search": 4,  # descents from the cheapest of them while the estimate is not trusted
     "searches": 3,  # searching fits per episode at most (the work per episode is bounded)
     "delays": 2,  # actuation delays [intervals] the searching fits consider (0 ... delays)
+    # stride evaluations of identification and design per apex decision (the work is spread
+    # over the decisions, `bound_env.control.anytime`); 0: all of it in one decision
+    "budget": 0,
 }
-ADAPTIVE_INTS = ("window", "identify", "iters", "trust_strides", "candidates", "search", "delays")
+ADAPTIVE_INTS = (
+    "window", "identify", "iters", "trust_strides", "candidates", "search", "searches", "delays",
+    "budget",
+)  # fmt: skip
 ADAPTIVE_LIMITS = {
     "window": (1, 1000),
     "prior": (1e-6, 10.0),  # the fit divides by prior^2 and sigma^2: 1e-300 overflowed
@@ -34,6 +41,7 @@ ADAPTIVE_LIMITS = {
     "trust_error": (0.0, 100.0),
     "trust_strides": (1, 1000),
     "trust_rms": (0.0, 100.0),
+    "trust_std": (0.0, 100.0),
     "deadband": (0.0, 1.0),
     "settle": (0.0, 100.0),
     "redesign": (0.0, 10.0),
@@ -42,6 +50,7 @@ ADAPTIVE_LIMITS = {
     "search": (0, 65_536),
     "searches": (0, 100_000),
     "delays": (0, 20),
+    "budget": (0, 1_000_000),
 }
 
 

@@ -50,6 +50,10 @@ class Fit:
     cost: float  # the fit's cost (residuals and prior)
     rms: float  # root mean square of the normalized residuals (z - P) / s
     transitions: int
+    # the posterior's standard deviation of the predicted apex (normalized), the largest over
+    # the fitted strides' components: sqrt(diag(J cov J')); small once the data pin down what
+    # the strides depend on (directions they cannot see do not count)
+    pred_std: float = math.nan
 
     @property
     def factors(self) -> dict:
@@ -83,6 +87,7 @@ class PlantIdentifier:
         self.scales = np.asarray(APEX_SCALES, dtype=float)
         self.prior, self.sigma = float(prior), float(sigma)
         self.candidates = self.sobol(candidates)
+        self.chunk: int | None = None  # at most this many strides in one batch (None: any)
 
     def sobol(self, n: int) -> np.ndarray:
         """``n`` starting points of the search in theta: a scrambled Sobol set (seed 0) in the
@@ -107,7 +112,14 @@ class PlantIdentifier:
         """z1 of the strides from Z[i] with the interval actions A[i] on the plant e^thetas[i]
         (NaN where a stride fails)."""
         aux = np.array([make_aux(self.params(t).to_array()) for t in np.atleast_2d(thetas)])
-        return self.map.run(np.atleast_2d(Z), np.atleast_2d(A), aux=aux).z1
+        Z, A = np.atleast_2d(Z), np.atleast_2d(A)
+        c = self.chunk
+        if c is None or len(Z) <= c:
+            return self.map.run(Z, A, aux=aux).z1
+        # in batches of at most ``chunk`` strides (each row's stride is its own: the same z1)
+        parts = [self.map.run(Z[i : i + c], A[i : i + c], aux=aux[i : i + c]).z1
+                 for i in range(0, len(Z), c)]  # fmt: skip
+        return np.concatenate(parts)
 
     def residuals(self, Z, A, Z1, theta) -> np.ndarray:
         """(n, 6): (P(z_k, a_k; e^theta) - z_{k+1}) / s (`FAILED_RESIDUAL` where it falls)."""
@@ -196,4 +208,7 @@ class PlantIdentifier:
                 break
         H = w * J.T @ J + wp * np.eye(p)
         rms = float(math.sqrt(np.mean(r**2))) if r.size else 0.0
-        return Fit(theta, np.linalg.inv(H), c, rms, len(Z))
+        cov = np.linalg.inv(H)
+        var = np.sum((J @ cov) * J, axis=1)
+        pred = float(math.sqrt(max(float(np.max(var)), 0.0))) if var.size else math.nan
+        return Fit(theta, cov, c, rms, len(Z), pred)

@@ -133,11 +133,13 @@ class PlantDesigner:
         b = lqr.basis
         self.W = interval_weights(b.edges, b.phi, lqr.dt)  # interval actions a = W u
         self.z_nominal = np.asarray(lqr.z_ref, dtype=float)
+        self.meter = None  # None, or a wrapper of every map it designs on (`anytime.Slices`)
 
     def plant_map(self, overrides: dict, rtol: float = EVAL_RTOL, segments=False) -> StrideMap:
         """The plant's stride map (the step env's, on the plant's parameters)."""
         lqr = self.lqr
-        return StrideMap(lqr.gait, overrides or None, lqr.dt, lqr.max_torque, rtol, segments)
+        m = StrideMap(lqr.gait, overrides or None, lqr.dt, lqr.max_torque, rtol, segments)
+        return m if self.meter is None else self.meter(m)
 
     # -- the pieces ------------------------------------------------------------------------------
     def _steps(self, z) -> np.ndarray:
@@ -297,3 +299,70 @@ class PlantDesigner:
             design={"cycle": d.cycle, "gain": d.gain_source, **d.info},
             u_ref=d.u_ref,
         )
+
+
+class RedesignedMPC:
+    """The shipped mpc of a spec, re-designed on a plant other than the nominal one: the base
+    of the privileged reference (`bound_env.control.privileged.PrivilegedMPC`, the true plant)
+    and the adaptive controller (`bound_env.control.adaptive.AdaptiveMPC`, its estimate).
+
+    ``spec``: an mpc spec (name, path or `bound_env.control.spec.ControllerSpec`; default the
+    subclass's ``NAME``); ``gait``: default the spec's. ``base`` is the spec's mpc (designed
+    without its ``privileged`` / ``adaptive`` block), ``mpc`` the acting one (``base`` until a
+    design), ``designer`` the `PlantDesigner` with the spec's weights. The protocol of
+    `bound_env.control.controllers` is the base's (gait, torque, basis, envs), the target the
+    acting mpc's."""
+
+    NAME = ""  # the shipped spec's name
+    ROLE = "a re-designed controller"  # "<ROLE> re-designs an mpc spec" (the error message)
+
+    def __init__(self, gait=None, spec=None, name: str | None = None):
+        from dataclasses import replace
+
+        from .build import design_controller
+        from .spec import ControllerSpec, load_spec, weights
+
+        spec = self.NAME if spec is None else spec
+        s = spec if isinstance(spec, ControllerSpec) else load_spec(spec)
+        if s.controller != "mpc":
+            raise ValueError(f"{s.path}: {self.ROLE} re-designs an mpc spec, got {s.controller!r}")
+        self._configure(s)
+        s = replace(s, privileged=False, adaptive=None)
+        self.base = design_controller(s, gait)
+        self.name = str(name) if name is not None else (s.name if s.path else self.NAME)
+        b = self.base
+        self.designer = PlantDesigner(
+            b.lqr, weights(s.path, "Q", s.Q, 6), weights(s.path, "R", s.R, b.basis.K)
+        )
+        self.mpc = self.base  # the acting controller
+
+    def _configure(self, spec) -> None:
+        """Read the subclass's own settings from the spec (before the design)."""
+
+    def redesigned(self, d: PlantDesign):
+        """The base MPC with the design ``d``: its LQR around d's cycle, planning on d's
+        plant (a fresh record of decisions)."""
+        from dataclasses import replace
+
+        b = self.base
+        fb = self.designer.feedback(d, name=b.lqr.name)
+        mpc = replace(b, lqr=fb, decision_seconds=[], decision_kinds=[])
+        mpc.model = self.designer.plant_map(d.overrides, b.rtol, b.segments)
+        return mpc
+
+    def _fingerprint(self, tag: bytes, *extra: str) -> str:
+        h = hashlib.sha256(tag)
+        h.update(self.base.fingerprint().encode())
+        for e in extra:
+            h.update(e.encode())
+        return h.hexdigest()[:16]
+
+    # -- the protocol of bound_env.control.controllers ---------------------------------------------
+    gait = property(lambda self: self.base.gait)
+    max_torque = property(lambda self: self.base.max_torque)
+    dt = property(lambda self: self.base.dt)
+    basis = property(lambda self: self.base.basis)
+    env_kwargs = property(lambda self: self.base.env_kwargs)
+    stride_env_kwargs = property(lambda self: self.base.stride_env_kwargs)
+    z_ref = property(lambda self: self.mpc.z_ref)  # the current target
+    snaps_time = True

@@ -31,12 +31,9 @@ each reset of an env that reports one (`bound_env.wrappers.RandomizedPlant`). A 
 
 from __future__ import annotations
 
-import hashlib
-from dataclasses import replace
-
 import numpy as np
 
-from .plant_design import PlantDesign, PlantDesigner, plant_overrides
+from .plant_design import PlantDesign, RedesignedMPC, plant_overrides
 
 NAME = "mpc-privileged"  # the shipped spec's name (configs/controllers/mpc-privileged.yaml)
 
@@ -66,33 +63,19 @@ def refuse_privileged(controller, what: str, name=None) -> None:
         )
 
 
-class PrivilegedMPC:
+class PrivilegedMPC(RedesignedMPC):
     """The shipped MPC planning on, aiming at the cycle of, and with its LQR designed on the
     robot's true plant (module docstring). ``spec``: an mpc spec (name, path or
     `bound_env.control.spec.ControllerSpec`; default ``mpc-privileged``); ``gait``: the gait
-    it is designed for (default: the spec's)."""
+    it is designed for (default: the spec's). The design is `RedesignedMPC`'s."""
 
+    NAME = NAME
+    ROLE = "a privileged controller"
     privileged = True
     stateful = False  # the plant is not an episode's memory: a reset keeps it
 
     def __init__(self, gait=None, spec=NAME, name: str | None = None):
-        from .build import design_controller
-        from .spec import ControllerSpec, load_spec, weights
-
-        s = spec if isinstance(spec, ControllerSpec) else load_spec(spec)
-        if s.controller != "mpc":
-            raise ValueError(
-                f"{s.path}: a privileged controller re-designs an mpc spec, got {s.controller!r}"
-            )
-        s = replace(s, privileged=False, adaptive=None)
-        self.base = design_controller(s, gait)
-        self.name = str(name) if name is not None else (s.name if s.path else NAME)
-        self.designer = PlantDesigner(
-            self.base.lqr,
-            weights(s.path, "Q", s.Q, 6),
-            weights(s.path, "R", s.R, self.base.basis.K),
-        )
-        self.mpc = self.base  # the controller of the current plant
+        super().__init__(gait, spec, name)
         self.plant_design: PlantDesign | None = None
 
     # -- the plant -------------------------------------------------------------------------------
@@ -109,29 +92,13 @@ class PrivilegedMPC:
         self.plant_design = d
         return d
 
-    def redesigned(self, d: PlantDesign):
-        """The base MPC with the design ``d``: its LQR around d's cycle, planning on the plant."""
-        b = self.base
-        fb = self.designer.feedback(d, name=b.lqr.name)
-        mpc = replace(b, lqr=fb, decision_seconds=[], decision_kinds=[])
-        mpc.model = self.designer.plant_map(d.overrides, b.rtol, b.segments)
-        return mpc
-
     @property
     def plant(self) -> dict:
         """The gait-file values of the current plant that differ from the gait's ({}:
         nominal)."""
         return dict(self.plant_design.overrides) if self.plant_design is not None else {}
 
-    # -- the protocol of bound_env.control.controllers (the current plant's mpc) -----------------
-    gait = property(lambda self: self.base.gait)
-    max_torque = property(lambda self: self.base.max_torque)
-    dt = property(lambda self: self.base.dt)
-    basis = property(lambda self: self.base.basis)
-    env_kwargs = property(lambda self: self.base.env_kwargs)
-    stride_env_kwargs = property(lambda self: self.base.stride_env_kwargs)
-    snaps_time = True
-    z_ref = property(lambda self: self.mpc.z_ref)  # the target: the plant's own cycle
+    # -- the protocol of bound_env.control.controllers: the current plant's mpc -----------------
     lqr = property(lambda self: self.mpc.lqr)
     decision_seconds = property(lambda self: self.mpc.decision_seconds)
     decision_kinds = property(lambda self: self.mpc.decision_kinds)
@@ -163,9 +130,7 @@ class PrivilegedMPC:
     def fingerprint(self) -> str:
         """The base mpc's fingerprint, marked privileged (the plant is the evaluation's, not
         the controller's; the design code is in the margins' source hash)."""
-        h = hashlib.sha256(b"privileged")
-        h.update(self.base.fingerprint().encode())
-        return h.hexdigest()[:16]
+        return self._fingerprint(b"privileged")
 
     def __repr__(self) -> str:
         return f"PrivilegedMPC({self.name!r}, plant={self.plant!r})"

@@ -45,8 +45,10 @@ class StrideOut:
 class ClosedLoop:
     """A controller in the loop of one PassiveBound environment (no wrappers).
 
-    ``stride(z)`` is the closed-loop apex map (see the package docstring); ``kick`` adds
-    ``delta`` to one entry of the simulator state just before control interval ``step``.
+    ``stride(z)`` is the closed-loop apex map (see the package docstring) of a fresh
+    controller (a stateful one is reset at every call); ``next_stride(z)`` continues an
+    episode; ``kick`` adds ``delta`` to one entry of the simulator state just before control
+    interval ``step``.
     """
 
     def __init__(
@@ -101,6 +103,16 @@ class ClosedLoop:
         return r
 
     def stride(self, z, kick: tuple | None = None) -> StrideOut:
+        """One closed-loop stride from the apex z with a fresh controller: a stateful one is
+        reset first (`reset_controller`), so that a stride on its own (the fixed point's
+        iterates and finite-difference probes, the effort on the cycle) is the map of a
+        controller that has seen nothing, whatever strides were asked for before it."""
+        reset_controller(self.controller)
+        return self.next_stride(z, kick)
+
+    def next_stride(self, z, kick: tuple | None = None) -> StrideOut:
+        """The next stride of an episode from z: the controller as it is, its memory of the
+        strides before kept (`run`'s strides; a caller that continues an episode)."""
         if self.stride_map is not None:
             z = np.asarray(z, dtype=float)
             r = self.strides(z[None], None if kick is None else [kick])  # (checks the kick)
@@ -155,7 +167,7 @@ class ClosedLoop:
         self.last_phase = None
         reset_controller(self.controller)  # a run is an episode (a stateful controller)
         for n in range(1, max_strides + 1):
-            out = self.stride(z, kick if n == 1 else None)
+            out = self.next_stride(z, kick if n == 1 else None)
             if out.z1 is None:
                 self.last_phase = out.phase
                 return False, n, out.failure
