@@ -312,7 +312,7 @@ def compare(
         groups, plots, curves, budget, note, pairs, basin_maps(docs), head, run, not yours
     )
     page += decisions_text(times, groups)
-    page += real_time_text(groups)  # each column's own decisions (empty before they were timed)
+    page += real_time_text(groups, times)  # fixed-state CPU times, else its measures' wall times
     page += model_error_text(groups)
     body = {"budget": budget, "seed": seed, "pairs": pairs, "decision_times": times}
     atomic_write(path.with_name("paired.json"), json.dumps(body, indent=2) + "\n")
