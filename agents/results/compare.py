@@ -36,7 +36,7 @@ from bound_env.schema import load_json_strict
 from ..runtime.policy import SHIPPED_DIR
 
 # `X as X`: re-exported, the names the page's modules define stay importable from here
-from .formatting import ROOT, rel
+from .formatting import ROOT, rel, slug
 from .headline import (
     COLUMNS_FILE,
     HEADLINE_FILE,
@@ -55,6 +55,7 @@ from .page import BASIN_SLICES as BASIN_SLICES
 from .page import COLUMN_STYLES, basin_maps, render_markdown
 from .page_inputs import check_margins_result, read_decision_times
 from .page_tables import MEASURES as MEASURES
+from .progress import PageProgress
 from .provenance import CLASSICAL_SELECTION as CLASSICAL_SELECTION
 from .provenance import LEARNED_SELECTION as LEARNED_SELECTION
 from .provenance import provenance as _provenance  # noqa: F401 (tests/test_margins_v3.py)
@@ -191,8 +192,7 @@ def check_entries(entries) -> None:
                 raise ValueError(f"--entry {label!r}: {e}") from None
 
 
-def _slug(text: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
+_slug = slug  # a label's or a policy's folder name under ``out``
 
 
 def compare(
@@ -257,12 +257,14 @@ def compare(
     defaults = {(lab, tuple(pols), gait) for lab, pols, gait in default_entries()}
     yours = [lab for lab, pols, gait in entries if (lab, tuple(pols), gait) not in defaults]
     groups = []
+    eta = PageProgress(entries, docs / COLUMNS_FILE, enabled=progress and not render_only)
     with contextlib.ExitStack() as stack:
         if executor is None and not render_only:
             executor = stack.enter_context(open_pool(scheduler, workers)).executor
         for label, policies, gait in entries:
             runs = []
             for policy in policies:
+                eta.start()
                 sub = (
                     out / _slug(label)
                     if len(policies) == 1
@@ -285,6 +287,7 @@ def compare(
                 r["label"] = label
                 r["source"] = policy
                 runs.append(r)
+                eta.done(label, policy, r)
             groups.append({"label": label, "gait": gait, "policies": policies, "runs": runs})
     old = docs / "paired.json"
     # render_only: the decision times measured by the run that computed the columns, checked

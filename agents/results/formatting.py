@@ -68,3 +68,8 @@ def rel(p: str) -> str:
         return str(Path(p).resolve().relative_to(ROOT))
     except ValueError:
         return p
+
+
+def slug(text: str) -> str:
+    """``text`` as a folder name: every character but letters, digits and ``-_.`` as ``_``."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)

@@ -229,6 +229,10 @@ def columns_json(groups, budget: str, seed: int, run: dict) -> dict:
                 "policies": [rel(p) for p in g["policies"]],
                 "fingerprints": _fingerprints(g),
                 "seconds": sum(float(r.get("seconds") or 0.0) for r in runs),
+                # where the time goes: the column's wall time (= seconds) and its workers'
+                # CPU time over the tasks it computed (none for a cached task)
+                "wall_seconds": sum(float(r.get("seconds") or 0.0) for r in runs),
+                "cpu_seconds": sum(float(r.get("cpu_seconds") or 0.0) for r in runs),
                 "tasks": tasks,
                 "r50": headline_measure(
                     runs,
