@@ -41,6 +41,7 @@ from .headline import (
     COLUMNS_FILE,
     HEADLINE_FILE,
     MODEL_ERROR_FILE,
+    add_held,
     columns_json,
     headline_numbers,
     model_error_json,
@@ -50,6 +51,14 @@ from .headline import HEADLINE as HEADLINE
 from .headline import headline_table as headline_table
 from .headline import mfpt_sigma_100_interval as mfpt_sigma_100_interval
 from .margins import compute_margins
+from .model_error import (
+    held_at,
+    model_error_budget,
+    model_error_entries,
+    model_error_section,
+    run_model_error,
+    time_rows,
+)
 from .page import BASIN_MAPS as BASIN_MAPS
 from .page import BASIN_SLICES as BASIN_SLICES
 from .page import COLUMN_STYLES, basin_maps, render_markdown
@@ -209,6 +218,7 @@ def compare(
     render_only: bool = False,
     mismatch=None,
     command: str = "",
+    model_error: bool = False,
 ) -> Path:
     """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path.
 
@@ -231,6 +241,11 @@ def compare(
     ``mismatch`` (specs of `bound_env.mismatch`, e.g. ``["pm5", "pm10"]``) measures every
     column under model error too, and the page gets a "Model error" section
     (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`, paired against lqr).
+
+    ``model_error`` (what ``bound-env compare`` asks for the page's own columns, unless
+    ``--no-mismatch``; ignored with ``mismatch``): the page's "Model error" section, its own
+    columns measured under model error at the model-error budget
+    (`agents.results.model_error`), their hold at ±10 % and ±15 % in the headline.
 
     Beside the page go ``columns.json`` (every column's fingerprint and headline measures,
     and the run: `agents.results.headline`, ``command`` recorded there) and, with
@@ -256,8 +271,14 @@ def compare(
     docs.mkdir(parents=True, exist_ok=True)
     defaults = {(lab, tuple(pols), gait) for lab, pols, gait in default_entries()}
     yours = [lab for lab, pols, gait in entries if (lab, tuple(pols), gait) not in defaults]
-    groups = []
-    eta = PageProgress(entries, docs / COLUMNS_FILE, enabled=progress and not render_only)
+    groups, me_groups = [], []
+    model_error = bool(model_error) and not mismatch
+    me_todo = [(f"model error {lab}", [pol], "default") for lab, pol in model_error_entries()]
+    eta = PageProgress(
+        entries + (me_todo if model_error else []),
+        docs / COLUMNS_FILE,
+        enabled=progress and not render_only,
+    )
     with contextlib.ExitStack() as stack:
         if executor is None and not render_only:
             executor = stack.enter_context(open_pool(scheduler, workers)).executor
@@ -289,6 +310,17 @@ def compare(
                 runs.append(r)
                 eta.done(label, policy, r)
             groups.append({"label": label, "gait": gait, "policies": policies, "runs": runs})
+        if model_error:  # the section's own columns, on the same executor
+            me_groups = run_model_error(
+                budget,
+                out,
+                seed,
+                executor=executor,
+                workers=workers,
+                progress=progress,
+                render_only=render_only,
+                on_column=lambda lab, pol, r: eta.done(f"model error {lab}", pol, r),
+            )
     old = docs / "paired.json"
     # render_only: the decision times measured by the run that computed the columns, checked
     # (one line naming the file and the key) before any figure is drawn
@@ -298,6 +330,8 @@ def compare(
     curves = training_curves(groups, docs)
     pairs = paired_comparisons(groups)
     head = headline_numbers(groups, budget, seed, yours)
+    if me_groups:
+        add_held(head, held_at(me_groups), model_error_budget(budget))
     path = docs / "MARGINS.md"
     from ..runtime.policy import load_controller
     from .decisions import decisions_text, fair_decision_times, real_time_text
@@ -306,7 +340,7 @@ def compare(
         times = fair_decision_times(groups, load_controller, seed)  # the workers are done
     cols_path = path.with_name(COLUMNS_FILE)
     if not render_only:
-        run = run_record(t0, workers, scheduler, load0, groups, command)
+        run = run_record(t0, workers, scheduler, load0, groups + me_groups, command)
     elif cols_path.is_file():  # the run that computed the columns, not this rewrite
         run = load_json_strict(cols_path, {"run": (dict, None)})["run"]
     else:
@@ -316,14 +350,19 @@ def compare(
     )
     page += decisions_text(times, groups)
     page += real_time_text(groups, times)  # fixed-state CPU times, else its measures' wall times
-    page += model_error_text(groups)
+    page += model_error_text(groups)  # --mismatch: every column under its specs
+    page += model_error_section(me_groups, budget)  # the page's own section
     body = {"budget": budget, "seed": seed, "pairs": pairs, "decision_times": times}
     atomic_write(path.with_name("paired.json"), json.dumps(body, indent=2) + "\n")
     # strict JSON: a measure that could not be made is null (and listed under "nonfinite")
     atomic_write(path.with_name(HEADLINE_FILE), strict_json(head, indent=2) + "\n")
     cols = columns_json(groups, budget, seed, run)
+    if me_groups:  # where the section's time went, column by column
+        cols["model_error"] = time_rows(me_groups)
     atomic_write(cols_path, strict_json(cols, indent=2) + "\n")
-    me = model_error_json(groups, budget, seed, run)
+    me = model_error_json(me_groups or groups, budget, seed, run)
+    if me is not None and me_groups:
+        me["mismatch_budget"] = model_error_budget(budget)
     if me is not None:
         atomic_write(path.with_name(MODEL_ERROR_FILE), strict_json(me, indent=2) + "\n")
     atomic_write(path, page)

@@ -151,14 +151,48 @@ def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
     return {"budget": budget, "seed": seed, "rows": rows}
 
 
+# The model-error column that stands for each headline row in "held at ±10 % / ±15 %"
+# (`agents.results.model_error`: the best learned row's first seed, `default`); a row without
+# one (the step-level PPO) is "not measured"
+HELD_COLUMNS = {"passive": "passive", "lqr": "lqr", "mpc": "mpc", "fine-tuned": "default"}
+HELD_SPECS = ("pm10", "pm15")
+
+
+def add_held(head: dict, held: dict, budget: str) -> dict:
+    """``head`` (`headline_numbers`) with each row's ``held``: its model-error column's hold
+    at ±10 % and ±15 % ({column, budget, pm10: {k, n}, pm15: {k, n}}; ``held``:
+    `agents.results.model_error.held_at`), None where the row has no such column."""
+    for row in head["rows"]:
+        col = HELD_COLUMNS.get(row["label"])
+        h = held.get(col) if col else None
+        if h is None or not all(s in h for s in HELD_SPECS):
+            row["held"] = None
+            continue
+        row["held"] = {"column": col, "budget": budget, **{s: h[s] for s in HELD_SPECS}}
+    return head
+
+
+def _held_cell(row: dict) -> str:
+    h = row.get("held")
+    if not h:
+        return "not measured"
+    text = " / ".join(f"{h[s]['k']}/{h[s]['n']}" for s in HELD_SPECS)
+    return text if h["column"] == row["label"] else f"{text} (`{h['column']}`)"
+
+
 def headline_table(head: dict) -> str:
     """The headline table in Markdown (five columns; one row per `HEADLINE` row present), from
     the numbers `headline_numbers` made (docs/headline.json): the page's first table and the
     README's results table are this text."""
+    held = any("held" in row for row in head["rows"])  # a page with its model-error section
+    budgets = {row["held"]["budget"] for row in head["rows"] if row.get("held")}
+    held_head = " held at ±10 % / ±15 %" + (
+        f" (model-error budget `{budgets.pop()}`) |" if len(budgets) == 1 else " |"
+    )
     lines = [
         "| controller | what it is | r50 [95 % interval] | σ (deg) where MFPT = 100 "
-        "strides [95 % interval] | interval |",
-        "| --- | --- | --- | --- | --- |",
+        "strides [95 % interval] | interval |" + (held_head if held else ""),
+        "| --- | --- | --- | --- | --- |" + (" --- |" if held else ""),
     ]
     for row in head["rows"]:
         cells = []
@@ -172,7 +206,8 @@ def headline_table(head: dict) -> str:
             else "r50: Wilson-based; σ: Poisson-based (one run's sampling error)"
         )
         name = row["role"] if row["role"] == row["label"] else f"{row['role']} ({row['label']})"
-        lines.append(f"| **{name}** | {row['what']} | {cells[0]} | {cells[1]} | {kind} |")
+        line = f"| **{name}** | {row['what']} | {cells[0]} | {cells[1]} | {kind} |"
+        lines.append(line + (f" {_held_cell(row)} |" if held else ""))
     return "\n".join(lines)
 
 
@@ -308,6 +343,7 @@ _ROW = {
     "r50": _MEASURE,
     "mfpt_sigma_100_deg": _MEASURE,
 }
+_HELD = {"column": str, "budget": str, **{s: {"k": int, "n": int} for s in HELD_SPECS}}
 
 
 def load_headline(path: Path = HEADLINE_JSON) -> dict:
@@ -318,6 +354,8 @@ def load_headline(path: Path = HEADLINE_JSON) -> dict:
     head = load_json_strict(path, {"budget": str, "seed": int, "rows": list})
     for i, row in enumerate(head["rows"]):
         check_keys(row, _ROW, str(path), f"rows[{i}].")
+        if row.get("held") is not None:  # the page's model-error section's hold (optional)
+            check_keys(row["held"], _HELD, str(path), f"rows[{i}].held.")
     if not head["rows"]:
         raise ValueError(f"{path}: rows: empty (write it with bound-env compare --docs)")
     return head

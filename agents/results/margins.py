@@ -84,6 +84,8 @@ def compute_margins(
     scheduler: str | None = None,
     seed: int = DEFAULT_SEED,
     mismatch=None,
+    mismatch_budget: str | None = None,
+    nominal: bool = True,
 ) -> dict:
     """`bound_env.analysis.margins.compute_margins` of ``policy`` (``"passive"``, a name, a
     path or a controller: `as_controller`), with `policy_sources` in its cache key. The other
@@ -107,6 +109,8 @@ def compute_margins(
         seed=seed,
         extra_sources=policy_sources(controller),
         mismatch=mismatch,
+        mismatch_budget=mismatch_budget,
+        nominal=nominal,
     )
 
 

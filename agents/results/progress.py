@@ -66,15 +66,20 @@ class PageProgress:
         )
         if self.enabled:
             print(line, file=self.stream or sys.stderr, flush=True)
+        self._t = time.perf_counter()  # the next column starts now, unless `start` says later
         return line
 
 
 def previous_seconds(path: Path) -> dict:
     """{(label, policy folder name): seconds per policy} of the last run's ``columns.json``
-    (its column's ``seconds`` shared equally by its policies); {} without a readable one (an
+    (its column's ``seconds`` shared equally by its policies; a model-error column's label
+    ``model error <label>``); {} without a readable one (an
     estimate only: a broken file is not an error here)."""
     try:
-        cols = json.loads(Path(path).read_text()).get("columns") or []
+        data = json.loads(Path(path).read_text())
+        cols = list(data.get("columns") or [])
+        # the model-error section's columns, as the progress line names them
+        cols += [{**c, "label": f"model error {c['label']}"} for c in data.get("model_error") or []]
         out = {}
         for c in cols:
             pols = c.get("policies") or []

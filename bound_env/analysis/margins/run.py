@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.cache import TaskCache, settings_hash
+from bound_env.cache import TaskCache, atomic_write, settings_hash
 from bound_env.parallel import TasksFailed, open_pool, run_tasks
 
 from ..apex_loop import CLOCK
@@ -236,14 +236,14 @@ def setup_key(
     )
 
 
-def mismatch_key(key: str, spec, budget: Budget) -> str:
+def mismatch_key(key: str, spec, budget: Budget, mismatch_budget: str | None = None) -> str:
     """Cache key of the model-error tasks: the evaluation's key (`setup_key`), the spec, its
-    budget and `MISMATCH_SETTINGS`."""
+    budget (``mismatch_budget``'s, default ``budget``'s name's) and `MISMATCH_SETTINGS`."""
     return settings_hash(
         {
             "setup": key,
             "mismatch": spec.to_dict(),
-            "mismatch_budget": asdict(MISMATCH_BUDGETS[budget.name]),
+            "mismatch_budget": asdict(MISMATCH_BUDGETS[mismatch_budget or budget.name]),
             "settings": MISMATCH_SETTINGS,
         }
     )
@@ -288,6 +288,8 @@ def compute_margins(
     seed: int = DEFAULT_SEED,
     extra_sources=(),
     mismatch=None,
+    mismatch_budget: str | None = None,
+    nominal: bool = True,
 ) -> dict:
     """All margins of ``controller`` (an object with the controller protocol, package
     docstring) as a JSON-able dict.
@@ -305,6 +307,12 @@ def compute_margins(
     ``mismatch``: a model-error spec (`bound_env.mismatch.as_spec`: a preset, a YAML file or
     a `MismatchSpec`) or a list of them: the result then has the key ``mismatch`` too,
     {spec name: its block} (`mismatch_tasks`), each spec's tasks cached under `mismatch_key`.
+    ``mismatch_budget``: the name of the model-error budget (`MISMATCH_BUDGETS`; default: the
+    one of ``budget``'s name, e.g. ``page``: the results page's model-error section).
+    ``nominal`` False: the model-error measures only (with the closed-loop cycle they start
+    from): the result holds the run's keys (controller, gait, budget, seed, fingerprint,
+    seconds, tasks), ``mismatch`` and ``"nominal": false``, and only ``margins.json`` is
+    written.
     """
     from bound_env.mismatch import as_spec, check_distinct
     from bound_env.params import load_gait
@@ -312,8 +320,11 @@ def compute_margins(
     budget = as_budget(budget)
     many = mismatch if isinstance(mismatch, (list, tuple)) else [mismatch]
     specs = check_distinct([as_spec(m) for m in many if m is not None])
-    if specs and budget.name not in MISMATCH_BUDGETS:
-        raise ValueError(f"--mismatch has budgets {sorted(MISMATCH_BUDGETS)}, got {budget.name!r}")
+    mb_name = budget.name if mismatch_budget is None else mismatch_budget
+    if specs and mb_name not in MISMATCH_BUDGETS:
+        raise ValueError(f"--mismatch has budgets {sorted(MISMATCH_BUDGETS)}, got {mb_name!r}")
+    if not nominal and not specs:
+        raise ValueError("nominal=False measures the model error only: give --mismatch specs")
     if workers < 1:
         raise ValueError(f"--workers must be at least 1, got {workers}")
     seed = check_seed(seed)
@@ -363,15 +374,20 @@ def compute_margins(
         jobs += [("window", (k, s)) for k in ("alpha_deg", "kc") for s in (-1, 1)]
         jobs += [("push", ("xdot", v, j)) for j, v in enumerate(budget.push_xdot)]
         jobs += [("push", ("th1dot", v, j)) for j, v in enumerate(budget.push_th1dot)]
+        if not nominal:
+            jobs = []  # the model-error measures only
         res = _run_all(
             executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}", counts
         )
         res.update(basin_results(res))
         mm = {}
         for spec in specs:
-            mb = MISMATCH_BUDGETS[budget.name]
+            mb = MISMATCH_BUDGETS[mb_name]
             mm_setup = replace(
-                setup, key=mismatch_key(setup.key, spec, budget), mismatch=spec, mismatch_budget=mb
+                setup,
+                key=mismatch_key(setup.key, spec, budget, mb_name),
+                mismatch=spec,
+                mismatch_budget=mb,
             )
             mm_res = _run_all(
                 executor,
@@ -383,7 +399,16 @@ def compute_margins(
                 counts,
             )
             mm[spec.name] = assemble_mismatch(mm_setup, mm_res)
-    result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
+    if not nominal:
+        result = {
+            "controller": controller_name(controller),
+            "gait": gait,
+            "budget": budget.name,
+            "seed": seed,
+            "nominal": False,
+        }
+    else:
+        result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
     result["fingerprint"] = fingerprint  # what decided these numbers, before they were made
     if mm:
         result["mismatch"] = mm
@@ -391,6 +416,8 @@ def compute_margins(
     # the CPU time of the tasks this run computed (in its workers; a cached task's: none)
     result["cpu_seconds"] = counts.pop("cpu_seconds", 0.0)
     result["tasks"] = counts  # taken from the cache, computed: the seconds' meaning
-    if out_dir is not None:
+    if out_dir is not None and not nominal:
+        atomic_write(out_dir / "margins.json", json.dumps(result, indent=2) + "\n")
+    elif out_dir is not None:
         write_outputs(result, out_dir)
     return result
