@@ -2,7 +2,7 @@
 columns under pm10, pm15 and pm10+noise at the model-error budget ``page`` by default
 (``--no-mismatch`` leaves it out, ``--mismatch`` keeps its old meaning), the section renders
 them paired against lqr with mpc-privileged marked, and the headline gains "held at ±10 % /
-±15 %" (agents/results/model_error.py, agents/results/headline.py)."""
+±15 %" (agents/results/compare.py, page.py, page_inputs.py, headline.py)."""
 
 from __future__ import annotations
 
@@ -13,17 +13,16 @@ from pathlib import Path
 import pytest
 
 from agents.results import compare as compare_mod
-from agents.results.headline import add_held, headline_table, load_headline
-from agents.results.margins import compute_margins
-from agents.results.model_error import (
+from agents.results.compare import (
     MODEL_ERROR_SPECS,
-    held_at,
-    load_model_error,
     model_error_budget,
     model_error_entries,
-    model_error_section,
     run_model_error,
 )
+from agents.results.headline import add_held, headline_table, held_at, load_headline
+from agents.results.margins import compute_margins
+from agents.results.page import model_error_section
+from agents.results.page_inputs import load_model_error
 from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
 from bound_env.mismatch import parse_specs
 
@@ -86,14 +85,14 @@ def test_the_section_renders_from_its_columns(tmp_path, lqr_under_error):
     _fake_section(tmp_path, alone)
     groups = run_model_error("test", tmp_path, 12345, render_only=True, specs=("pm10", "pm15"))
     assert [g["label"] for g in groups] == [lab for lab, _ in model_error_entries()]
-    text = model_error_section(groups, "test")
+    text = model_error_section(groups)
     assert text.startswith("\n## Model error\n") and "model-error budget `test`" in text
     assert "### pm10" in text and "### pm15" in text
     assert "mpc-privileged (**privileged**: reads the true plant)" in text
     held = held_at(groups)
     k = alone["mismatch"]["pm10"]["hold"]["k"]
     assert held["default"]["pm10"] == {"k": k, "n": 8}
-    assert model_error_section([], "test") == ""
+    assert model_error_section([]) == ""
 
 
 def test_render_only_names_the_file_of_a_missing_or_wrong_column(tmp_path, lqr_under_error):

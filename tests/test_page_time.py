@@ -1,6 +1,6 @@
 """Where the page's time goes: each margins task's wall and CPU time, a column's in
 ``columns.json``, and the page's progress line with an estimate of the time left
-(agents/results/progress.py)."""
+(agents/results/headline.py)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from agents.results.headline import columns_json
-from agents.results.progress import PageProgress, previous_seconds
+from agents.results.headline import PageProgress, columns_json, previous_seconds
 from bound_env.analysis.margins import run as margins_run
 from bound_env.cache import TaskCache
 from bound_env.parallel import SerialExecutor

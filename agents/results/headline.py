@@ -31,6 +31,7 @@ controller is now.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
@@ -43,7 +44,7 @@ from bound_env.analysis.margins.stats import t_interval
 from bound_env.cache import atomic_write
 from bound_env.schema import check_keys, load_json_strict
 
-from .formatting import ROOT, num3, rel, value
+from .formatting import ROOT, num3, rel, slug, value
 
 # The headline table (the page's first table and the README's): (role, column label, what it
 # is). The step-level PPO row is the shipped step-level recipe's column (`step-ppo`: residual
@@ -152,8 +153,8 @@ def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
 
 
 # The model-error column that stands for each headline row in "held at ±10 % / ±15 %"
-# (`agents.results.model_error`: the best learned row's first seed, `default`); a row without
-# one (the step-level PPO) is "not measured"
+# (`agents.results.compare.model_error_entries`: the best learned row's is its first seed,
+# `default`); a row without one (the step-level PPO) is "not measured"
 HELD_COLUMNS = {"passive": "passive", "lqr": "lqr", "mpc": "mpc", "fine-tuned": "default"}
 HELD_SPECS = ("pm10", "pm15")
 
@@ -161,7 +162,7 @@ HELD_SPECS = ("pm10", "pm15")
 def add_held(head: dict, held: dict, budget: str) -> dict:
     """``head`` (`headline_numbers`) with each row's ``held``: its model-error column's hold
     at ±10 % and ±15 % ({column, budget, pm10: {k, n}, pm15: {k, n}}; ``held``:
-    `agents.results.model_error.held_at`), None where the row has no such column."""
+    `held_at`), None where the row has no such column."""
     for row in head["rows"]:
         col = HELD_COLUMNS.get(row["label"])
         h = held.get(col) if col else None
@@ -326,6 +327,119 @@ def model_error_json(groups, budget: str, seed: int, run: dict) -> dict | None:
         ],
         "run": run,
     }
+
+
+def held_at(groups) -> dict:
+    """{label: {spec: {k, n}}} of the hold of every model-error column (the headline's "held
+    at ±10 % / ±15 %")."""
+    out = {}
+    for g in groups:
+        mm = g["runs"][0].get("mismatch") or {}
+        out[g["label"]] = {
+            name: {"k": int(b["hold"]["k"]), "n": int(b["hold"]["n"])} for name, b in mm.items()
+        }
+    return out
+
+
+def time_rows(groups) -> list[dict]:
+    """``columns.json``'s ``model_error``: each section column's fingerprint, wall and CPU
+    time (its workers', over the tasks it computed) and tasks, as the page's columns have."""
+    rows = []
+    for g in groups:
+        r = g["runs"][0]
+        rows.append(
+            {
+                "label": g["label"],
+                "gait": g["gait"],
+                "policies": [rel(p) for p in g["policies"]],
+                "fingerprints": [r.get("fingerprint")],
+                "seconds": float(r.get("seconds") or 0.0),
+                "wall_seconds": float(r.get("seconds") or 0.0),
+                "cpu_seconds": float(r.get("cpu_seconds") or 0.0),
+                "tasks": dict(r.get("tasks") or {"cached": 0, "computed": 0}),
+            }
+        )
+    return rows
+
+
+class PageProgress:
+    """The page's progress line (stderr), after every column's policy: how many are done,
+    that one's wall and CPU time, the page's time so far and an estimate of the time left.
+
+    The estimate: where the last run's ``columns.json`` (``previous``) has a column's time
+    (`previous_seconds`: its ``seconds`` per policy), the time left is those of the policies
+    still to run, scaled by how this run compares with it so far (the sum of this run's
+    seconds over the last run's, for the policies done that it has); otherwise the mean time
+    of a policy so far times the policies left. A policy whose every task came from the cache
+    (seconds, not minutes) counts in neither; the estimate supposes the ones left compute
+    theirs."""
+
+    def __init__(self, entries, previous: Path, enabled: bool = True, stream=None):
+        self.todo = [(label, pol) for label, pols, _gait in entries for pol in pols]
+        self.before = previous_seconds(previous)
+        self.enabled, self.stream = enabled, stream
+        self.t0, self.k = time.perf_counter(), 0
+        self.spent: list = []  # (seconds, the last run's or None, computed?) per policy done
+        self._t = self.t0
+
+    def start(self) -> None:
+        self._t = time.perf_counter()
+
+    def estimate_left(self) -> float | None:
+        """Seconds left (module docstring), None before the first policy is done."""
+        spent = [(a, b) for a, b, computed in self.spent if computed]
+        if not spent:
+            return None
+        left = self.todo[self.k :]
+        known = [(a, b) for a, b in spent if b]
+        scale = sum(a for a, _ in known) / sum(b for _, b in known) if known else None
+        mean = sum(a for a, _ in spent) / len(spent)
+        total = 0.0
+        for label, pol in left:
+            prev = self.before.get((label, slug(Path(pol).name)))
+            total += prev * scale if (prev and scale is not None) else mean
+        return total
+
+    def done(self, label: str, policy: str, result: dict) -> str:
+        """Count a policy done; its line (printed when enabled)."""
+        now = time.perf_counter()
+        prev = self.before.get((label, slug(Path(policy).name)))
+        computed = int((result.get("tasks") or {}).get("computed", 1)) > 0
+        self.spent.append((now - self._t, prev, computed))
+        self.k += 1
+        left = self.estimate_left()
+        name = label if Path(policy).name in (label, policy) else f"{label} {Path(policy).name}"
+        line = (
+            f"[page {self.k}/{len(self.todo)}] {name}: {now - self._t:.0f} s wall, "
+            f"{float(result.get('cpu_seconds') or 0.0):.0f} s CPU in its workers; "
+            f"page {now - self.t0:.0f} s so far"
+            + (f", about {left:.0f} s left" if self.k < len(self.todo) and left is not None else "")
+        )
+        if self.enabled:
+            print(line, file=self.stream or sys.stderr, flush=True)
+        self._t = time.perf_counter()  # the next column starts now, unless `start` says later
+        return line
+
+
+def previous_seconds(path: Path) -> dict:
+    """{(label, policy folder name): seconds per policy} of the last run's ``columns.json``
+    (its column's ``seconds`` shared equally by its policies; a model-error column's label
+    ``model error <label>``); {} without a readable one (an
+    estimate only: a broken file is not an error here)."""
+    try:
+        data = json.loads(Path(path).read_text())
+        cols = list(data.get("columns") or [])
+        # the model-error section's columns, as the progress line names them
+        cols += [{**c, "label": f"model error {c['label']}"} for c in data.get("model_error") or []]
+        out = {}
+        for c in cols:
+            pols = c.get("policies") or []
+            secs = float(c.get("seconds") or 0.0) / max(1, len(pols))
+            for p in pols:
+                out[(c["label"], slug(Path(p).name))] = secs
+        return out
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        return {}
 
 
 START, END = "<!-- headline:start -->", "<!-- headline:end -->"
