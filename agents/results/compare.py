@@ -269,6 +269,8 @@ def compare(
     groups, me_groups = [], []
     model_error = bool(model_error) and not mismatch
     me_todo = [(f"model error {lab}", [pol], "default") for lab, pol in model_error_entries()]
+    if model_error and not render_only:
+        check_entries(me_todo)  # the section's columns load, before the first column runs
     eta = PageProgress(
         entries + (me_todo if model_error else []),
         docs / COLUMNS_FILE,
