@@ -1,7 +1,8 @@
 """What the results page reads back under ``compare --render-only``, checked before it is used.
 
 ``--render-only`` rewrites the page from files an earlier run left: each column's
-``margins.json`` (`check_margins_result`) and the decision times of the old ``paired.json``
+``margins.json`` (`load_result`, with `check_margins_result`), each Model error section
+column's (`load_model_error`) and the decision times of the old ``paired.json``
 (`read_decision_times`); ``python -m agents.results.headline`` reads ``headline.json``
 (`agents.results.headline.load_headline`, with `check_fields`). A file that lacks a key the page
 uses, or holds it with the wrong type, is a ValueError of one line naming the file and the key
