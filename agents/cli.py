@@ -283,8 +283,9 @@ def register(sub) -> None:
         "--mismatch",
         metavar="SPEC",
         help="also measure every column under model error and add a Model error section "
-        "(the specs of margins --mismatch, e.g. pm5,pm10)",
+        "(the specs of margins --mismatch, e.g. pm5,pm10) instead of the page's own one",
     )
+    p.add_argument("--no-mismatch", action="store_true", help="leave out its Model error section")
     p.add_argument(
         "--budget",
         choices=("test", "quick", "standard", "full"),
@@ -580,6 +581,7 @@ def cmd_compare(args) -> int:
         render_only=args.render_only,
         mismatch=mismatch,
         command=shlex.join(["bound-env", *getattr(args, "argv", ["compare"])]),
+        model_error=not args.no_mismatch and (not parsed or args.keep_defaults),  # its own
     )
     say(args, f"wrote {path}")
     if args.json:

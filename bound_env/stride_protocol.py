@@ -11,6 +11,8 @@ imports control:
   stride controller's ``__call__`` outputs; `ProfileActions`: the stride map's a = W u), the
   plans of n robots under one controller (`StridePlans`) and the loop side of ``on_apex``
   (`notify_apex`);
+- the interval actions of n copies of one stride controller at once, each told its own
+  apexes (`profile_rows`: bit for bit each copy's ``__call__``);
 - who made an apex decision (`DECISION_KINDS`; a gated planner's ``decision_kinds``).
 
 The controller side of the protocol is described in `bound_env.control.controllers`.
@@ -100,6 +102,49 @@ class StridePlans:
     def apex(self, i: int, z, time_since_apex: float = 0.0) -> None:
         self.taus[i] = self.ctrl.apex_torques(np.asarray(z, dtype=float))
         self.t0[i] = time_since_apex
+
+
+def _owner(cls, name: str):
+    """The class in ``cls``'s MRO that defines ``name`` (None: none does)."""
+    return next((k for k in cls.__mro__ if name in vars(k)), None)
+
+
+def profile_rows(copies, obs) -> np.ndarray | None:
+    """Each copy's ``__call__(obs[k])`` (copies of one stride controller, one per robot, each
+    told its own apexes) in one array, bit for bit, or None where they do not offer it (the
+    caller then calls them row by row).
+
+    A stride controller offers it with ``planned_profile()``: (taus [N m], t0), the profile it
+    planned at its last apex and the time since the apex it was announced at (None before
+    the first apex), defined by the same class as the ``__call__`` it stands for (a subclass
+    that overrides ``__call__`` alone is called row by row). Its interval action is then
+    clip(basis.average(taus, t, t + dt) / max_torque, -1, 1) at the observed time t, snapped
+    to the grid t0 + k dt where ``snaps_time`` (as its ``__call__``: the windows' weights
+    in one array, each row's dot product as the scalar path's, bit for bit)."""
+    if not len(copies):
+        return np.zeros(0)
+    c0 = copies[0]
+    cls = type(c0)
+    if _owner(cls, "planned_profile") is None or _owner(cls, "planned_profile") is not _owner(
+        cls, "__call__"
+    ):
+        return None
+    plans = [c.planned_profile() for c in copies]
+    if any(p is None for p in plans):  # no apex announced yet: the copy's own call decides
+        return None
+    taus = np.array([p[0] for p in plans], dtype=float)
+    t = np.asarray(obs)[:, OBS_TIME].astype(float)
+    if c0.snaps_time:
+        t0 = np.array([p[1] for p in plans], dtype=float)
+        t = t0 + c0.dt * np.round((t - t0) / c0.dt)  # round half to even, as Python's round
+    basis, t1 = c0.basis, t + c0.dt
+    lo = np.clip(basis.edges[:-1], t[:, None], t1[:, None])
+    hi = np.clip(np.append(basis.edges[1:-1], np.inf), t[:, None], t1[:, None])
+    w = hi - lo
+    # each row's dot product as `TorqueBasis.average` makes it (np.dot: BLAS may fuse a
+    # multiply and an add, so elementwise products summed can differ in the last bit)
+    avg = np.fromiter((np.dot(taus[k], w[k]) for k in range(len(t))), float, len(t)) / (t1 - t)
+    return np.clip(avg / c0.max_torque, -1.0, 1.0)
 
 
 def reset_controller(controller) -> None:

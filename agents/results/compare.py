@@ -36,15 +36,19 @@ from bound_env.schema import load_json_strict
 from ..runtime.policy import SHIPPED_DIR
 
 # `X as X`: re-exported, the names the page's modules define stay importable from here
-from .formatting import ROOT, rel
+from .formatting import ROOT, rel, slug
 from .headline import (
     COLUMNS_FILE,
     HEADLINE_FILE,
     MODEL_ERROR_FILE,
+    PageProgress,
+    add_held,
     columns_json,
     headline_numbers,
+    held_at,
     model_error_json,
     run_record,
+    time_rows,
 )
 from .headline import HEADLINE as HEADLINE
 from .headline import headline_table as headline_table
@@ -52,8 +56,9 @@ from .headline import mfpt_sigma_100_interval as mfpt_sigma_100_interval
 from .margins import compute_margins
 from .page import BASIN_MAPS as BASIN_MAPS
 from .page import BASIN_SLICES as BASIN_SLICES
-from .page import COLUMN_STYLES, basin_maps, render_markdown
-from .page_inputs import check_margins_result, read_decision_times
+from .page import COLUMN_STYLES, basin_maps, model_error_section, render_markdown
+from .page_inputs import load_model_error, read_decision_times
+from .page_inputs import load_result as load_result
 from .page_tables import MEASURES as MEASURES
 from .provenance import CLASSICAL_SELECTION as CLASSICAL_SELECTION
 from .provenance import LEARNED_SELECTION as LEARNED_SELECTION
@@ -191,8 +196,7 @@ def check_entries(entries) -> None:
                 raise ValueError(f"--entry {label!r}: {e}") from None
 
 
-def _slug(text: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
+_slug = slug  # a label's or a policy's folder name under ``out``
 
 
 def compare(
@@ -209,6 +213,7 @@ def compare(
     render_only: bool = False,
     mismatch=None,
     command: str = "",
+    model_error: bool = False,
 ) -> Path:
     """Compute (or reuse) every entry's margins and write ``docs/MARGINS.md``; returns its path.
 
@@ -231,6 +236,11 @@ def compare(
     ``mismatch`` (specs of `bound_env.mismatch`, e.g. ``["pm5", "pm10"]``) measures every
     column under model error too, and the page gets a "Model error" section
     (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`, paired against lqr).
+
+    ``model_error`` (what ``bound-env compare`` asks for the page's own columns, unless
+    ``--no-mismatch``; ignored with ``mismatch``): the page's "Model error" section, its own
+    columns measured under model error at the model-error budget
+    (`run_model_error`, `model_error_entries`), their hold at ±10 % and ±15 % in the headline.
 
     Beside the page go ``columns.json`` (every column's fingerprint and headline measures,
     and the run: `agents.results.headline`, ``command`` recorded there) and, with
@@ -256,13 +266,23 @@ def compare(
     docs.mkdir(parents=True, exist_ok=True)
     defaults = {(lab, tuple(pols), gait) for lab, pols, gait in default_entries()}
     yours = [lab for lab, pols, gait in entries if (lab, tuple(pols), gait) not in defaults]
-    groups = []
+    groups, me_groups = [], []
+    model_error = bool(model_error) and not mismatch
+    me_todo = [(f"model error {lab}", [pol], "default") for lab, pol in model_error_entries()]
+    if model_error and not render_only:
+        check_entries(me_todo)  # the section's columns load, before the first column runs
+    eta = PageProgress(
+        entries + (me_todo if model_error else []),
+        docs / COLUMNS_FILE,
+        enabled=progress and not render_only,
+    )
     with contextlib.ExitStack() as stack:
         if executor is None and not render_only:
             executor = stack.enter_context(open_pool(scheduler, workers)).executor
         for label, policies, gait in entries:
             runs = []
             for policy in policies:
+                eta.start()
                 sub = (
                     out / _slug(label)
                     if len(policies) == 1
@@ -285,7 +305,19 @@ def compare(
                 r["label"] = label
                 r["source"] = policy
                 runs.append(r)
+                eta.done(label, policy, r)
             groups.append({"label": label, "gait": gait, "policies": policies, "runs": runs})
+        if model_error:  # the section's own columns, on the same executor
+            me_groups = run_model_error(
+                budget,
+                out,
+                seed,
+                executor=executor,
+                workers=workers,
+                progress=progress,
+                render_only=render_only,
+                on_column=lambda lab, pol, r: eta.done(f"model error {lab}", pol, r),
+            )
     old = docs / "paired.json"
     # render_only: the decision times measured by the run that computed the columns, checked
     # (one line naming the file and the key) before any figure is drawn
@@ -295,6 +327,8 @@ def compare(
     curves = training_curves(groups, docs)
     pairs = paired_comparisons(groups)
     head = headline_numbers(groups, budget, seed, yours)
+    if me_groups:
+        add_held(head, held_at(me_groups), model_error_budget(budget))
     path = docs / "MARGINS.md"
     from ..runtime.policy import load_controller
     from .decisions import decisions_text, fair_decision_times, real_time_text
@@ -303,7 +337,7 @@ def compare(
         times = fair_decision_times(groups, load_controller, seed)  # the workers are done
     cols_path = path.with_name(COLUMNS_FILE)
     if not render_only:
-        run = run_record(t0, workers, scheduler, load0, groups, command)
+        run = run_record(t0, workers, scheduler, load0, groups + me_groups, command)
     elif cols_path.is_file():  # the run that computed the columns, not this rewrite
         run = load_json_strict(cols_path, {"run": (dict, None)})["run"]
     else:
@@ -312,19 +346,107 @@ def compare(
         groups, plots, curves, budget, note, pairs, basin_maps(docs), head, run, not yours
     )
     page += decisions_text(times, groups)
-    page += real_time_text(groups)  # each column's own decisions (empty before they were timed)
-    page += model_error_text(groups)
+    page += real_time_text(groups, times)  # fixed-state CPU times, else its measures' wall times
+    page += model_error_text(groups)  # --mismatch: every column under its specs
+    page += model_error_section(me_groups)  # the page's own section
     body = {"budget": budget, "seed": seed, "pairs": pairs, "decision_times": times}
     atomic_write(path.with_name("paired.json"), json.dumps(body, indent=2) + "\n")
     # strict JSON: a measure that could not be made is null (and listed under "nonfinite")
     atomic_write(path.with_name(HEADLINE_FILE), strict_json(head, indent=2) + "\n")
     cols = columns_json(groups, budget, seed, run)
+    if me_groups:  # where the section's time went, column by column
+        cols["model_error"] = time_rows(me_groups)
     atomic_write(cols_path, strict_json(cols, indent=2) + "\n")
-    me = model_error_json(groups, budget, seed, run)
+    me = model_error_json(me_groups or groups, budget, seed, run)
+    if me is not None and me_groups:
+        me["mismatch_budget"] = model_error_budget(budget)
     if me is not None:
         atomic_write(path.with_name(MODEL_ERROR_FILE), strict_json(me, indent=2) + "\n")
     atomic_write(path, page)
     return path
+
+
+# --------------------------------------------------------------------------------------------
+# The results page's model-error section (``bound-env compare``, on by default for the page's
+# own columns; ``--no-mismatch`` leaves it out): which controller holds a robot that is not its
+# model, beside which one has the widest basin.
+#
+# The section's columns (`model_error_entries`): passive, lqr, mpc, `default` (the fine-tuned
+# student's first seed, the best learned column's s0), `mpc-adaptive` (the MPC that identifies
+# its plant online), the learned adaptive controller (`agents/policies/adaptive/s0`, where it is
+# shipped) and `mpc-privileged` (re-designed on each robot's true plant: **privileged**, an
+# upper reference, never a deployable controller; the tables label it). Each is measured under
+# `MODEL_ERROR_SPECS` (pm10, pm15, pm10+noise) on the model-error budget `model_error_budget`
+# (``page``: hold on 32 plants for 100 strides and r50 under error on five sizes, no MFPT;
+# ``test`` for ``--budget test``), the model-error measures only (`compute_margins` with
+# ``nominal=False``): its nominal margins are the page's other columns. Results under
+# ``<out>/model-error/<label>/``; the paired comparisons are against lqr. The section's text:
+# `agents.results.page.model_error_section`; its held column in the headline and its columns'
+# times: `agents.results.headline`; its inputs for ``--render-only``:
+# `agents.results.page_inputs.load_model_error`.
+# --------------------------------------------------------------------------------------------
+MODEL_ERROR_SPECS = ("pm10", "pm15", "pm10+noise")
+ADAPTIVE = SHIPPED_DIR / "adaptive" / "s0"  # the learned adaptive controller's first seed
+
+
+def model_error_budget(budget: str) -> str:
+    """The model-error budget (`bound_env.analysis.margins.mismatch_tasks.MISMATCH_BUDGETS`)
+    of the page's ``budget``: ``test`` for the test budget, else ``page``."""
+    return "test" if budget == "test" else "page"
+
+
+def model_error_entries() -> list[tuple[str, str]]:
+    """(label, policy) of the section's columns (module docstring), all on the default gait."""
+    out = [("passive", "passive"), ("lqr", "lqr"), ("mpc", "mpc"), ("default", "default")]
+    out.append(("mpc-adaptive", "mpc-adaptive"))
+    if (ADAPTIVE / "adaptive.npz").is_file():
+        out.append(("adaptive", str(ADAPTIVE)))
+    out.append(("mpc-privileged", "mpc-privileged"))
+    return out
+
+
+def run_model_error(
+    budget: str,
+    out: Path,
+    seed: int,
+    executor=None,
+    workers: int = 1,
+    progress: bool = False,
+    render_only: bool = False,
+    specs=MODEL_ERROR_SPECS,
+    on_column=None,
+) -> list[dict]:
+    """The section's columns as the page's groups ({label, gait, policies, runs}), computed
+    (or taken from the cache) under ``specs``, or with ``render_only`` read from their
+    ``margins.json`` (a ValueError naming the file where one is missing or of another budget,
+    seed or spec). ``on_column(label, policy, result)`` is called after each."""
+    from bound_env.mismatch import parse_specs
+
+    parsed = parse_specs(",".join(specs))
+    mb = model_error_budget(budget)
+    groups = []
+    for label, policy in model_error_entries():
+        sub = Path(out) / "model-error" / slug(label)
+        if render_only:
+            r = load_model_error(sub / "margins.json", budget, seed, parsed, mb)
+        else:
+            r = compute_margins(
+                policy,
+                budget=budget,
+                workers=workers,
+                executor=executor,
+                out=sub,
+                progress=progress,
+                seed=seed,
+                mismatch=parsed,
+                mismatch_budget=mb,
+                nominal=False,
+            )
+        r["label"], r["source"] = label, policy
+        if on_column is not None:
+            on_column(label, policy, r)
+        groups.append({"label": label, "gait": "default", "policies": [policy], "runs": [r]})
+    return groups
 
 
 def training_curves(groups, docs: Path) -> list:
@@ -371,55 +493,6 @@ def model_error_text(groups) -> str:
     specs = list(dict.fromkeys(k for r in measured.values() for k in r["mismatch"]))
     ref = "lqr" if "lqr" in measured else None
     return "\n## Model error\n\n" + mismatch_markdown(measured, specs=specs, reference=ref)
-
-
-def load_result(path: Path, budget: str, seed: int, mismatch=None) -> dict:
-    """A column's ``margins.json`` as `compute_margins` wrote it, for ``render_only``: it must
-    exist, be of ``budget`` and ``seed`` and hold every key the page reads
-    (`agents.results.page_inputs.check_margins_result`), else a ValueError naming the file (and the
-    key). ``mismatch`` (specs): the result must hold a model-error block of each, measured
-    under that very spec, and keeps only those (the page's section is theirs); None keeps
-    the blocks it holds."""
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: no margins.json to render (run compare without --render-only)")
-    try:
-        r = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise ValueError(f"{path}: not a margins result ({e})") from None
-    if not isinstance(r, dict) or "basin_curve" not in r:
-        raise ValueError(f"{path}: not a margins result (no basin_curve)")
-    if r.get("budget") != budget or r.get("seed", DEFAULT_SEED) != seed:
-        raise ValueError(
-            f"{path}: budget {r.get('budget')!r}, seed {r.get('seed')!r}; "
-            f"the page asks for budget {budget!r}, seed {seed}"
-        )
-    r = check_margins_result(r, path)  # every key the page reads, or one line naming it
-    if mismatch is not None:
-        r["mismatch"] = _measured_blocks(r, path, mismatch)
-    return r
-
-
-def _measured_blocks(r: dict, path: Path, specs) -> dict:
-    """{name: block} of ``r``'s model-error blocks of ``specs``, each measured under that
-    spec (its ``spec`` entry); ValueError naming the file and the spec otherwise."""
-    held = r.get("mismatch") if isinstance(r.get("mismatch"), dict) else {}
-    out = {}
-    for spec in specs:
-        block = held.get(spec.name)
-        if not isinstance(block, dict):
-            have = ", ".join(sorted(held)) or "none"
-            raise ValueError(
-                f"{path}: no model-error block {spec.name!r} (it holds: {have}); run compare "
-                f"--mismatch {spec.name} without --render-only first"
-            )
-        if block.get("spec") != spec.to_dict():
-            raise ValueError(
-                f"{path}: its model-error block {spec.name!r} was measured under another spec "
-                f"({block.get('spec')}); run compare --mismatch without --render-only first"
-            )
-        out[spec.name] = block
-    return out
 
 
 def _reference(groups, name: str, gait: str):

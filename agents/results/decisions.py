@@ -6,12 +6,15 @@ terrain runs, the gate (within the safe radius, the LQR alone), the LQR's own pl
 it (mpc: it returns on the planning model; a learned chooser: row 0) or an override (a
 searched or chosen profile). `shares_rows` puts them in a table.
 
-**Decision times** (`fair_decision_times`): every controller that plans at the apex
-(``coefficients(z)``: mpc and the learned stride controllers) is timed on the *same* apex
-states, all past the safe radius (where the planner, not the gate, decides): the test
-directions' starts z* + r |z*| d at the curve's sizes, one decision each, one process, after
-the margins' workers have finished (an otherwise idle machine: the load average is recorded
-beside the times).
+**Decision times** (`fair_decision_times`): every controller that decides at the apex
+(``coefficients(z)``: lqr, deadbeat, mpc and the learned stride controllers, a step-level
+residual through its base) is timed on the *same* apex states, all past the safe radius (where
+a gated planner, not its gate, decides): the test directions' starts z* + r |z*| d at the
+curve's sizes, in one process, after the margins' workers have finished. A decision's time is
+the CPU time of the process (`time.process_time_ns`: a busy machine's other processes do not
+count) and, per state, the minimum over `DECISION_REPEATS` repeats (an interrupt or a cache
+miss adds time, never removes it), so a rerun reproduces it; the load average is recorded
+beside the times, and the minimum wall time per state too (``wall``).
 """
 
 from __future__ import annotations
@@ -23,6 +26,11 @@ import numpy as np
 
 FAIR_SIZES = (0.15, 0.2, 0.25, 0.3, 0.35)  # relative perturbation sizes of the timed states
 FAIR_SAFE = 0.05  # states with max |z - z*| / s above this (mpc's and default's safe radius)
+DECISION_REPEATS = 5  # each state's decision is timed this many times; the minimum counts
+CLOCK = (
+    f"CPU time of the process (time.process_time_ns), per state the minimum over "
+    f"{DECISION_REPEATS} repeats"
+)
 
 
 def timing_states(z_star, seed: int, n_dirs: int = 32, sizes=FAIR_SIZES) -> np.ndarray:
@@ -48,44 +56,76 @@ def planner_of(ctrl):
     return None
 
 
-def time_decisions(ctrl, Z) -> dict | None:
-    """p50/p99/mean/max [s] of ``ctrl``'s apex decisions on the states Z (None: not a planner)."""
-    planner = planner_of(ctrl)
+def decider_of(ctrl):
+    """The object whose ``coefficients(z)`` (one apex state) is ``ctrl``'s apex decision,
+    gated or not (lqr, deadbeat: a matrix product), or None (passive, a plain step policy)."""
+    import inspect
+
+    for c in (ctrl, getattr(ctrl, "base", None)):
+        f = getattr(c, "coefficients", None) if c is not None else None
+        if callable(f):
+            try:
+                inspect.signature(f).bind(np.zeros(6))
+            except (TypeError, ValueError):  # another protocol (a stride residual's (z, du))
+                continue
+            return c
+    return None
+
+
+def time_decisions(ctrl, Z, repeats: int = DECISION_REPEATS, gated: bool = True) -> dict | None:
+    """p50/p99/mean/max [s] of ``ctrl``'s apex decisions on the states Z, each state's the
+    minimum over ``repeats`` timings of the process's CPU time (`CLOCK`), and ``wall`` (the
+    same of the minimum wall times); None: not a planner (``gated``: a gated planner,
+    `planner_of`; else any apex decider, `decider_of`)."""
+    planner = planner_of(ctrl) if gated else decider_of(ctrl)
     if planner is None:
         return None
     planner.coefficients(Z[0])  # compiled and warm
-    ts = []
-    for z in Z:
-        t0 = time.perf_counter()
-        planner.coefficients(z)
-        ts.append(time.perf_counter() - t0)
+    cpu, wall = np.full(len(Z), np.inf), np.full(len(Z), np.inf)
+    for _ in range(repeats):
+        for i, z in enumerate(Z):
+            c0, w0 = time.process_time_ns(), time.perf_counter_ns()
+            planner.coefficients(z)
+            w1, c1 = time.perf_counter_ns(), time.process_time_ns()
+            cpu[i], wall[i] = min(cpu[i], 1e-9 * (c1 - c0)), min(wall[i], 1e-9 * (w1 - w0))
     from bound_env.analysis.margins.curve import time_stats
 
-    return time_stats(ts)
+    out = time_stats(cpu)
+    w = time_stats(wall)
+    out["wall"] = {k: w[k] for k in ("p50", "p99", "mean", "max")}
+    out["gated"] = planner_of(ctrl) is not None
+    return out
 
 
-def fair_decision_times(groups, load_controller, seed: int) -> dict:
-    """{label: times of its first policy} for every column whose controller plans at the
-    apex, all timed on `timing_states` (default gait only: other gaits' states differ)."""
+def fair_decision_times(groups, load_controller, seed: int, repeats: int = DECISION_REPEATS):
+    """{label: times of its first policy} for every column whose controller decides at the
+    apex (`decider_of`), each timed on its gait's `timing_states` (``gait`` per controller;
+    ``states`` counts the default gait's, ``states_by_gait`` every gait's)."""
     from bound_env.params import load_gait
 
-    Z = timing_states(load_gait("default").z0, seed)
+    by_gait: dict = {}
     out: dict = {
-        "states": int(len(Z)),
+        "states": 0,
         "measured_on": "the same apex states for every controller: the test directions' "
         f"starts z* + r |z*| d (32 directions, r = {', '.join(map(str, FAIR_SIZES))}) past the "
-        f"safe radius {FAIR_SAFE}, one decision each, in one process after the margins' "
-        "workers finished",
+        f"safe radius {FAIR_SAFE}, in one process after the margins' workers finished; "
+        f"{CLOCK}",
+        "clock": "process_time",
+        "repeats": int(repeats),
         "load_average_before": list(os.getloadavg()),
         "controllers": {},
     }
     for g in groups:
-        if g["gait"] != "default":
-            continue
+        gait = g["gait"]
+        if gait not in by_gait:
+            by_gait[gait] = timing_states(load_gait(gait).z0, seed)
         ctrl = load_controller(g["policies"][0])
-        t = time_decisions(ctrl, Z)
+        t = time_decisions(ctrl, by_gait[gait], repeats, gated=False)
         if t is not None:
+            t["gait"] = gait
             out["controllers"][g["label"]] = t
+    out["states"] = int(len(by_gait.get("default", ())))
+    out["states_by_gait"] = {k: int(len(v)) for k, v in by_gait.items()}
     out["load_average_after"] = list(os.getloadavg())
     return out
 
@@ -137,26 +177,48 @@ def decisions_text(times: dict, groups) -> str:
     return "\n".join(lines) + "\n" if len(lines) > 3 else ""
 
 
-def real_time_text(groups) -> str:
-    """The page's real-time yardstick: each column's decision p50 and p99 over every apex
-    decision of its own margins measures (its first seed's ``decision_times``), and the row
-    "best controller within 1 ms per decision (p99)" by the columns' mean r50 over seeds
-    (`bound_env.analysis.margins.decision_times.real_time_table`). Empty when no column has
-    decision times (pages measured before they were recorded)."""
+def real_time_text(groups, times: dict | None = None) -> str:
+    """The page's real-time yardstick: each column's decision p50 and p99 and the row "best
+    controller within 1 ms per decision (p99)" by the columns' mean r50 over seeds
+    (`bound_env.analysis.margins.decision_times.real_time_table`). A column timed by the
+    dedicated pass (``times``, `fair_decision_times`: CPU time on fixed states, minimum over
+    repeats, which a rerun reproduces) is given by it; another one by the wall times of every
+    apex decision of its own margins measures (its first seed's ``decision_times``, inside
+    busy workers). Empty when no column has decision times (pages measured before they were
+    recorded)."""
     from bound_env.analysis.margins.decision_times import real_time_table
 
+    fixed = (times or {}).get("controllers") or {}
     columns = {}
     for g in groups:
         runs = g["runs"]
         r50s = [r["basin_curve"]["r50"] for r in runs if r.get("basin_curve")]
         columns[g["label"]] = {
             "decision_times": runs[0].get("decision_times"),
+            "fixed": fixed.get(g["label"]),
             "r50": float(np.mean(r50s)) if r50s else None,
         }
-    if not any(c["decision_times"] for c in columns.values()):
+    if not any(c["decision_times"] or c["fixed"] for c in columns.values()):
         return ""
+    how = (
+        f"the {times.get('states_by_gait', {}).get('default', times.get('states'))} fixed apex "
+        f"states above ({times.get('clock', 'wall')} time, per state the minimum over "
+        f"{times.get('repeats', 1)} repeat(s); load average "
+        f"{(times.get('load_average_before') or [float('nan')])[0]:.2f} before)"
+        if fixed
+        else ""
+    )
+    intro = (
+        f"A decision's time on {how}, where the column was timed there (`timed on`: fixed); "
+        "else the wall time of every apex decision it made during its own margins measures "
+        "(first seed, inside busy workers: `timed on`: its measures). `decisions`: how many "
+        "apex decisions its measures made. A controller without apex decisions has none.\n\n"
+        if fixed
+        else "Wall time of every apex decision a controller made during its own margins "
+        "measures (first seed; a controller without apex decisions has none):\n\n"
+    )
     return (
         "\n## Real time: every apex decision of each controller's own measures\n\n"
-        "Wall time of every apex decision a controller made during its own margins measures "
-        "(first seed; a controller without apex decisions has none):\n\n" + real_time_table(columns)
+        + intro
+        + real_time_table(columns)
     )

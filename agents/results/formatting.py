@@ -151,3 +151,8 @@ def data_lookup(data, path: str):
         else:
             raise KeyError(f"{seen}: missing")
     return data
+
+
+def slug(text: str) -> str:
+    """``text`` as a folder name: every character but letters, digits and ``-_.`` as ``_``."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)

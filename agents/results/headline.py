@@ -31,6 +31,7 @@ controller is now.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
@@ -43,7 +44,7 @@ from bound_env.analysis.margins.stats import t_interval
 from bound_env.cache import atomic_write
 from bound_env.schema import check_keys, load_json_strict
 
-from .formatting import ROOT, num3, rel, value
+from .formatting import ROOT, num3, rel, slug, value
 
 # The headline table (the page's first table and the README's): (role, column label, what it
 # is). The step-level PPO row is the shipped step-level recipe's column (`step-ppo`: residual
@@ -153,14 +154,48 @@ def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
     return {"budget": budget, "seed": seed, "rows": rows}
 
 
+# The model-error column that stands for each headline row in "held at ±10 % / ±15 %"
+# (`agents.results.compare.model_error_entries`: the best learned row's is its first seed,
+# `default`); a row without one (the step-level PPO) is "not measured"
+HELD_COLUMNS = {"passive": "passive", "lqr": "lqr", "mpc": "mpc", "fine-tuned": "default"}
+HELD_SPECS = ("pm10", "pm15")
+
+
+def add_held(head: dict, held: dict, budget: str) -> dict:
+    """``head`` (`headline_numbers`) with each row's ``held``: its model-error column's hold
+    at ±10 % and ±15 % ({column, budget, pm10: {k, n}, pm15: {k, n}}; ``held``:
+    `held_at`), None where the row has no such column."""
+    for row in head["rows"]:
+        col = HELD_COLUMNS.get(row["label"])
+        h = held.get(col) if col else None
+        if h is None or not all(s in h for s in HELD_SPECS):
+            row["held"] = None
+            continue
+        row["held"] = {"column": col, "budget": budget, **{s: h[s] for s in HELD_SPECS}}
+    return head
+
+
+def _held_cell(row: dict) -> str:
+    h = row.get("held")
+    if not h:
+        return "not measured"
+    text = " / ".join(f"{h[s]['k']}/{h[s]['n']}" for s in HELD_SPECS)
+    return text if h["column"] == row["label"] else f"{text} (`{h['column']}`)"
+
+
 def headline_table(head: dict) -> str:
     """The headline table in Markdown (five columns; one row per `HEADLINE` row present), from
     the numbers `headline_numbers` made (docs/headline.json): the page's first table and the
     README's results table are this text."""
+    held = any("held" in row for row in head["rows"])  # a page with its model-error section
+    budgets = {row["held"]["budget"] for row in head["rows"] if row.get("held")}
+    held_head = " held at ±10 % / ±15 %" + (
+        f" (model-error budget `{budgets.pop()}`) |" if len(budgets) == 1 else " |"
+    )
     lines = [
         "| controller | what it is | r50 [95 % interval] | σ (deg) where MFPT = 100 "
-        "strides [95 % interval] | interval |",
-        "| --- | --- | --- | --- | --- |",
+        "strides [95 % interval] | interval |" + (held_head if held else ""),
+        "| --- | --- | --- | --- | --- |" + (" --- |" if held else ""),
     ]
     for row in head["rows"]:
         cells = []
@@ -176,7 +211,8 @@ def headline_table(head: dict) -> str:
         name = row["role"] if row["role"] == row["label"] else f"{row['role']} ({row['label']})"
         if row.get("privileged"):
             name += " (privileged: reads the true plant)"
-        lines.append(f"| **{name}** | {row['what']} | {cells[0]} | {cells[1]} | {kind} |")
+        line = f"| **{name}** | {row['what']} | {cells[0]} | {cells[1]} | {kind} |"
+        lines.append(line + (f" {_held_cell(row)} |" if held else ""))
     return "\n".join(lines)
 
 
@@ -233,6 +269,10 @@ def columns_json(groups, budget: str, seed: int, run: dict) -> dict:
                 "policies": [rel(p) for p in g["policies"]],
                 "fingerprints": _fingerprints(g),
                 "seconds": sum(float(r.get("seconds") or 0.0) for r in runs),
+                # where the time goes: the column's wall time (= seconds) and its workers'
+                # CPU time over the tasks it computed (none for a cached task)
+                "wall_seconds": sum(float(r.get("seconds") or 0.0) for r in runs),
+                "cpu_seconds": sum(float(r.get("cpu_seconds") or 0.0) for r in runs),
                 "tasks": tasks,
                 "r50": headline_measure(
                     runs,
@@ -293,6 +333,119 @@ def model_error_json(groups, budget: str, seed: int, run: dict) -> dict | None:
     }
 
 
+def held_at(groups) -> dict:
+    """{label: {spec: {k, n}}} of the hold of every model-error column (the headline's "held
+    at ±10 % / ±15 %")."""
+    out = {}
+    for g in groups:
+        mm = g["runs"][0].get("mismatch") or {}
+        out[g["label"]] = {
+            name: {"k": int(b["hold"]["k"]), "n": int(b["hold"]["n"])} for name, b in mm.items()
+        }
+    return out
+
+
+def time_rows(groups) -> list[dict]:
+    """``columns.json``'s ``model_error``: each section column's fingerprint, wall and CPU
+    time (its workers', over the tasks it computed) and tasks, as the page's columns have."""
+    rows = []
+    for g in groups:
+        r = g["runs"][0]
+        rows.append(
+            {
+                "label": g["label"],
+                "gait": g["gait"],
+                "policies": [rel(p) for p in g["policies"]],
+                "fingerprints": [r.get("fingerprint")],
+                "seconds": float(r.get("seconds") or 0.0),
+                "wall_seconds": float(r.get("seconds") or 0.0),
+                "cpu_seconds": float(r.get("cpu_seconds") or 0.0),
+                "tasks": dict(r.get("tasks") or {"cached": 0, "computed": 0}),
+            }
+        )
+    return rows
+
+
+class PageProgress:
+    """The page's progress line (stderr), after every column's policy: how many are done,
+    that one's wall and CPU time, the page's time so far and an estimate of the time left.
+
+    The estimate: where the last run's ``columns.json`` (``previous``) has a column's time
+    (`previous_seconds`: its ``seconds`` per policy), the time left is those of the policies
+    still to run, scaled by how this run compares with it so far (the sum of this run's
+    seconds over the last run's, for the policies done that it has); otherwise the mean time
+    of a policy so far times the policies left. A policy whose every task came from the cache
+    (seconds, not minutes) counts in neither; the estimate supposes the ones left compute
+    theirs."""
+
+    def __init__(self, entries, previous: Path, enabled: bool = True, stream=None):
+        self.todo = [(label, pol) for label, pols, _gait in entries for pol in pols]
+        self.before = previous_seconds(previous)
+        self.enabled, self.stream = enabled, stream
+        self.t0, self.k = time.perf_counter(), 0
+        self.spent: list = []  # (seconds, the last run's or None, computed?) per policy done
+        self._t = self.t0
+
+    def start(self) -> None:
+        self._t = time.perf_counter()
+
+    def estimate_left(self) -> float | None:
+        """Seconds left (module docstring), None before the first policy is done."""
+        spent = [(a, b) for a, b, computed in self.spent if computed]
+        if not spent:
+            return None
+        left = self.todo[self.k :]
+        known = [(a, b) for a, b in spent if b]
+        scale = sum(a for a, _ in known) / sum(b for _, b in known) if known else None
+        mean = sum(a for a, _ in spent) / len(spent)
+        total = 0.0
+        for label, pol in left:
+            prev = self.before.get((label, slug(Path(pol).name)))
+            total += prev * scale if (prev and scale is not None) else mean
+        return total
+
+    def done(self, label: str, policy: str, result: dict) -> str:
+        """Count a policy done; its line (printed when enabled)."""
+        now = time.perf_counter()
+        prev = self.before.get((label, slug(Path(policy).name)))
+        computed = int((result.get("tasks") or {}).get("computed", 1)) > 0
+        self.spent.append((now - self._t, prev, computed))
+        self.k += 1
+        left = self.estimate_left()
+        name = label if Path(policy).name in (label, policy) else f"{label} {Path(policy).name}"
+        line = (
+            f"[page {self.k}/{len(self.todo)}] {name}: {now - self._t:.0f} s wall, "
+            f"{float(result.get('cpu_seconds') or 0.0):.0f} s CPU in its workers; "
+            f"page {now - self.t0:.0f} s so far"
+            + (f", about {left:.0f} s left" if self.k < len(self.todo) and left is not None else "")
+        )
+        if self.enabled:
+            print(line, file=self.stream or sys.stderr, flush=True)
+        self._t = time.perf_counter()  # the next column starts now, unless `start` says later
+        return line
+
+
+def previous_seconds(path: Path) -> dict:
+    """{(label, policy folder name): seconds per policy} of the last run's ``columns.json``
+    (its column's ``seconds`` shared equally by its policies; a model-error column's label
+    ``model error <label>``); {} without a readable one (an
+    estimate only: a broken file is not an error here)."""
+    try:
+        data = json.loads(Path(path).read_text())
+        cols = list(data.get("columns") or [])
+        # the model-error section's columns, as the progress line names them
+        cols += [{**c, "label": f"model error {c['label']}"} for c in data.get("model_error") or []]
+        out = {}
+        for c in cols:
+            pols = c.get("policies") or []
+            secs = float(c.get("seconds") or 0.0) / max(1, len(pols))
+            for p in pols:
+                out[(c["label"], slug(Path(p).name))] = secs
+        return out
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        return {}
+
+
 START, END = "<!-- headline:start -->", "<!-- headline:end -->"
 README = ROOT / "README.md"
 HEADLINE_JSON = ROOT / "docs" / HEADLINE_FILE
@@ -308,6 +461,7 @@ _ROW = {
     "r50": _MEASURE,
     "mfpt_sigma_100_deg": _MEASURE,
 }
+_HELD = {"column": str, "budget": str, **{s: {"k": int, "n": int} for s in HELD_SPECS}}
 
 
 def load_headline(path: Path = HEADLINE_JSON) -> dict:
@@ -320,6 +474,8 @@ def load_headline(path: Path = HEADLINE_JSON) -> dict:
         check_keys(row, _ROW, str(path), f"rows[{i}].")
         if not isinstance(row.get("privileged", False), bool):  # absent: an older file
             raise ValueError(f"{path}: rows[{i}].privileged must be true or false")
+        if row.get("held") is not None:  # the page's model-error section's hold (optional)
+            check_keys(row["held"], _HELD, str(path), f"rows[{i}].held.")
     if not head["rows"]:
         raise ValueError(f"{path}: rows: empty (write it with bound-env compare --docs)")
     return head

@@ -128,6 +128,8 @@ def compute_margins(
     scheduler: str | None = None,
     seed: int = DEFAULT_SEED,
     mismatch=None,
+    mismatch_budget: str | None = None,
+    nominal: bool = True,
 ) -> dict:
     """`bound_env.analysis.margins.compute_margins` of ``policy`` (``"passive"``, a name, a
     path or a controller: `as_controller`), with its files' hash (`policy_files_sha`) in its
@@ -152,6 +154,8 @@ def compute_margins(
         extra_sources=policy_sources(controller),
         mismatch=mismatch,
         files=policy_files_sha(policy),
+        mismatch_budget=mismatch_budget,
+        nominal=nominal,
     )
 
 

@@ -425,3 +425,33 @@ def render_markdown(
             training_section(curves, literal or own),
         ]
     )
+
+
+def model_error_section(groups) -> str:
+    """The page's "Model error" section of the columns
+    `agents.results.compare.run_model_error` made: how they were measured (the model-error
+    budget their blocks record), then one table per spec, paired against lqr
+    (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`)."""
+    from types import SimpleNamespace
+
+    from bound_env.analysis.margins.mismatch_report import mismatch_markdown
+
+    measured = {g["label"]: g["runs"][0] for g in groups if g["runs"][0].get("mismatch")}
+    if not measured:
+        return ""
+    first = next(iter(next(iter(measured.values()))["mismatch"].values()))
+    mb = SimpleNamespace(**first["budget"])
+    specs = list(dict.fromkeys(k for r in measured.values() for k in r["mismatch"]))
+    ref = "lqr" if "lqr" in measured else None
+    mfpt = "no MFPT" if not mb.mfpt_sigmas else f"MFPT at {len(mb.mfpt_sigmas)} slope sigmas"
+    intro = (
+        f"Each robot on its own plant (the spec's draws; the same plants for every column), "
+        f"the controller on its nominal design. The model-error budget `{mb.name}`: hold on "
+        f"{mb.plants} plants for {mb.hold_strides} strides from the nominal z*, r50 under error "
+        f"on {len(mb.curve_sizes)} sizes ({mb.curve_strides} strides), {mfpt}; `default` is "
+        "the best learned column's first seed, `adaptive` the learned adaptive controller's "
+        "(`agents/policies/adaptive/s0`), `mpc-privileged` reads the robot's true plant "
+        "(an upper reference, not a controller one could deploy). "
+        "[docs/model-error.md](model-error.md) says how each measure is made.\n\n"
+    )
+    return "\n## Model error\n\n" + intro + mismatch_markdown(measured, specs=specs, reference=ref)

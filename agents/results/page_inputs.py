@@ -1,7 +1,8 @@
 """What the results page reads back under ``compare --render-only``, checked before it is used.
 
 ``--render-only`` rewrites the page from files an earlier run left: each column's
-``margins.json`` (`check_margins_result`) and the decision times of the old ``paired.json``
+``margins.json`` (`load_result`, with `check_margins_result`), each Model error section
+column's (`load_model_error`) and the decision times of the old ``paired.json``
 (`read_decision_times`); ``python -m agents.results.headline`` reads ``headline.json``
 (`agents.results.headline.load_headline`, with `check_fields`). A file that lacks a key the page
 uses, or holds it with the wrong type, is a ValueError of one line naming the file and the key
@@ -19,7 +20,7 @@ import json
 import math
 from pathlib import Path
 
-from bound_env.analysis.margins import Z_LABELS
+from bound_env.analysis.margins import DEFAULT_SEED, Z_LABELS
 from bound_env.schema import check_keys, read_json
 
 
@@ -235,3 +236,81 @@ def read_decision_times(path: Path):
         return None
     check_fields(data, [(("decision_times",), "map"), *TIMES_FIELDS], path)
     return data["decision_times"]
+
+
+def load_result(path: Path, budget: str, seed: int, mismatch=None) -> dict:
+    """A column's ``margins.json`` as `compute_margins` wrote it, for ``render_only``: it must
+    exist, be of ``budget`` and ``seed`` and hold every key the page reads
+    (`agents.results.page_inputs.check_margins_result`), else a ValueError naming the file (and the
+    key). ``mismatch`` (specs): the result must hold a model-error block of each, measured
+    under that very spec, and keeps only those (the page's section is theirs); None keeps
+    the blocks it holds."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no margins.json to render (run compare without --render-only)")
+    try:
+        r = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: not a margins result ({e})") from None
+    if not isinstance(r, dict) or "basin_curve" not in r:
+        raise ValueError(f"{path}: not a margins result (no basin_curve)")
+    if r.get("budget") != budget or r.get("seed", DEFAULT_SEED) != seed:
+        raise ValueError(
+            f"{path}: budget {r.get('budget')!r}, seed {r.get('seed')!r}; "
+            f"the page asks for budget {budget!r}, seed {seed}"
+        )
+    r = check_margins_result(r, path)  # every key the page reads, or one line naming it
+    if mismatch is not None:
+        r["mismatch"] = _measured_blocks(r, path, mismatch)
+    return r
+
+
+def _measured_blocks(r: dict, path: Path, specs) -> dict:
+    """{name: block} of ``r``'s model-error blocks of ``specs``, each measured under that
+    spec (its ``spec`` entry); ValueError naming the file and the spec otherwise."""
+    held = r.get("mismatch") if isinstance(r.get("mismatch"), dict) else {}
+    out = {}
+    for spec in specs:
+        block = held.get(spec.name)
+        if not isinstance(block, dict):
+            have = ", ".join(sorted(held)) or "none"
+            raise ValueError(
+                f"{path}: no model-error block {spec.name!r} (it holds: {have}); run compare "
+                f"--mismatch {spec.name} without --render-only first"
+            )
+        if block.get("spec") != spec.to_dict():
+            raise ValueError(
+                f"{path}: its model-error block {spec.name!r} was measured under another spec "
+                f"({block.get('spec')}); run compare --mismatch without --render-only first"
+            )
+        out[spec.name] = block
+    return out
+
+
+def load_model_error(path: Path, budget: str, seed: int, specs, mb: str) -> dict:
+    """A model-error column's ``margins.json`` for ``--render-only``: of ``budget`` and
+    ``seed``, with a block of each spec measured under it on the model-error budget ``mb``;
+    a one-line ValueError naming the file otherwise."""
+    from dataclasses import asdict
+
+    from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
+
+    again = "run compare without --render-only first (or give --no-mismatch)"
+    if not path.is_file():
+        raise ValueError(f"{path}: no model-error result to render; {again}")
+    try:
+        r = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: not a margins result ({e})") from None
+    if not isinstance(r, dict) or r.get("budget") != budget or r.get("seed") != seed:
+        raise ValueError(f"{path}: not of budget {budget!r} and seed {seed}; {again}")
+    held = r.get("mismatch") if isinstance(r.get("mismatch"), dict) else {}
+    want = json.loads(json.dumps(asdict(MISMATCH_BUDGETS[mb])))  # as the JSON holds it
+    for spec in specs:
+        b = held.get(spec.name)
+        if not isinstance(b, dict) or b.get("spec") != spec.to_dict():
+            raise ValueError(f"{path}: no model-error block {spec.name!r} of its spec; {again}")
+        if b.get("budget") != want:
+            raise ValueError(f"{path}: block {spec.name!r} is not of the {mb} budget; {again}")
+    r["mismatch"] = {s.name: held[s.name] for s in specs}
+    return r

@@ -46,7 +46,13 @@ import gymnasium as gym
 import numpy as np
 
 from bound_env import schema as check
-from bound_env.stride_protocol import OBS_TIME, OBS_Z, notify_apex, reset_controller
+from bound_env.stride_protocol import (
+    OBS_TIME,
+    OBS_Z,
+    notify_apex,
+    profile_rows,
+    reset_controller,
+)
 
 from ..common.wrappers import ObservationFilter, full_observation_names
 
@@ -62,6 +68,20 @@ def residual_features(obs, keep, base_action: float, x_apex, gate: float) -> np.
     """The residual policy's observation (module docstring), float64."""
     obs = np.asarray(obs, dtype=np.float64)
     return np.concatenate([obs[keep], [base_action], x_apex, [gate]])
+
+
+def residual_features_rows(obs, keep, base_actions, x_apex, gates) -> np.ndarray:
+    """`residual_features` of n rows at once (n, ...): each row's the same entries, copied."""
+    obs = np.asarray(obs, dtype=np.float64)
+    return np.concatenate(
+        [
+            obs[:, keep],
+            np.asarray(base_actions, float)[:, None],
+            x_apex,
+            np.asarray(gates)[:, None],
+        ],
+        axis=1,
+    )
 
 
 class _Gate:
@@ -287,20 +307,26 @@ class ResidualController:
     def act_rows(self, copies, obs) -> np.ndarray:
         """The actions of ``copies`` (copies of this controller, one per robot, each told its
         own apexes) on their observations ``obs`` (one row each): each copy's ``__call__``,
-        with one forward pass of the network for every gated row (`MLPController.batch`,
-        each row computed alone; equal to the row-by-row actions to rounding)."""
+        end to end for all rows at once. The bases' interval torques in one array
+        (`bound_env.stride_protocol.profile_rows`: bit for bit each base's call; a base that
+        does not offer it is called row by row), the features of every gated row in one array
+        (`residual_features`' entries, copied), and one forward pass of the network for them
+        (`MLPController.batch`, each row computed alone; equal to the row-by-row actions to
+        rounding)."""
         n = len(copies)
-        a0, gates = np.empty(n), np.empty(n)
+        obs = np.asarray(obs)
         for k, c in enumerate(copies):
             if c._x is None:  # as `__call__`: the observation at a reset is an apex
                 c.on_apex(obs[k][list(OBS_Z)], float(obs[k][OBS_TIME]))
-            a0[k] = float(c.base(obs[k]))
-            gates[k] = c._gate
+        a0 = profile_rows([c.base for c in copies], obs)
+        if a0 is None:
+            a0 = np.array([float(c.base(obs[k])) for k, c in enumerate(copies)], dtype=float)
+        gates = np.fromiter((c._gate for c in copies), dtype=float, count=n)
         out = a0.copy()
         on = np.flatnonzero(gates)
         if on.size:
-            feats = np.stack(
-                [residual_features(obs[k], self.keep, a0[k], copies[k]._x, gates[k]) for k in on]
+            feats = residual_features_rows(
+                obs[on], self.keep, a0[on], np.stack([copies[k]._x for k in on]), gates[on]
             )
             r = self.net.batch(feats)
             out[on] = np.clip(a0[on] + self.scale * gates[on] * r, -1.0, 1.0)

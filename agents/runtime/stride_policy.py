@@ -127,6 +127,11 @@ class StridePolicyController:
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
         self._taus = self.apex_torques(z)
 
+    def planned_profile(self):
+        """(taus [N m], t0) of the last apex's profile, as ``__call__`` reads it (None before
+        the first apex; `bound_env.stride_protocol.profile_rows`)."""
+        return None if self._taus is None else (self._taus, 0.0)
+
     def __call__(self, obs) -> float:
         from bound_env.stride_protocol import OBS_TIME, OBS_Z
 

@@ -16,7 +16,12 @@ PassiveBound-v0 env use):
   ``__call__`` outputs on each control interval of the stride from each (after
   ``on_apex(z, 0.0)``), bit for bit, for `bound_env.stride_map.max_intervals` intervals, so
   that a closed loop can advance whole strides through the one stride map
-  (`bound_env.stride_map`) instead of one Python call per interval.
+  (`bound_env.stride_map`) instead of one Python call per interval;
+- ``planned_profile() -> (taus, t0) | None`` (a stride controller, optional): the torques of
+  the profile planned at the last apex and the time since the apex it was announced at, as
+  ``__call__`` reads them (None before the first apex), so that the copies of n robots act in
+  one array (`bound_env.stride_protocol.profile_rows`, bit for bit their calls; a step-level
+  residual's bases).
 
 A stride-level controller chooses the coefficients u = sat(-G (z - z*)) in ``on_apex`` and then
 outputs its torque profile tau(t) = max_torque * sum_i u_i phi_i(t). The step env holds the
@@ -110,6 +115,11 @@ class StrideFeedback:
 
     def on_apex(self, z, time_since_apex: float = 0.0) -> None:
         self._taus = self.apex_torques(z)
+
+    def planned_profile(self):
+        """(taus [N m], t0) of the last apex's profile, as ``__call__`` reads it (None before
+        the first apex; `bound_env.stride_protocol.profile_rows`)."""
+        return None if self._taus is None else (self._taus, 0.0)
 
     def __call__(self, obs) -> float:
         t = float(obs[OBS_TIME])

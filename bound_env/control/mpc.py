@@ -331,6 +331,16 @@ class MPCController:
         self._u = self.coefficients(z)
         self._t0 = float(time_since_apex)
 
+    def planned_profile(self):
+        """(taus [N m], t0) of the last apex's plan, as ``__call__`` reads it (None before the
+        first apex; `bound_env.stride_protocol.profile_rows`)."""
+        if self._u is None:
+            return None
+        memo = self.__dict__.get("_profile_memo")  # this plan's torques, made once per apex
+        if memo is None or memo[0] is not self._u:
+            memo = self._profile_memo = (self._u, self.basis.torques(self._u, self.max_torque))
+        return memo[1], self._t0
+
     def __call__(self, obs) -> float:
         t = float(obs[OBS_TIME])
         if self._u is None:

@@ -117,14 +117,14 @@ def setup_key(
     )
 
 
-def mismatch_key(key: str, spec, budget: Budget) -> str:
+def mismatch_key(key: str, spec, budget: Budget, mismatch_budget: str | None = None) -> str:
     """Cache key of the model-error tasks: the evaluation's key (`setup_key`), the spec, its
-    budget and `MISMATCH_SETTINGS`."""
+    budget (``mismatch_budget``'s, default ``budget``'s name's) and `MISMATCH_SETTINGS`."""
     return settings_hash(
         {
             "setup": key,
             "mismatch": spec.to_dict(),
-            "mismatch_budget": asdict(MISMATCH_BUDGETS[budget.name]),
+            "mismatch_budget": asdict(MISMATCH_BUDGETS[mismatch_budget or budget.name]),
             "settings": MISMATCH_SETTINGS,
         }
     )

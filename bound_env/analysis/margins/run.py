@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.cache import TaskCache
+from bound_env.cache import TaskCache, atomic_write
 from bound_env.parallel import TasksFailed, open_pool, run_tasks
 
 from ..apex_loop import CLOCK
@@ -73,8 +73,9 @@ TASKS = {
 
 
 def run_task(setup: Setup, name: str, args: tuple) -> dict:
-    """Worker entry point: one named task."""
-    t0 = time.perf_counter()
+    """Worker entry point: one named task (its wall ``seconds`` and the worker's
+    ``cpu_seconds``, `time.process_time`, go into its result)."""
+    t0, c0 = time.perf_counter(), time.process_time()
     CLOCK.seconds.clear()
     CLOCK.on = True  # every apex decision of the task is timed (the real-time yardstick)
     try:
@@ -87,6 +88,7 @@ def run_task(setup: Setup, name: str, args: tuple) -> dict:
         result["decision_hist"] = histogram(CLOCK.seconds)
         CLOCK.seconds.clear()
     result["seconds"] = time.perf_counter() - t0
+    result["cpu_seconds"] = time.process_time() - c0
     return result
 
 
@@ -117,7 +119,8 @@ def _run_all(
 ) -> dict:
     """Run (name, args) jobs through the executor, using and filling the cache. A task that
     raises is reported (key and arguments) without stopping the others; then `TasksFailed`.
-    ``counts`` (a dict) adds up the tasks taken from the cache and those computed."""
+    ``counts`` (a dict) adds up the tasks taken from the cache and those computed, and the
+    CPU time of those computed (``cpu_seconds``: the workers' process time)."""
     results, tasks = {}, {}
     for name, args in jobs:
         key = task_key(setup.key, name, args)
@@ -139,6 +142,10 @@ def _run_all(
     )
     for key, res in done.items():
         results[tasks[key][2]] = res
+        if counts is not None:
+            counts["cpu_seconds"] = counts.get("cpu_seconds", 0.0) + float(
+                res.get("cpu_seconds") or 0.0
+            )
     if failures:
         raise TasksFailed(
             failures,
@@ -188,6 +195,8 @@ def compute_margins(
     extra_sources=(),
     mismatch=None,
     files: str | None = None,
+    mismatch_budget: str | None = None,
+    nominal: bool = True,
 ) -> dict:
     """All margins of ``controller`` (an object with the controller protocol, package
     docstring) as a JSON-able dict.
@@ -208,6 +217,12 @@ def compute_margins(
     ``files``: the sha256 of the controller's files (its spec, a policy's weights), recorded
     in the result's ``fingerprint`` (`fingerprint.column_fingerprint`) by the caller that
     resolved its name.
+    ``mismatch_budget``: the name of the model-error budget (`MISMATCH_BUDGETS`; default: the
+    one of ``budget``'s name, e.g. ``page``: the results page's model-error section).
+    ``nominal`` False: the model-error measures only (with the closed-loop cycle they start
+    from): the result holds the run's keys (controller, gait, budget, seed, fingerprint,
+    seconds, tasks), ``mismatch`` and ``"nominal": false``, and only ``margins.json`` is
+    written.
     """
     from bound_env.mismatch import as_spec, check_distinct
     from bound_env.params import load_gait
@@ -215,8 +230,11 @@ def compute_margins(
     budget = as_budget(budget)
     many = mismatch if isinstance(mismatch, (list, tuple)) else [mismatch]
     specs = check_distinct([as_spec(m) for m in many if m is not None])
-    if specs and budget.name not in MISMATCH_BUDGETS:
-        raise ValueError(f"--mismatch has budgets {sorted(MISMATCH_BUDGETS)}, got {budget.name!r}")
+    mb_name = budget.name if mismatch_budget is None else mismatch_budget
+    if specs and mb_name not in MISMATCH_BUDGETS:
+        raise ValueError(f"--mismatch has budgets {sorted(MISMATCH_BUDGETS)}, got {mb_name!r}")
+    if not nominal and not specs:
+        raise ValueError("nominal=False measures the model error only: give --mismatch specs")
     if workers < 1:
         raise ValueError(f"--workers must be at least 1, got {workers}")
     seed = check_seed(seed)
@@ -273,15 +291,20 @@ def compute_margins(
         jobs += [("window", (k, s)) for k in ("alpha_deg", "kc") for s in (-1, 1)]
         jobs += [("push", ("xdot", v, j)) for j, v in enumerate(budget.push_xdot)]
         jobs += [("push", ("th1dot", v, j)) for j, v in enumerate(budget.push_th1dot)]
+        if not nominal:
+            jobs = []  # the model-error measures only
         res = _run_all(
             executor, setup, jobs, cache, progress, f"margins {controller_name(controller)}", counts
         )
         res.update(basin_results(res))
         mm = {}
         for spec in specs:
-            mb = MISMATCH_BUDGETS[budget.name]
+            mb = MISMATCH_BUDGETS[mb_name]
             mm_setup = replace(
-                setup, key=mismatch_key(setup.key, spec, budget), mismatch=spec, mismatch_budget=mb
+                setup,
+                key=mismatch_key(setup.key, spec, budget, mb_name),
+                mismatch=spec,
+                mismatch_budget=mb,
             )
             mm_res = _run_all(
                 executor,
@@ -293,12 +316,25 @@ def compute_margins(
                 counts,
             )
             mm[spec.name] = assemble_mismatch(mm_setup, mm_res)
-    result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
+    if not nominal:
+        result = {
+            "controller": controller_name(controller),
+            "gait": gait,
+            "budget": budget.name,
+            "seed": seed,
+            "nominal": False,
+        }
+    else:
+        result = assemble(controller, gait, budget, z_star, cyc, res, scale, seed)
     result["fingerprint"] = fingerprint  # what decided these numbers, before they were made
     if mm:
         result["mismatch"] = mm
     result["seconds"] = time.perf_counter() - t0
+    # the CPU time of the tasks this run computed (in its workers; a cached task's: none)
+    result["cpu_seconds"] = counts.pop("cpu_seconds", 0.0)
     result["tasks"] = counts  # taken from the cache, computed: the seconds' meaning
-    if out_dir is not None:
+    if out_dir is not None and not nominal:
+        atomic_write(out_dir / "margins.json", json.dumps(result, indent=2) + "\n")
+    elif out_dir is not None:
         write_outputs(result, out_dir)
     return result
