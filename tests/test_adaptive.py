@@ -466,3 +466,56 @@ def test_every_decision_runs_within_its_budget_and_the_work_is_the_same_spread_o
         AdaptiveMPC(budget=20)
     with pytest.raises(ValueError, match="adaptive.budget"):
         check_adaptive({"budget": -1}, "f.yaml")
+
+
+def _trusted_on_plant(ctrl, nominal_map, strides=30):
+    """``ctrl`` run ``strides`` strides on PLANT from z*: the last apex state."""
+    aux = make_aux(PLANT.to_array())[None]
+    z = Z_STAR.copy()
+    for _ in range(strides):
+        ctrl.stride_action(z)
+        r = nominal_map.run(z[None], ctrl.last_actions[None], aux=aux)
+        assert r.ok[0]
+        z = r.z1[0]
+    return z
+
+
+def test_unbounded_the_decision_that_finishes_a_trusted_fit_acts_on_its_design(nominal_map):
+    """With ``budget`` 0 a fit finished in a decision is followed by its design in the same
+    decision: no decision ends trusted on an estimate that the acting design is not of (the
+    design lagged one stride behind every fit before)."""
+    ctrl = AdaptiveMPC()
+    aux = make_aux(PLANT.to_array())[None]
+    z, acted = Z_STAR.copy(), 0
+    for _ in range(30):
+        ctrl.stride_action(z)
+        if ctrl.trusted:
+            moved = np.max(np.abs(ctrl.theta - ctrl.designed_theta))
+            assert moved <= ctrl.config["redesign"], (ctrl.strides, moved)
+            acted += ctrl.mpc is not ctrl.base
+        r = nominal_map.run(z[None], ctrl.last_actions[None], aux=aux)
+        assert r.ok[0]
+        z = r.z1[0]
+    assert acted > 20  # trusted and acting on its design most of the episode
+
+
+@pytest.mark.parametrize("fallback", [False, True])
+def test_fallback_decides_what_acts_after_a_mispredicted_stride(mpc, nominal_map, fallback):
+    """A trusted estimate meets a stride it mispredicts (the robot is pushed: the next apex is
+    not where the stride led). ``fallback: true``: the shipped mpc acts again (its action),
+    and it refits after ``identify`` strides too; ``false`` (shipped): the design stays."""
+    ctrl = AdaptiveMPC(fallback=fallback)
+    z = _trusted_on_plant(ctrl, nominal_map)
+    assert ctrl.trusted and ctrl.mpc is not ctrl.base and ctrl.strides > ctrl.config["identify"]
+    design, fit = ctrl.mpc, ctrl.fit
+    pushed = z * (1.0 + 0.05 * np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0]))
+    u = ctrl.stride_action(pushed)
+    assert ctrl.innovations[-1] > ctrl.config["trust_error"]
+    if fallback:
+        assert ctrl.mpc is ctrl.base and not ctrl.trusted and ctrl.fit is not fit
+        np.testing.assert_array_equal(u, mpc.plan(pushed))
+    else:
+        assert ctrl.mpc is design and ctrl.fit is fit
+        assert not np.array_equal(u, mpc.plan(pushed))
+    with pytest.raises(ValueError, match="adaptive.fallback must be true or false"):
+        check_adaptive({"fallback": 1}, "f.yaml")

@@ -158,12 +158,12 @@ class AdaptiveMPC(RedesignedMPC):
         if self.fit is not None:  # a fitted estimate met a stride it was not fitted to
             was = self.trusted
             self.trusted = good and self.fit.pred_std <= cfg["trust_std"]
-            if was and not good:  # the model is wrong: back to the shipped mpc, refit
+            if was and not good and cfg["fallback"]:  # the model is wrong: back to mpc, refit
                 self.mpc, self.design, self.designed_theta = self.base, None, np.zeros(len(EIGHT))
                 if self.job_kind == "design":
                     self._end_work()
         settled = self.trusted and e <= cfg["settle"]
-        listening = self.strides <= cfg["identify"] or not good
+        listening = self.strides <= cfg["identify"] or (cfg["fallback"] and not good)
         if self.job is None and listening and not settled:
             self._start_fit()
 
@@ -210,13 +210,22 @@ class AdaptiveMPC(RedesignedMPC):
     def _work(self) -> int:
         """This decision's slice of the work in flight (a design is started once a trusted
         estimate moved more than ``redesign`` from the acting design); its result taken once
-        ready. Returns the stride evaluations spent."""
+        ready. Unbounded (``budget`` 0), a fit finished here is followed by its design in the
+        same decision, so that the decision acts on it. Returns the stride evaluations spent."""
+        spent, fitted = self._work_slice()
+        while fitted and self.config["budget"] <= 0:
+            more, fitted = self._work_slice()
+            spent += more
+        return spent
+
+    def _work_slice(self) -> tuple[int, bool]:
+        """One slice of `_work`: (stride evaluations spent, whether a fit finished)."""
         if self.job is None and self.trusted:
             if np.max(np.abs(self.theta - self.designed_theta)) > self.config["redesign"]:
                 self._start_design()
         job = self.job
         if job is None:
-            return 0
+            return 0, False
         done = job.advance()
         spent = job.spent
         if done:
@@ -234,7 +243,7 @@ class AdaptiveMPC(RedesignedMPC):
             else:
                 d = job.result
                 self.mpc, self.design, self.designed_theta = self.redesigned(d), d, theta
-        return spent
+        return spent, done and kind == "fit"
 
     def _decide(self, z) -> np.ndarray:
         t0 = time.perf_counter()

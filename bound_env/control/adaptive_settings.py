@@ -16,7 +16,7 @@ ADAPTIVE_DEFAULTS = {
     "trust_error": 0.15,  # an estimate is trusted after predicting an unseen stride this well
     "trust_std": 0.05,  # ... and its predicted apex's posterior std (normalized) is this small
     "trust_strides": 1,  # in-sample trust (off with trust_rms 0): once it fits this many ...
-    "trust_rms": 0.0,  # ... strides with an rms residual at most this (normalized)
+    "trust_rms": 0.05,  # ... strides with an rms residual at most this (normalized)
     "deadband": 1e-5,  # innovations at most this: no update (the nominal plant)
     "settle": 0.05,  # a trusted estimate is not refitted after innovations at most this
     "redesign": 0.005,  # a trusted estimate this far (max |log f|) from the design: redesign
@@ -28,7 +28,12 @@ ADAPTIVE_DEFAULTS = {
     # stride evaluations of identification and design per apex decision (the work is spread
     # over the decisions, `bound_env.control.anytime`); 0: all of it in one decision
     "budget": 0,
+    # a trusted estimate that mispredicts a stride: back to the shipped mpc and refit, also
+    # after ``identify`` strides (false: the design stays and fitting ends at ``identify``;
+    # chosen on the validation plants, docs/controllers.md)
+    "fallback": False,
 }
+ADAPTIVE_BOOLS = ("fallback",)
 ADAPTIVE_INTS = (
     "window", "identify", "iters", "trust_strides", "candidates", "search", "searches", "delays",
     "budget",
@@ -51,6 +56,7 @@ ADAPTIVE_LIMITS = {
     "searches": (0, 100_000),
     "delays": (0, 20),
     "budget": (0, 1_000_000),
+    "fallback": (False, True),
 }
 
 
@@ -70,6 +76,10 @@ def check_adaptive(value, path) -> dict | None:
 
 def _adaptive_value(key: str, v, where: str):
     lo, hi = ADAPTIVE_LIMITS[key]
+    if key in ADAPTIVE_BOOLS:
+        if not isinstance(v, bool):
+            raise ValueError(f"{where} must be true or false, got {v!r}")
+        return v
     if key in ADAPTIVE_INTS:
         return schema.integer(v, where, lo, hi)
     if isinstance(v, str):
