@@ -461,3 +461,17 @@ def test_column_styles_unique_and_fixed():
         assert st["lqr literal"]["color"] != st["passive"]["color"]
     many = column_styles([f"c{k}" for k in range(50)])
     assert len({(s["color"], s["ls"]) for s in many.values()}) == 50
+
+
+def test_the_readme_table_says_which_budget_each_column_is():
+    """The headline's caption names the nominal budget, and the model-error budget of the held
+    column where the rows have one (with its plants and strides, from `MISMATCH_BUDGETS`)."""
+    head = load_headline(DOCS / "headline.json")
+    with_held = render_block(head)
+    caption = with_held.splitlines()[-2]
+    assert f"r50 and σ: the **{head['budget']}** budget" in caption
+    held = [r["held"] for r in head["rows"] if r.get("held")]
+    if held:
+        assert f"the model-error budget `{held[0]['budget']}` (" in caption
+    bare = {**head, "rows": [{k: v for k, v in r.items() if k != "held"} for r in head["rows"]]}
+    assert "model-error budget" not in render_block(bare)

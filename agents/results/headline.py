@@ -483,9 +483,18 @@ def load_headline(path: Path = HEADLINE_JSON) -> dict:
 
 def render_block(head: dict) -> str:
     """The README's block: the markers around the table and the line saying where it is from."""
+    held = [r["held"] for r in head["rows"] if r.get("held")]
+    budgets = f"r50 and σ: the **{head['budget']}** budget"
+    if held:
+        from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
+
+        mb = MISMATCH_BUDGETS.get(held[0]["budget"])
+        budgets += f"; held at ±10 % / ±15 %: the model-error budget `{held[0]['budget']}`"
+        if mb is not None:
+            budgets += f" ({mb.plants} plants, {mb.hold_strides} strides from the nominal z*)"
     return (
         f"{START}\n{headline_table(head)}\n\n"
-        f"The **{head['budget']}** budget on the test set (seed {head['seed']}); generated from "
+        f"{budgets}; on the test set (seed {head['seed']}); generated from "
         f"`docs/{HEADLINE_FILE}` by `python -m agents.results.headline`.\n{END}"
     )
 
