@@ -189,24 +189,47 @@ def _data(s: Sources, name: str, path: str, unit: str = "", text: str = "") -> s
 HOLD_EVAL_SEEDS = (2026, 2027, 2028)  # scripts/hold_eval.py's test seeds, pooled
 
 
-def _hold_eval_rows(s: Sources, policy: str, delta: str) -> list[dict]:
+def _hold_eval_rows(s: Sources, policy: str | None, delta: str, seed: str = "test") -> list:
+    """The rows of ``policy`` (None: every policy) at ``delta`` on ``seed``, or on the test
+    seeds (``test``: each seed's, pooled)."""
+    seeds = HOLD_EVAL_SEEDS if seed == "test" else (int(seed),)
     rows = [
         r
         for r in s.data("hold_eval.jsonl")
-        if r.get("policy") == policy and r.get("delta") == float(delta) and not r.get("set")
-        and r.get("measure") == "mm_hold" and r.get("seed") in HOLD_EVAL_SEEDS
+        if policy in (None, r.get("policy")) and r.get("delta") == float(delta)
+        and not r.get("set") and r.get("measure") == "mm_hold" and r.get("seed") in seeds
     ]  # fmt: skip
-    if sorted(r["seed"] for r in rows) != list(HOLD_EVAL_SEEDS):
-        raise KeyError(f"hold_eval.jsonl: [policy={policy};delta={delta}] on {HOLD_EVAL_SEEDS}")
+    if policy is not None and sorted(r["seed"] for r in rows) != sorted(seeds):
+        raise KeyError(f"hold_eval.jsonl: [policy={policy};delta={delta}] on {seeds}")
     return rows
+
+
+def _held(rows: list[dict]) -> tuple[int, int]:
+    return sum(sum(map(bool, r["held"])) for r in rows), sum(len(r["held"]) for r in rows)
+
+
+def _held_effort(s: Sources, policy: str, delta: str) -> list[float]:
+    """The tail |τ| of each plant ``policy`` holds at ``delta``, the test seeds pooled."""
+    rows = _hold_eval_rows(s, policy, delta)
+    return [e for r in rows for e, h in zip(r["tail_effort"], r["held"], strict=True) if h]
 
 
 def _hold_eval_torque(s: Sources, policy: str, delta: str) -> str:
     import numpy as np
 
-    rows = _hold_eval_rows(s, policy, delta)
-    eff = [e for r in rows for e, h in zip(r["tail_effort"], r["held"], strict=True) if h]
-    return f"{float(np.median(eff)):.2g}"
+    return f"{float(np.median(_held_effort(s, policy, delta))):.2g}"
+
+
+def _hold_eval_best(s: Sources, policy: str, delta: str, seed: str) -> str:
+    """``k/n`` of one row; a ValueError naming a row of a test seed that holds more."""
+    k, n = _held(_hold_eval_rows(s, policy, delta, seed))
+    for r in _hold_eval_rows(s, None, delta):
+        if _held([r])[0] * n > k * len(r["held"]):
+            raise ValueError(
+                f"hold_eval.jsonl: not the best at {delta}: {r['policy']} on seed "
+                f"{r['seed']} holds {'/'.join(map(str, _held([r])))}"
+            )
+    return f"{k}/{n}"
 
 
 def _hold_eval_table(s: Sources) -> str:
@@ -352,6 +375,21 @@ QUANTITIES = {
         2,
         "median mean |τ| of the held plants, scripts/hold_eval.py's test seeds pooled [N m]",
         _hold_eval_torque,
+    ),
+    "holdevalk": (
+        3,
+        "plants held by a row of docs/hold_eval.jsonl (POLICY,DELTA,SEED; `test`: pooled)",
+        lambda s, p, d, seed: str(_held(_hold_eval_rows(s, p, d, seed))[0]),
+    ),
+    "holdevalbest": (
+        3,
+        "plants held k/n by one row (POLICY,DELTA,SEED), checked to be the most of a test seed",
+        _hold_eval_best,
+    ),
+    "holdevalbelow": (
+        3,
+        "held plants whose tail |τ| is below LEVEL N m (POLICY,DELTA,LEVEL), test seeds pooled",
+        lambda s, p, d, level: str(sum(e < float(level) for e in _held_effort(s, p, d))),
     ),
     "pagemin": (0, "the page's wall time [min]", lambda s: f"{s.run()['wall_seconds'] / 60:.1f}"),
     "pageworkers": (0, "the page run's workers", lambda s: str(s.run()["workers"])),
