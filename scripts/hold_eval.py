@@ -235,7 +235,27 @@ def main(argv=None) -> int:
                 }
                 with args.out.open("a") as f:
                     f.write(json.dumps(row) + "\n")
+    if args.out is not None and args.out.exists():
+        compact(args.out)
     return 0
+
+
+def compact(path: Path) -> None:
+    """Rewrite the rows file ``path`` (atomically) with only the newest row of each (policy,
+    delta, seed, set, robots): a row recomputed under a new fingerprint replaces the one before
+    it, so that a reader finds one row per key."""
+    from bound_env.cache import atomic_write
+
+    lines = path.read_text().splitlines()
+    last = {}
+    for i, line in enumerate(lines):
+        row = json.loads(line)
+        key = (row.get("measure"), row["policy"], row["delta"], row["seed"], row.get("set", ""),
+               row["n"])  # fmt: skip
+        last[key] = i
+    keep = sorted(last.values())
+    if len(keep) < len(lines):
+        atomic_write(path, "".join(lines[i] + "\n" for i in keep))
 
 
 def parser() -> argparse.ArgumentParser:
