@@ -91,9 +91,9 @@ def test_hold_eval_reuses_a_row_only_under_its_fingerprint(tmp_path, monkeypatch
     rows = [json.loads(x) for x in out.read_text().splitlines()]
     # a recomputed row replaces the one before it: one row per key, the newest
     assert len(rows) == 1 and rows[0]["fingerprint"]["inputs"]
-    assert mod.main([*argv, "--delta", "0.1", "--strides", "30"]) == 0 and len(calls) == 5
+    assert mod.main([*argv, "--delta", "0.1", "--strides", "30"]) == 0 and len(calls) == 4
     rows = [json.loads(x) for x in out.read_text().splitlines()]
-    assert [r["delta"] for r in rows] == [0.05, 0.1]  # --delta 0.05 reused, 0.1 added
+    assert [r["delta"] for r in rows] == [0.05, 0.1]  # 0.05 kept, 0.1 added
 
 
 def test_adaptive_hold_reuses_an_entry_only_under_its_fingerprint(tmp_path, monkeypatch, capsys):
