@@ -246,12 +246,7 @@ def load_result(path: Path, budget: str, seed: int, mismatch=None) -> dict:
     under that very spec, and keeps only those (the page's section is theirs); None keeps
     the blocks it holds."""
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: no margins.json to render (run compare without --render-only)")
-    try:
-        r = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise ValueError(f"{path}: not a margins result ({e})") from None
+    r = _read_result(path, "no margins.json to render (run compare without --render-only)")
     if not isinstance(r, dict) or "basin_curve" not in r:
         raise ValueError(f"{path}: not a margins result (no basin_curve)")
     if r.get("budget") != budget or r.get("seed", DEFAULT_SEED) != seed:
@@ -263,6 +258,17 @@ def load_result(path: Path, budget: str, seed: int, mismatch=None) -> dict:
     if mismatch is not None:
         r["mismatch"] = _measured_blocks(r, path, mismatch)
     return r
+
+
+def _read_result(path: Path, missing: str):
+    """The JSON of the margins result ``path``; a ValueError naming it (``missing`` when there
+    is no such file, else why it does not parse)."""
+    if not path.is_file():
+        raise ValueError(f"{path}: {missing}")
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: not a margins result ({e})") from None
 
 
 def _measured_blocks(r: dict, path: Path, specs) -> dict:
@@ -296,12 +302,7 @@ def load_model_error(path: Path, budget: str, seed: int, specs, mb: str) -> dict
     from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
 
     again = "run compare without --render-only first (or give --no-mismatch)"
-    if not path.is_file():
-        raise ValueError(f"{path}: no model-error result to render; {again}")
-    try:
-        r = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise ValueError(f"{path}: not a margins result ({e})") from None
+    r = _read_result(path, f"no model-error result to render; {again}")
     if not isinstance(r, dict) or r.get("budget") != budget or r.get("seed") != seed:
         raise ValueError(f"{path}: not of budget {budget!r} and seed {seed}; {again}")
     held = r.get("mismatch") if isinstance(r.get("mismatch"), dict) else {}
