@@ -16,8 +16,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# The wall-clock parts of a margins result: the only keys that may differ between two runs.
-WALL_CLOCK = ("seconds", "decision_seconds", "decision_times", "decision_hist")
+# The timing parts of a margins result (wall and CPU): the only keys that may differ between two
+# runs.
+WALL_CLOCK = ("seconds", "cpu_seconds", "decision_seconds", "decision_times", "decision_hist")
 
 JOB = """
 import json, sys
