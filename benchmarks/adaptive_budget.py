@@ -9,7 +9,10 @@ its observation, its slice of identification and design, its plan) and the shipp
 from the same apex (``plan``), each timed alone with ``time.perf_counter`` in the same run, so
 the ratio is load-independent. Prints p50, p99 and max of both, the ratio of the p99s, the
 largest slice of work (stride evaluations) and the machine's load (``uptime``); nothing is
-asserted.
+asserted. ``--out FILE`` also writes the row (its policy and budget replace an earlier row of
+the same pair) into FILE's ``rows``, atomically, with its ``fingerprint``
+(`agents.results.provenance.row_fingerprint`: the code, the controller's data, the spec, the
+seed, the plants and strides), so the docs can quote it (`docs/data/adaptive_budget.json`).
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ def main(argv=None) -> int:
     ap.add_argument("--strides", type=int, default=100)
     ap.add_argument("--budget", type=int, default=None, help="default: the spec's")
     ap.add_argument("--policy", default="mpc-adaptive-bounded", help="an mpc-adaptive spec")
+    ap.add_argument("--out", default=None, help="a JSON file to write the row into")
     args = ap.parse_args(argv)
     from bound_env.analysis.margins.mismatch_tasks import mismatch_seeds
     from bound_env.control import load_controller
@@ -54,6 +58,7 @@ def main(argv=None) -> int:
     plants = sample_plant_params(spec, args.plants, mismatch_seeds(args.seed)["plants"], mpc.params)
     sm = StrideMap(mpc.gait, None, mpc.dt, mpc.max_torque, EVAL_RTOL)
     t_ada, t_mpc, fell = [], [], 0
+    load_before = os.getloadavg()[0]
     print("load before:", subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip())
     for p in plants:  # (the largest slice: over the whole run)
         aux = make_aux(p.to_array())[None]
@@ -82,7 +87,57 @@ def main(argv=None) -> int:
     print(f"mpc:          {stats(t_mpc)}")
     print(f"p99 ratio {np.percentile(t_ada, 99) / np.percentile(t_mpc, 99):.2f}x "
           f"(OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')})")  # fmt: skip
+    if args.out:
+        write_row(args, ada, spec, len(plants), fell, t_ada, t_mpc, work, load_before)
     return 0
+
+
+def write_row(args, ada, spec, plants, fell, t_ada, t_mpc, work, load_before) -> None:
+    """The run's row, with its fingerprint, into ``args.out``'s ``rows`` (module docstring)."""
+    import json
+    from pathlib import Path
+
+    from agents.results.provenance import row_fingerprint
+    from bound_env.cache import atomic_write
+
+    def ms(ts, q):
+        return round(float(np.percentile(np.asarray(ts) * 1e3, q)), 2)
+
+    budget = int(ada.config["budget"])
+    row = {
+        "policy": args.policy,
+        "budget": budget,
+        "made_with": "PYTHONPATH=. python benchmarks/adaptive_budget.py "
+        f"--plants {plants} --policy {args.policy}"
+        + (f" --budget {args.budget}" if args.budget is not None else "")
+        + f" --out {args.out}",
+        "load_1min": round(load_before, 2),
+        "held": plants - fell,
+        "n": plants,
+        "decisions": len(t_ada),
+        "largest_slice": int(work),
+        "p50_ms": ms(t_ada, 50),
+        "p99_ms": ms(t_ada, 99),
+        "max_ms": ms(t_ada, 100),
+        "mpc_p50_ms": ms(t_mpc, 50),
+        "mpc_p99_ms": ms(t_mpc, 99),
+        "mpc_max_ms": ms(t_mpc, 100),
+        "p99_ratio": round(float(np.percentile(t_ada, 99) / np.percentile(t_mpc, 99)), 2),
+        "fingerprint": row_fingerprint(
+            args.policy,
+            ada,
+            spec=spec.to_dict(),
+            seed=args.seed,
+            plants=plants,
+            strides=args.strides,
+            budget=budget,
+        ),
+    }
+    out = Path(args.out)
+    data = json.loads(out.read_text()) if out.is_file() else {"rows": []}
+    keep = [r for r in data.get("rows", []) if (r["policy"], r["budget"]) != (args.policy, budget)]
+    data["rows"] = keep + [row]
+    atomic_write(out, json.dumps(data, indent=1, ensure_ascii=False) + "\n")
 
 
 if __name__ == "__main__":

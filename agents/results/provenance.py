@@ -218,18 +218,23 @@ def _data_rows(docs: Path) -> dict:
         data = json.loads(path.read_text())
         rows = [r for c in data.get("columns", {}).values() for r in c.get("rows", [])]
         out["data/hold_vs_delta.json"] = (rows, data.get("made_with"))
-    path = docs / "data" / "adaptive_hold_test.json"
-    if path.is_file():
+    for name in ("adaptive_hold_test.json", "adaptive_hold_validation.json"):
+        path = docs / "data" / name
+        if not path.is_file():
+            continue
         rows = json.loads(path.read_text()).get("entries", [])
         pols = " ".join(dict.fromkeys(r["policy"] for r in rows))
         specs = " ".join(dict.fromkeys(r["spec_name"] for r in rows))
-        seeds = {r["seed"] for r in rows}
-        seed = f" --seed {seeds.pop()}" if len(seeds) == 1 else ""
-        out["data/adaptive_hold_test.json"] = (
+        seeds = sorted({r["seed"] for r in rows})
+        out[f"data/{name}"] = (
             rows,
-            f"python scripts/adaptive_hold.py --policy {pols} --mismatch {specs}{seed} "
-            f"--out {rel(str(path))}",
+            f"for s in {' '.join(map(str, seeds))}; do python scripts/adaptive_hold.py "
+            f"--policy {pols} --mismatch {specs} --seed $s --out {rel(str(path))}; done",
         )
+    path = docs / "data" / "adaptive_budget.json"
+    if path.is_file():
+        rows = json.loads(path.read_text()).get("rows", [])
+        out["data/adaptive_budget.json"] = (rows, "; ".join(r["made_with"] for r in rows))
     path = docs / "data" / "adaptive_factors.json"
     if path.is_file():
         rows = json.loads(path.read_text())
