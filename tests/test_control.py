@@ -21,8 +21,8 @@ from bound_env.control import (
     lqr_gain,
     spectral_radius,
 )
-from bound_env.params import load_gait
-from bound_env.stride_task import make_basis
+from bound_env.model.params import load_gait
+from bound_env.sim.stride_task import make_basis
 
 gym.register_envs(bound_env)
 Z_STAR = load_gait("default").z0
@@ -180,7 +180,7 @@ def test_margins_schema_and_acceptance_numbers(tmp_path):
             [
                 sys.executable,
                 "-m",
-                "bound_env.cli",
+                "bound_env.commands.cli",
                 "margins",
                 "--policy",
                 name,

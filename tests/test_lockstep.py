@@ -81,7 +81,7 @@ def test_a_batch_must_answer_every_query():
 def _setup(policy: str):
     from agents.runtime.policy import load_controller
     from bound_env.analysis.margins import BUDGETS, Setup, run_task
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     ctrl = load_controller(policy)
     setup = Setup(ctrl, "default", BUDGETS["test"], np.asarray(load_gait("default").z0, float))

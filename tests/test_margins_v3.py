@@ -37,7 +37,7 @@ from bound_env.analysis.paired import (
     sign_test,
 )
 from bound_env.control.spec import CONTROLLERS_DIR
-from bound_env.params import GAITS_DIR, load_gait
+from bound_env.model.params import GAITS_DIR, load_gait
 
 Z_STAR = np.asarray(load_gait("default").z0, dtype=float)
 
@@ -78,7 +78,7 @@ def test_default_seed_is_the_old_test_set():
 
 
 def test_cli_default_seed_is_the_test_set():
-    from bound_env.cli import build_parser
+    from bound_env.commands.cli import build_parser
 
     parser = build_parser()
     for cmd in ("margins", "compare"):

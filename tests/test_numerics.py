@@ -1,4 +1,4 @@
-"""The shared numerics (`bound_env.analysis.numerics`) and job files (`bound_env.cache`) on
+"""The shared numerics (`bound_env.analysis.numerics`) and job files (`bound_env.files.cache`) on
 known answers: linear maps, a synthetic threshold, a cache line cut short by a kill."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from bound_env.analysis.numerics import (
     newton,
     sorted_eigenvalues,
 )
-from bound_env.cache import (
+from bound_env.files.cache import (
     TaskCache,
     append_line,
     atomic_path,

@@ -9,8 +9,8 @@ from bound_env.analysis.variational import (
     jacobian_variational,
     saltation_matrix,
 )
-from bound_env.dynamics import A_XB, A_XF, make_aux, rhs
-from bound_env.hybrid import (
+from bound_env.model.dynamics import A_XB, A_XF, make_aux, rhs
+from bound_env.model.hybrid import (
     G_LO_B,
     G_LO_F,
     G_TD_B,
@@ -21,7 +21,7 @@ from bound_env.hybrid import (
     simulate_stride,
     state_from_z,
 )
-from bound_env.params import load_gait
+from bound_env.model.params import load_gait
 
 TOL = 1e-12
 

@@ -31,7 +31,7 @@ from bound_env.analysis.numerics import (  # noqa: F401 - old names, for users' 
     map_fixed_point,
     sorted_eigenvalues,
 )
-from bound_env.parallel import SerialExecutor  # noqa: F401 - its old home, kept as an alias
+from bound_env.sim.parallel import SerialExecutor  # noqa: F401 - its old home, kept as an alias
 
 from ..runtime.policy import load_controller
 

@@ -32,8 +32,8 @@ Modules, read top to bottom:
 
 import importlib
 
-# Names re-exported lazily, so that ``bound_env.analysis.cli`` (imported by every run of the
-# ``bound-env`` command to register its sub-commands) does not load the simulator.
+# Names re-exported lazily, so that ``bound_env.commands.analysis_cli`` (imported by every run of
+# the ``bound-env`` command to register its sub-commands) does not load the simulator.
 _EXPORTS = {
     "continuation": ("Branch", "BranchPoint", "continue_branch", "plot_branch"),
     "fixed_point": ("FixedPointResult", "find_fixed_point", "paper_search", "slope_secant"),

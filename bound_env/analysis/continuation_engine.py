@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..params import Params
+from ..model.params import Params
 from .fixed_point import NEWTON_TOL, make_residual, param_step
 from .numerics import NewtonOutcome, newton
 from .stability import DZ

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..params import GAIT_KEYS, Z_NAMES, Params, z_to_paper
+from ..model.params import GAIT_KEYS, Z_NAMES, Params, z_to_paper
 from .numerics import (  # noqa: F401 - NewtonOutcome, scaled_rcond: re-exported (old home)
     NEWTON_MAX_ITER,
     NEWTON_TOL,

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..params import Params
+from ..model.params import Params
 from .numerics import MapFailure, fd_jacobian, sorted_eigenvalues  # both once defined here
 from .poincare import StrideFailure, poincare_map, sim_options, stride
 

@@ -1,6 +1,6 @@
 """Linearized stride map and the classical gain designs (LQR, deadbeat).
 
-The controlled stride map z_{k+1} = P(z_k, u_k) (`bound_env.stride_task.StrideSimulator`) is
+The controlled stride map z_{k+1} = P(z_k, u_k) (`bound_env.sim.stride_task.StrideSimulator`) is
 linearized at the passive fixed point z* with u = 0:
 
     z_{k+1} - z* ~ A (z_k - z*) + B u_k,   A = dP/dz (6 x 6, SI),  B = dP/du (6 x K),

@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..mismatch import PLANT_KEYS, plant_values
-from ..params import Params, load_gait
-from ..stride_map import EVAL_RTOL, StrideMap, interval_weights
+from ..model.mismatch import PLANT_KEYS, plant_values
+from ..model.params import Params, load_gait
+from ..sim.stride_map import EVAL_RTOL, StrideMap, interval_weights
 from .controllers import StrideFeedback
 from .design import FD_FLOOR_Z, FD_REL_Z, FD_U, lqr_gain, spectral_radius
 
@@ -95,9 +95,9 @@ class PlantDesign:
 
 def plant_overrides(plant, gait="default") -> dict:
     """The gait-file values of ``plant`` that differ from ``gait``'s: ``plant`` is a
-    `bound_env.params.Params` or a mapping of some of `bound_env.mismatch.PLANT_KEYS` to values
-    in gait-file units (``info["plant"]`` of `bound_env.wrappers.RandomizedPlant`). ValueError
-    naming the key for anything else."""
+    `bound_env.model.params.Params` or a mapping of some of `bound_env.model.mismatch.PLANT_KEYS`
+    to values in gait-file units (``info["plant"]`` of `bound_env.envs.wrappers.RandomizedPlant`).
+    ValueError naming the key for anything else."""
     nominal = plant_values(load_gait(gait).params)
     if isinstance(plant, Params):
         values = plant_values(plant)
@@ -124,7 +124,7 @@ class PlantDesigner:
     with the weights Q, R (diagonal matrices, normalized coordinates) on any plant."""
 
     def __init__(self, lqr: StrideFeedback, Q, R, max_shift: float = MAX_SHIFT):
-        from ..task import APEX_SCALES
+        from ..sim.task import APEX_SCALES
 
         self.lqr = lqr
         self.Q, self.R = np.asarray(Q, dtype=float), np.asarray(R, dtype=float)

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ...events import PHASES
+from ...model.events import PHASES
 from ..apex_loop import RETURNED, apex_loop
 from ..numerics import run_together, threshold_steps
 from .closed_loop import FAILURES_BY_REASON, STRIDES, ClosedLoop, Setup, loop_for
@@ -28,9 +28,9 @@ BASIN_GROUPS = tuple(tuple((i, sign) for i in range(6)) for sign in (1, -1))
 def start_geometry(z, loop: ClosedLoop) -> dict:
     """What the apex start state z itself rules out: ``invalid`` (the start failure, or None)
     and ``mechanisms``: geometric reasons a stride from z cannot go as the gait does."""
-    from bound_env.dynamics import back_hip, front_hip, make_aux
-    from bound_env.hybrid import failure_name, start_status, state_from_z
-    from bound_env.params import P_GB, P_GF, P_LB, P_LF
+    from bound_env.model.dynamics import back_hip, front_hip, make_aux
+    from bound_env.model.hybrid import failure_name, start_status, state_from_z
+    from bound_env.model.params import P_GB, P_GF, P_LB, P_LF
 
     y = state_from_z(z)
     aux = make_aux(loop.env.params.to_array())

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...params import Params, z_to_si
+from ...model.params import Params, z_to_si
 from ..continuation_engine import (
     CORRECTOR_MAX_ITER,
     FixedPointPath,

@@ -1,0 +1,2 @@
+"""The paper's planar model: its parameters, equations of motion, guards and resets, the
+reference and compiled integrators, the apex-to-apex stride, terrain and model error."""
