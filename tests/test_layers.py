@@ -614,7 +614,7 @@ def test_old_core_names_are_aliases_of_the_moved_modules():
     )
     assert load_env_creator("bound_env.env:PassiveBoundEnv") is bound_env.envs.env.PassiveBoundEnv
     # a pickle written before the move names the old module
-    old_pickle = pickle.dumps(bound_env.sim.task.TaskConfig).replace(
+    old_pickle = pickle.dumps(bound_env.sim.task.TaskConfig, protocol=0).replace(
         b"bound_env.sim.task", b"bound_env.task"
     )
     assert b"bound_env.task" in old_pickle

@@ -404,7 +404,7 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
 
     monkeypatch.setattr(keys, "source_files", lambda extra=(): copies + list(extra))
     k0 = setup_key(c, "default", q)
-    fast = tmp_path / "bound_env" / "fast.py"
+    fast = tmp_path / "model" / "fast.py"
     fast.write_text(fast.read_text() + "\n# a comment\n")
     assert setup_key(c, "default", q) == k0  # a comment is no code
     fast.write_text(fast.read_text() + "\nA_CHANGE = 1\n")

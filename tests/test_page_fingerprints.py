@@ -139,8 +139,8 @@ AUDITED_EDITS = {
     ),
     "mpc's StrideMap swapped for another class": (
         "bound_env/control/mpc.py",
-        "from ..stride_map import StrideMap\n",
-        "from ..stride_map import Strides as StrideMap\n",
+        "from ..sim.stride_map import StrideMap\n",
+        "from ..sim.stride_map import Strides as StrideMap\n",
         {"mpc": ["sources", "code"], "mpc-adaptive": ["sources", "code"]},
     ),
 }
