@@ -21,7 +21,7 @@ import json
 
 import numpy as np
 
-from bound_env.commands.cli_args import number
+from bound_env.files.values import number
 
 CHECKPOINTS = (1, 3, 10, 30)
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.commands.cli_args import number
+from bound_env.files.values import number
 
 
 def hold_entry(policy: str, spec_text: str, seed: int, ctrl=None) -> dict:

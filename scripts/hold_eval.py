@@ -260,8 +260,8 @@ def compact(path: Path) -> None:
 
 def parser() -> argparse.ArgumentParser:
     """The options, typed and range-checked with the command line's own argparse types
-    (`bound_env.commands.cli_args.number`): a bad one is a usage error, exit 2."""
-    from bound_env.commands.cli_args import number
+    (`bound_env.files.values.number`): a bad one is a usage error, exit 2."""
+    from bound_env.files.values import number
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", nargs="+", type=_policy, default=["lqr", "lqr+of"])
@@ -310,7 +310,7 @@ def _of_setting(text: str) -> str:
                 f"estimator must be one of {ESTIMATORS}, got {value!r}"
             )
         return text
-    from bound_env.commands.cli_args import number
+    from bound_env.files.values import number
 
     lo, hi = OF_LIMITS[key]
     try:

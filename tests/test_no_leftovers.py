@@ -16,7 +16,8 @@ import pytest
 
 from agents.runtime.policy_table import ARCHIVE_DIR
 from bound_env.commands.cli import main
-from bound_env.commands.cli_args import check_name, check_writable, name_key
+from bound_env.commands.cli_args import check_writable
+from bound_env.files.values import check_name, name_key
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -17,12 +17,8 @@ def register(sub) -> None:
         MAX_GRID,
         MAX_STRIDES,
     )
-    from bound_env.commands.cli_args import (
-        POLICY_GAIT_HELP,
-        add_gait_args,
-        add_progress_args,
-        number,
-    )
+    from bound_env.commands.cli_args import POLICY_GAIT_HELP, add_gait_args, add_progress_args
+    from bound_env.files.values import number
     from bound_env.sim.parallel import add_scheduler_args
 
     p = sub.add_parser(

@@ -144,7 +144,7 @@ def chosen_entries(parsed, keep_defaults: bool = False) -> list[tuple[str, list[
     the default-gait passive) and the ``parsed`` entries; with ``keep_defaults`` every default
     column (`default_entries`) stays, and an entry of the same label (or folder) replaces the
     default column of that name. No entries: the default columns."""
-    from bound_env.commands.cli_args import name_key
+    from bound_env.files.values import name_key
 
     defaults = default_entries()
     if not parsed:
@@ -165,7 +165,7 @@ def check_entries(entries) -> None:
     no path, no ``|``), two labels that share a folder or a column name, two policies of one
     entry that share a folder, and a policy or gait that does not load (`load_controller`,
     with its checks, as `compute_margins` loads it)."""
-    from bound_env.commands.cli_args import check_name, name_key
+    from bound_env.files.values import check_name, name_key
 
     from .margins import as_controller
 

@@ -295,7 +295,7 @@ def train(
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from bound_env.commands.cli_args import check_name
+    from bound_env.files.values import check_name
 
     given = {"env_id": env_id, "seed": seed, "sets": sets, "init_from": init_from}
     if env_id is None:

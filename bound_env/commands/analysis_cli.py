@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files.values import number
 from ..model.params import (
     GAIT_KEYS,
     Z_NAMES,
@@ -23,15 +24,7 @@ from ..model.params import (
     z_to_si,
 )
 from ..sim.parallel import add_scheduler_args
-from .cli_args import (
-    add_gait_args,
-    add_json_arg,
-    gait_from_args,
-    number,
-    out_dir,
-    say,
-    strict_json,
-)
+from .cli_args import add_gait_args, add_json_arg, gait_from_args, out_dir, say, strict_json
 
 
 def register(sub) -> None:

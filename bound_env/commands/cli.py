@@ -14,7 +14,8 @@ import sys
 import time
 from importlib.metadata import entry_points
 
-from .cli_args import add_gait_args, gait_from_args, number, strict_json
+from ..files.values import number
+from .cli_args import add_gait_args, gait_from_args, strict_json
 
 PLUGIN_GROUP = "bound_env.commands"  # entry points: name = "module:register"
 

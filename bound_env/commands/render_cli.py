@@ -20,14 +20,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from .cli_args import (
-    add_gait_args,
-    add_progress_args,
-    gait_overrides,
-    number,
-    out_dir,
-    strict_json,
-)
+from ..files.values import number
+from .cli_args import add_gait_args, add_progress_args, gait_overrides, out_dir, strict_json
 
 # name -> part(gait=..., out=..., progress=...) -> (JSON-able summary, lines to print at the
 # end); ``bound-env demo`` runs them in order and stores each summary under its name

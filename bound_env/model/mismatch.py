@@ -29,7 +29,7 @@ A YAML file (``--mismatch path.yaml``) has the keys ``params`` (a mapping of `PL
 delta), ``noise`` (a mapping of `NOISE_SCALES` names to sigma, or one number for all of
 them), ``delay`` (an integer) and optionally ``name`` (default: the file's stem); every key
 is optional, none may appear twice. A name is 1 to 64 letters, digits, ``. _ + - ( )`` and
-single spaces (`bound_env.commands.cli_args.check_name`): it heads a column of the results page.
+single spaces (`bound_env.files.values.check_name`): it heads a column of the results page.
 Ranges lie in [0, 1), noise in [0, `MAX_NOISE`] (one scale: more buries the signal, and
 the observation sits at its bounds), the delay in [0, `MAX_DELAY`].
 
@@ -49,8 +49,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..commands.cli_args import check_name
 from ..files import schema
+from ..files.values import check_name
 from .params import Params
 
 # Plant parameters that may vary (gait-file names) and the `Params` field each scales.

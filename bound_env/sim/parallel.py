@@ -215,7 +215,7 @@ def add_scheduler_args(p, workers_default: int | None = 2) -> None:
         f"running scheduler (needs {DASK_HINT}); default: a local process pool",
     )
     if workers_default is not None:
-        from ..commands.cli_args import number
+        from ..files.values import number
 
         p.add_argument(
             "--workers",
