@@ -41,10 +41,11 @@ Gymnasium itself is imported lazily by those modules; the simulator (`bound_env.
 The package in rooms by job, lowest first (imports point down only, ``tests/test_layers.py``):
 
 - `bound_env.files`: file schemas and value checks, the task cache, package resources, layouts;
-- `bound_env.model`: the paper's model, its integrators, the stride, terrain and model error;
+- `bound_env.model`: the paper's model, its integrators, the stride, terrain and model error,
+  the numerics on any map and the stride's exact Jacobian;
 - `bound_env.sim`: the task and its kernels, the stride map and protocol, the process pool;
-- `bound_env.analysis`: the Poincaré tools, the margins, the reproduction;
-- `bound_env.control`: the classical controllers (their designs use the analysis numerics);
+- `bound_env.analysis` and `bound_env.control`, side by side (neither imports the other): the
+  Poincaré tools, the margins, the reproduction; the classical controllers;
 - `bound_env.envs`: the Gymnasium envs, their wrappers and rendering;
 - `bound_env.commands`: the ``bound-env`` command line.
 
@@ -79,6 +80,8 @@ MOVED = {
     f"bound_env.{m}": f"bound_env.{room}.{m}" for room, ms in _ROOMS.items() for m in ms.split()
 }
 MOVED["bound_env.analysis.cli"] = "bound_env.commands.analysis_cli"
+MOVED["bound_env.analysis.numerics"] = "bound_env.model.numerics"
+MOVED["bound_env.analysis.variational"] = "bound_env.model.variational"
 
 
 class ModuleAliases(importlib.abc.MetaPathFinder, importlib.abc.Loader):

@@ -26,9 +26,9 @@ import numpy as np
 
 from agents.runtime.policy import load_controller
 from bound_env.analysis.margins import RETURN_TOL, ClosedLoop, fd_steps, random_directions
-from bound_env.analysis.numerics import map_fixed_point
 from bound_env.commands.cli_args import check_writable
 from bound_env.files.cache import atomic_write
+from bound_env.model.numerics import map_fixed_point
 from bound_env.model.params import load_gait
 from bound_env.sim.stride_protocol import reset_controller
 

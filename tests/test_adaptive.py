@@ -371,7 +371,7 @@ def test_the_fixed_point_of_mpc_adaptive_on_the_nominal_plant_is_mpcs(mpc):
     """The nominal fixed-point task (iterates and central-difference probes) leaves
     mpc-adaptive untaught: its cycle and multipliers are mpc's, bit for bit."""
     from bound_env.analysis.margins import ClosedLoop, fd_steps
-    from bound_env.analysis.numerics import map_fixed_point
+    from bound_env.model.numerics import map_fixed_point
 
     ctrl = load_controller("mpc-adaptive")
     loop = ClosedLoop(ctrl, "default")

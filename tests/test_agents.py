@@ -15,7 +15,7 @@ from agents.results.margins import compute_margins
 from agents.runtime.controllers import MLPController, ZeroController
 from agents.runtime.policy import load_controller
 from bound_env.analysis.margins import BUDGETS, random_directions
-from bound_env.analysis.numerics import (
+from bound_env.model.numerics import (
     bisect_threshold,
     fd_jacobian,
     map_fixed_point,

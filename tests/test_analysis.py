@@ -83,7 +83,7 @@ def test_jacobian_method_validated(gait, fixed):
 
 
 def test_variational_jacobian_matches_fd(gait, fixed):
-    pytest.importorskip("bound_env.analysis.variational")
+    pytest.importorskip("bound_env.model.variational")
     st = stability(fixed.z, gait.params, method="variational")
     assert np.max(np.abs(st.eigenvalues - fixed.eigenvalues)) < 1e-6
 

@@ -32,7 +32,7 @@ def closed_loop_jacobian(ctrl):
     """Fixed point and Jacobian of the closed-loop stride map z -> P(z, u(z)), measured in
     PassiveBoundStride-v1: Newton with a central-difference Jacobian."""
     from bound_env.analysis.margins import fd_steps
-    from bound_env.analysis.numerics import map_fixed_point
+    from bound_env.model.numerics import map_fixed_point
 
     env = gym.make("PassiveBoundStride-v1", **ctrl.stride_env_kwargs).unwrapped
 

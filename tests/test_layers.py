@@ -268,7 +268,7 @@ PENDING: dict[str, set[str]] = {}  # analysis modules still importing the protoc
 
 def test_analysis_never_imports_control():
     """bound_env.analysis (the Poincaré tools and the margins) never imports bound_env.control
-    (whose design imports the analysis numerics), directly or through other modules."""
+    (the numerics both use live in bound_env.model), directly or through other modules."""
     import bound_env.control.controllers as controllers
     import bound_env.sim.stride_protocol as protocol
 
@@ -526,22 +526,23 @@ def test_old_flat_names_are_aliases_of_the_moved_modules():
 # bound_env/ in rooms by job, lowest first, with the same rule as agents'. The package itself
 # (`bound_env/__init__.py`: the env ids, their registration, the old names' aliases) sits on
 # `files` (it chooses the Numba cache through `files.resources` before anything compiles);
-# `control` sits on `analysis` (its designs linearize the stride map with the analysis
-# numerics); the envs on `control` (the rescue task designs its LQR, `LibraryActions` takes the
-# MPC's profile library).
+# `analysis` and `control` are siblings on `sim` (the numerics and the exact Jacobian that both
+# use live in `model`): neither imports the other; the envs sit on `control` (the rescue task
+# designs its LQR, `LibraryActions` takes the MPC's profile library).
 CORE_ROOMS = {
     "bound_env.files": 0,
     "bound_env": 1,
     "bound_env.model": 2,
     "bound_env.sim": 3,
     "bound_env.analysis": 4,
-    "bound_env.control": 5,
-    "bound_env.envs": 6,
-    "bound_env.commands": 7,
+    "bound_env.control": 4,
+    "bound_env.envs": 5,
+    "bound_env.commands": 6,
 }
 # the rooms issue 47 made: each says its job in one sentence
 NEW_CORE_ROOMS = ("files", "model", "sim", "envs", "commands")
-# every module name that moved (the flat core's 33 and the analysis commands): configs,
+# every module name that moved (the flat core's 33, the analysis commands and the numerics that
+# analysis and control share): configs,
 # fingerprints, pickles, Gymnasium entry points and older console scripts name them
 OLD_CORE_NAMES = (
     "_dop853 cache cli cli_args dynamics env events fast hybrid layout mismatch parallel params "
@@ -555,20 +556,22 @@ def test_the_room_check_sees_an_arrow_up_in_the_core():
     edges = {
         "bound_env.sim.parallel": ["bound_env.commands.cli_args", "bound_env.model.params"],
         "bound_env.analysis.margins.run": ["bound_env.control.spec", "bound_env.sim.task"],
+        "bound_env.control.design": ["bound_env.analysis.numerics", "bound_env.model.numerics"],
         "bound_env.files.schema": ["bound_env"],
         "bound_env.envs.env": ["bound_env.envs.render", "bound_env.control.mpc"],
     }
     assert _arrows_up(edges, CORE_ROOMS) == [
         "bound_env.sim.parallel -> bound_env.commands.cli_args",
-        "bound_env.analysis.margins.run -> bound_env.control.spec",
+        "bound_env.analysis.margins.run -> bound_env.control.spec",  # siblings
+        "bound_env.control.design -> bound_env.analysis.numerics",
         "bound_env.files.schema -> bound_env",
     ]
 
 
 def test_core_rooms_point_down():
-    """files -> the package -> model -> sim -> analysis -> control -> envs -> commands: the
-    model never imports the simulation, the simulation never the command line, the analysis
-    never the envs; every module lives in a room."""
+    """files -> the package -> model -> sim -> analysis, control (side by side) -> envs ->
+    commands: the model never imports the simulation, the simulation never the command line,
+    the analysis never the envs nor control; every module lives in a room."""
     mods, _, edges = _graph("bound_env")
     assert {_room(m) for m in mods} == set(CORE_ROOMS)
     assert _arrows_up(edges, CORE_ROOMS) == []
@@ -595,7 +598,9 @@ def test_old_core_names_are_aliases_of_the_moved_modules():
 
     from gymnasium.envs.registration import load_env_creator
 
-    old = {f"bound_env.{m}" for m in OLD_CORE_NAMES} | {"bound_env.analysis.cli"}
+    old = {f"bound_env.{m}" for m in OLD_CORE_NAMES} | {
+        f"bound_env.analysis.{m}" for m in ("cli", "numerics", "variational")
+    }
     assert set(bound_env.MOVED) == old
     mods = _modules("bound_env")
     assert set(bound_env.MOVED.values()) <= set(mods)

@@ -29,7 +29,7 @@ from bound_env.analysis.margins.stats import (
     threshold_on_grid,
     wilson_interval,
 )
-from bound_env.analysis.numerics import bisect_threshold
+from bound_env.model.numerics import bisect_threshold
 
 
 def test_bisection_grows_past_one_to_a_known_basin_of_five():

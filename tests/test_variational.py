@@ -3,12 +3,6 @@
 import numpy as np
 import pytest
 
-from bound_env.analysis.variational import (
-    augmented_jacobian,
-    guard,
-    jacobian_variational,
-    saltation_matrix,
-)
 from bound_env.model.dynamics import A_XB, A_XF, make_aux, rhs
 from bound_env.model.hybrid import (
     G_LO_B,
@@ -22,6 +16,12 @@ from bound_env.model.hybrid import (
     state_from_z,
 )
 from bound_env.model.params import load_gait
+from bound_env.model.variational import (
+    augmented_jacobian,
+    guard,
+    jacobian_variational,
+    saltation_matrix,
+)
 
 TOL = 1e-12
 

@@ -144,7 +144,7 @@ class BasinValidationCallback(BaseCallback):
 
     def score(self, ctrl) -> float:
         from bound_env.analysis.margins import BASIN_HI, BASIN_LO, ClosedLoop, fd_steps
-        from bound_env.analysis.numerics import bisect_threshold, map_fixed_point
+        from bound_env.model.numerics import bisect_threshold, map_fixed_point
         from bound_env.model.params import load_gait
 
         gait = self.env_kwargs.get("gait", "default")

@@ -25,8 +25,8 @@ import numpy as np
 
 from ..model.dynamics import make_aux, total_energy
 from ..model.hybrid import StrideResult, simulate_stride, state_from_z
+from ..model.numerics import MapFailure
 from ..model.params import Params
-from .numerics import MapFailure
 
 ANALYSIS_TOL = 1e-12  # rtol = atol of the integrator for every analysis stride
 PAPER_STRIDES = 100  # strides simulated before the convergence check (III.D.4 C, IV.B.3)

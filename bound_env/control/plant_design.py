@@ -7,7 +7,7 @@ place (`PlantDesigner.design`):
 
 1. **The target: the plant's own cycle.** Newton on the plant's passive apex map,
    F(z) = P(z, 0) - z, from the nominal z* (or a hint), with the Jacobian by central
-   differences in one batch of strides (`bound_env.analysis.numerics.newton`). A passive cycle
+   differences in one batch of strides (`bound_env.model.numerics.newton`). A passive cycle
    needs no torque, so the loop that holds it spends nothing on it. It is kept if Newton
    converges within ``max_shift`` (normalized apex error max |z - z*|_i / s_i) of z*.
 2. **Where the plant has none near z\\*** (the passive cycle ends in a fold within a few
@@ -164,7 +164,7 @@ class PlantDesigner:
 
     def passive_cycle(self, sm: StrideMap, z0):
         """Newton on P(z, 0) = z from z0: (z, residual, converged)."""
-        from ..analysis.numerics import newton
+        from ..model.numerics import newton
 
         K = self.lqr.basis.K
         u0 = np.zeros(K)
@@ -177,7 +177,7 @@ class PlantDesigner:
         def jac(z):
             out = self.jacobians(sm, z, u0)
             if out is None:
-                from ..analysis.numerics import MapFailure
+                from ..model.numerics import MapFailure
 
                 raise MapFailure("a stride fails near the point", z)
             return out[1] - np.eye(6)

@@ -3,7 +3,7 @@ the start geometry, the physical cap of a direction, and the grown-then-bisected
 the ceiling uses too (`grown_search`).
 
 A direction's search is a generator (`basin_steps`): `task_basins` runs the searches of
-several directions in lockstep (`bound_env.analysis.numerics.run_together`), each step's
+several directions in lockstep (`bound_env.model.numerics.run_together`), each step's
 closed-loop runs as one batch of robots advanced together (`closed_loop_runs`); each search
 sees the outcomes it would see alone, so its result is `task_basin`'s."""
 
@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from ...model.events import PHASES
+from ...model.numerics import run_together, threshold_steps
 from ..apex_loop import RETURNED, apex_loop
-from ..numerics import run_together, threshold_steps
 from .closed_loop import FAILURES_BY_REASON, STRIDES, ClosedLoop, Setup, loop_for
 
 BASIN_LO, BASIN_HI = 1e-3, 1.0  # first bracket of the relative basin search (then it grows)
@@ -106,7 +106,7 @@ def grown_search(ok, cap: float, iters: int) -> tuple[float, bool, float | None]
 
 
 def grown_steps(cap: float, iters: int):
-    """`grown_search` as a generator (`bound_env.analysis.numerics.threshold_steps`): it
+    """`grown_search` as a generator (`bound_env.model.numerics.threshold_steps`): it
     yields each size to test, is sent whether it held, and returns what `grown_search`
     returns."""
     fails = []

@@ -35,9 +35,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from ..model.dynamics import A_CB, A_XB, A_XF, body_points, jit, make_aux, rhs, trig
-from ..model.hybrid import simulate_stride, state_from_z
-from ..model.params import P_GB, P_GF, P_LB, P_LF, Z_IN_Y, Params
+from .dynamics import A_CB, A_XB, A_XF, body_points, jit, make_aux, rhs, trig
+from .hybrid import simulate_stride, state_from_z
+from .params import P_GB, P_GF, P_LB, P_LF, Z_IN_Y, Params
 
 N_W = 10  # augmented state: y (8) + two toe positions
 Z_ROWS = np.array(Z_IN_Y)  # z = w[Z_ROWS] (eq. 17)

@@ -1,4 +1,5 @@
-"""Numerics on any map ``f(z) -> z | None``: the analysis and the agents share these.
+"""Numerics on any map ``f(z) -> z | None``: the analysis, the controllers' designs and the
+agents share these.
 
 A map that returns ``None`` has failed there (a stride that fell); every function here says
 what it does with such a point. Nothing in this module knows about strides or parameters.
