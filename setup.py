@@ -2,7 +2,7 @@
 
 ``configs/`` stays at the top of the repository and is mapped into the wheel as the data
 package ``bound_env.configs`` (gaits and controller specs in its subpackages ``gaits`` and
-``controllers``; read with importlib.resources, see `bound_env.resources`). The
+``controllers``; read with importlib.resources, see `bound_env.files.resources`). The
 code packages are found, so a new subpackage under ``bound_env/`` or ``agents/`` is shipped
 without editing this file. The shipped policies are package data of ``agents``
 (``agents/policies/<name>/`` and ``agents/policies/<group>/<name>/``, see

@@ -23,12 +23,10 @@ aliases of the same module objects (`MOVED`): users' scripts, run configs naming
 that reading's periodic gait) is registered by `bound_env` itself, beside ``PassiveBound-v0``.
 """
 
-import importlib
-import importlib.abc
-import importlib.util
-import sys
-
-from bound_env import LITERAL_ENV_ID  # noqa: E402,F401 - kept here for older imports
+from bound_env import (
+    LITERAL_ENV_ID,  # noqa: E402,F401 - kept here for older imports
+    install_aliases,
+)
 
 _ROOMS = {
     "results": (
@@ -46,25 +44,7 @@ _ROOMS = {
 MOVED = {f"agents.{m}": f"agents.{room}.{m}" for room, ms in _ROOMS.items() for m in ms.split()}
 
 
-class _Alias(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    """Imports an old flat name (`MOVED`) as the module it moved to: the same module object."""
-
-    def find_spec(self, fullname, path=None, target=None):
-        if fullname in MOVED:
-            return importlib.util.spec_from_loader(fullname, self)
-        return None
-
-    def create_module(self, spec):
-        module = importlib.import_module(MOVED[spec.name])
-        spec.loader_state = module.__spec__  # the import sets the alias's spec on the module
-        return module
-
-    def exec_module(self, module):
-        module.__spec__ = module.__spec__.loader_state
-
-
-if not any(isinstance(f, _Alias) for f in sys.meta_path):
-    sys.meta_path.insert(0, _Alias())  # before an installed copy that still has the old files
+install_aliases(MOVED)  # bound_env's finder: old names are the same module objects
 
 
 def register_envs() -> None:

@@ -1,4 +1,4 @@
-"""``bound-env train | margins | compare`` (registered by `bound_env.cli`)."""
+"""``bound-env train | margins | compare`` (registered by `bound_env.commands.cli`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from bound_env.cli_args import (
+from bound_env.commands.cli_args import (
     POLICY_GAIT_HELP,
     add_gait_args,
     add_json_arg,
@@ -50,8 +50,8 @@ def _add_sample_seed(p, number) -> None:
 
 
 def register(sub) -> None:
-    from bound_env.cli_args import add_progress_args, name_type, number
-    from bound_env.parallel import MAX_WORKERS, add_scheduler_args
+    from bound_env.commands.cli_args import add_progress_args, name_type, number
+    from bound_env.sim.parallel import MAX_WORKERS, add_scheduler_args
 
     from .common.config import DEFAULT_CONFIG, DEFAULT_ENV_ID
 
@@ -328,7 +328,7 @@ def register(sub) -> None:
     register_finetune(sub)
 
     # the main job's passive-vs-learned comparison (bound-env demo; agents/results/demo.py)
-    from bound_env.render_cli import register_demo_part
+    from bound_env.commands.render_cli import register_demo_part
 
     register_demo_part("comparison", demo_comparison)
 
@@ -363,8 +363,8 @@ def cmd_rollout(args) -> int:
 
 
 def _write_json(path: Path, data) -> Path:
-    """Write JSON atomically (`bound_env.cache.atomic_write`), creating the folder."""
-    from bound_env.cache import atomic_write
+    """Write JSON atomically (`bound_env.files.cache.atomic_write`), creating the folder."""
+    from bound_env.files.cache import atomic_write
 
     out_dir(path.parent)
     return atomic_write(path, json.dumps(data, indent=2) + "\n")
@@ -421,7 +421,7 @@ def train_sets(args) -> list[str]:
     of ``--set`` as ``env_kwargs.gait_overrides.KEY`` and ``--gait`` as ``env_kwargs.gait``. A
     ``--set`` of another key (``n_steps=``, ``env_kwargs.x=``) is the old spelling of ``--hp``:
     it still works, with a deprecation notice on stderr."""
-    from bound_env.params import GAIT_KEYS, parse_override
+    from bound_env.model.params import GAIT_KEYS, parse_override
 
     sets = list(getattr(args, "hp", None) or [])
     for text in args.set or []:
@@ -552,7 +552,7 @@ def cmd_margins(args) -> int:
 
 def _checked(path, flag: str) -> Path:
     """``path`` once `check_writable` passes (created later, by the command's own work)."""
-    from bound_env.cli_args import check_writable
+    from bound_env.commands.cli_args import check_writable
 
     check_writable(path, flag)
     return Path(path)
@@ -564,7 +564,7 @@ def cmd_compare(args) -> int:
     parsed = [parse_entry(t) for t in args.entry or ()]
     mismatch = None
     if args.mismatch is not None:
-        from bound_env.mismatch import parse_specs
+        from bound_env.model.mismatch import parse_specs
 
         mismatch = parse_specs(args.mismatch)  # a bad spec: before any work
     entries = chosen_entries(parsed, keep_defaults=args.keep_defaults)

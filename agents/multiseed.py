@@ -1,7 +1,7 @@
 """Several trainings of one recipe, one per seed, as tasks of an executor; then ``compare``.
 
 ``bound-env train --seeds 0,1,2 [--scheduler local|tcp://HOST:PORT] [--workers N]`` runs
-`agents.training.train.train` once per seed, each as one task (`bound_env.parallel`), with
+`agents.training.train.train` once per seed, each as one task (`bound_env.sim.parallel`), with
 ``torch.set_num_threads(1)`` in the task (one core per training), and ends with
 `agents.results.compare.compare` over the seeds (passive vs the recipe, mean and 95 % t interval).
 
@@ -89,7 +89,7 @@ def train_seeds(
     """Train ``name``_s<seed> for every seed through one executor, then compare them with
     the passive gait (unless ``compare_budget`` is None). Returns {"runs": [...],
     "compare": path of the page or None}."""
-    from bound_env.parallel import TasksFailed, open_pool, run_tasks
+    from bound_env.sim.parallel import TasksFailed, open_pool, run_tasks
 
     if transfer not in TRANSFERS:
         raise ValueError(f"--runs-transfer must be one of {TRANSFERS}, got {transfer!r}")

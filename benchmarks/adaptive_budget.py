@@ -2,7 +2,7 @@
 
 Run by hand: ``PYTHONPATH=. python benchmarks/adaptive_budget.py [--spec pm10] [--seed 777]
 [--plants 8] [--strides 100] [--policy mpc-adaptive-bounded] [--budget N]``. Robot i runs
-on plant i of the seed's plants (`bound_env.mismatch.sample_plant_params`, the margins' plant
+on plant i of the seed's plants (`bound_env.model.mismatch.sample_plant_params`, the margins' plant
 seed) from the nominal z*,
 through the stride map on its plant; at every apex mpc-adaptive decides (``stride_action``:
 its observation, its slice of identification and design, its plan) and the shipped mpc plans
@@ -44,9 +44,9 @@ def main(argv=None) -> int:
     from bound_env.analysis.margins.mismatch_tasks import mismatch_seeds
     from bound_env.control import load_controller
     from bound_env.control.adaptive import AdaptiveMPC
-    from bound_env.dynamics import make_aux
-    from bound_env.mismatch import as_spec, sample_plant_params
-    from bound_env.stride_map import EVAL_RTOL, StrideMap
+    from bound_env.model.dynamics import make_aux
+    from bound_env.model.mismatch import as_spec, sample_plant_params
+    from bound_env.sim.stride_map import EVAL_RTOL, StrideMap
 
     mpc = load_controller("mpc")
     extra = dict(a.split("=") for a in os.environ.get("ADAPTIVE_SET", "").split() if a)
@@ -98,7 +98,7 @@ def write_row(args, ada, spec, plants, fell, t_ada, t_mpc, work, load_before) ->
     from pathlib import Path
 
     from agents.results.provenance import row_fingerprint
-    from bound_env.cache import atomic_write
+    from bound_env.files.cache import atomic_write
 
     def ms(ts, q):
         return round(float(np.percentile(np.asarray(ts) * 1e3, q)), 2)

@@ -15,7 +15,7 @@ has loaded the compiled code), then the whole grid is timed without the chunk ca
 Cluster start-up is timed separately. The machine's load average is printed beside: other
 jobs on the machine slow every row, and the ratios between rows are what to compare.
 ``--json PATH`` records each case's grid time in the ``basin_map`` section of PATH
-(`bound_env.cache.record_section`: with the load, the commit and the command); the docs quote
+(`bound_env.files.cache.record_section`: with the load, the commit and the command); the docs quote
 ``docs/timings.json``'s (`agents.results.numbers`, ``basinmap(NAME)``).
 """
 
@@ -38,8 +38,8 @@ from bound_env.analysis.basin import (
     run_chunk,
     run_grid,
 )
-from bound_env.parallel import open_pool
-from bound_env.params import load_gait
+from bound_env.model.params import load_gait
+from bound_env.sim.parallel import open_pool
 
 
 def spec_for(grid: int, controller=None, gait: str = "default", chunk: int = 128) -> BasinSpec:
@@ -139,7 +139,7 @@ def main() -> None:
             )
     print(f"load average at end: {os.getloadavg()}")
     if args.json:
-        from bound_env.cache import record_section
+        from bound_env.files.cache import record_section
 
         record_section(
             args.json,

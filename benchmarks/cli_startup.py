@@ -2,7 +2,7 @@
 
 Run by hand: ``.venv/bin/python benchmarks/cli_startup.py [--rounds 5]``.
 
-Each case runs ``python -c "from bound_env.cli import main; main()" ARGS`` in a fresh
+Each case runs ``python -c "from bound_env.commands.cli import main; main()" ARGS`` in a fresh
 process (the console script does the same), so the time includes Python's start and every
 import made before the arguments are parsed. The median wall time and the CPU time (user +
 sys, which machine load affects less) of each case are printed, and the modules that parsing
@@ -25,14 +25,14 @@ CASES = {
 }
 HEAVY = ("numba", "torch", "stable_baselines3", "scipy", "matplotlib")
 PROBE = (
-    "import sys\nfrom bound_env.cli import build_parser\nbuild_parser()\n"
+    "import sys\nfrom bound_env.commands.cli import build_parser\nbuild_parser()\n"
     "print(' '.join(m for m in {heavy!r} if m in sys.modules))"
 )
 
 
 def run(args: list[str]) -> tuple[float, float]:
     """(wall, cpu) seconds of one CLI call in a fresh process."""
-    code = "from bound_env.cli import main; import sys; sys.exit(main())"
+    code = "from bound_env.commands.cli import main; import sys; sys.exit(main())"
     t0 = time.perf_counter()
     before = os.times()
     subprocess.run([sys.executable, "-c", code, *args], capture_output=True, check=False)

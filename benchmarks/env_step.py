@@ -9,7 +9,7 @@ so that machine load affects them alike; the medians are printed. The vector env
 (sync, async, and the native ``vector_entry_point`` one with N = 8 and 64) are reported as
 environment-steps per second (N per call). Ratios are against Pendulum-v1's single-env rate.
 ``--json PATH`` records the medians in the ``env_step`` section of PATH
-(`bound_env.cache.record_section`); the docs quote ``docs/timings.json``'s.
+(`bound_env.files.cache.record_section`); the docs quote ``docs/timings.json``'s.
 """
 
 from __future__ import annotations
@@ -111,7 +111,7 @@ def main():
     for env in singles.values():
         env.close()
     if args.json:
-        from bound_env.cache import record_section
+        from bound_env.files.cache import record_section
 
         record_section(
             args.json,

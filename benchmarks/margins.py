@@ -159,7 +159,7 @@ def measure(policy: str, budget_name: str, measures: list[str], gait: str) -> di
     import numpy as np
 
     from agents.runtime.policy import load_controller
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     Setup, run_task, setup_key, as_budget, strides, where, chunk = _api()
     budget = as_budget(budget_name)

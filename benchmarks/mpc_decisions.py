@@ -118,7 +118,7 @@ def main(argv=None) -> None:
         raise SystemExit("--rounds must be at least 1")
 
     from agents.results.decisions import timing_states
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     Z = timing_states(load_gait("default").z0, args.seed)
     base = args.base.resolve() if args.base else base_checkout(args.commit)

@@ -1,6 +1,6 @@
 """The step-level residual policy in the batched closed loop: all robots' actions in one call
 (`ResidualController.act_rows`, batched end to end: the bases' interval torques in one array,
-`bound_env.stride_protocol.profile_rows`, the features and the network's forward pass) against
+`bound_env.sim.stride_protocol.profile_rows`, the features and the network's forward pass) against
 one call per robot (the loop before it), and against act_rows with each base called row by row
 (the network alone batched: the loop of the last page).
 

@@ -9,8 +9,8 @@ import argparse
 import statistics
 import time
 
-from bound_env.hybrid import simulate_stride
-from bound_env.params import load_gait
+from bound_env.model.hybrid import simulate_stride
+from bound_env.model.params import load_gait
 
 
 def median_time(fn, repeats, inner):

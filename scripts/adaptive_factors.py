@@ -21,7 +21,7 @@ import json
 
 import numpy as np
 
-from bound_env.cli_args import number
+from bound_env.files.values import number
 
 CHECKPOINTS = (1, 3, 10, 30)
 
@@ -34,7 +34,7 @@ def run(policy: str, spec: str, n: int) -> dict:
     from agents.experts.adaptive import FACTOR_KEYS, true_map, validation_plants
     from agents.results.provenance import row_fingerprint
     from agents.runtime.policy import load_controller
-    from bound_env.mismatch import as_spec
+    from bound_env.model.mismatch import as_spec
 
     ctrl = load_controller(policy)
     # what made the entry (`agents.results.provenance.row_fingerprint`), before it is used
@@ -90,7 +90,7 @@ def main(argv=None) -> int:
     check_run_arguments(ap, args.policy, [args.mismatch])  # before the run starts
     from pathlib import Path
 
-    from bound_env.cache import atomic_write
+    from bound_env.files.cache import atomic_write
 
     res = [run(p, args.mismatch, args.plants) for p in args.policy]
     atomic_write(Path(args.out), json.dumps(res, indent=1) + "\n")

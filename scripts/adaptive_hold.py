@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.cli_args import number
+from bound_env.files.values import number
 
 
 def hold_entry(policy: str, spec_text: str, seed: int, ctrl=None) -> dict:
@@ -35,8 +35,8 @@ def hold_entry(policy: str, spec_text: str, seed: int, ctrl=None) -> dict:
     from bound_env.analysis.margins import as_budget
     from bound_env.analysis.margins.closed_loop import Setup
     from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS, task_mm_hold
-    from bound_env.mismatch import as_spec
-    from bound_env.params import load_gait
+    from bound_env.model.mismatch import as_spec
+    from bound_env.model.params import load_gait
 
     spec = as_spec(spec_text)
     ctrl = load_controller(policy) if ctrl is None else ctrl
@@ -101,7 +101,7 @@ def privileged_entry(name: str, spec_text: str, seed: int) -> dict:
     from agents.experts.adaptive import CycleTeacher, hold_on, privileged_teacher
     from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS, mismatch_seeds
     from bound_env.control import load_controller as classical
-    from bound_env.mismatch import as_spec, sample_plant_params
+    from bound_env.model.mismatch import as_spec, sample_plant_params
 
     spec = as_spec(spec_text)
     mb = MISMATCH_BUDGETS["quick"]
@@ -171,11 +171,11 @@ def main(argv=None) -> int:
     from agents.runtime.policy_args import check_run_arguments
 
     check_run_arguments(ap, args.policy, args.mismatch, skip=PRIVILEGED)
-    from bound_env.cache import atomic_write
+    from bound_env.files.cache import atomic_write
 
     out = Path(args.out)
     from agents.results.provenance import reusable
-    from bound_env.mismatch import as_spec
+    from bound_env.model.mismatch import as_spec
 
     data = json.loads(out.read_text()) if out.is_file() else {"entries": []}
 

@@ -86,7 +86,7 @@ def parser():
 
 
 def main(argv=None) -> int:
-    from bound_env.schema import read_json
+    from bound_env.files.schema import read_json
 
     args = parser().parse_args(argv)
     try:

@@ -26,11 +26,11 @@ import numpy as np
 
 from agents.runtime.policy import load_controller
 from bound_env.analysis.margins import RETURN_TOL, ClosedLoop, fd_steps, random_directions
-from bound_env.analysis.numerics import map_fixed_point
-from bound_env.cache import atomic_write
-from bound_env.cli_args import check_writable
-from bound_env.params import load_gait
-from bound_env.stride_protocol import reset_controller
+from bound_env.commands.cli_args import check_writable
+from bound_env.files.cache import atomic_write
+from bound_env.model.numerics import map_fixed_point
+from bound_env.model.params import load_gait
+from bound_env.sim.stride_protocol import reset_controller
 
 SIZES = (0.02, 0.05)  # relative perturbation sizes (the passive basin_min is ~0.02)
 N_DIRS = 12

@@ -24,10 +24,11 @@ from pathlib import Path
 from agents.common.seeds import VALIDATION_SEED
 from agents.results.margins import compute_margins
 from bound_env.analysis.margins import DEFAULT_SEED, check_seed
-from bound_env.cache import atomic_write
-from bound_env.cli_args import check_writable, number
+from bound_env.commands.cli_args import check_writable
 from bound_env.control import ControllerSpec, load_controller
-from bound_env.parallel import MAX_WORKERS
+from bound_env.files.cache import atomic_write
+from bound_env.files.values import number
+from bound_env.sim.parallel import MAX_WORKERS
 
 XD = [1.0, 1.0, 1.0, 10.0, 1.0, 1.0]  # Q weighting forward speed 10x
 SETTINGS = [  # (label, spec keyword arguments)

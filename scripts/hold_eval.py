@@ -6,7 +6,7 @@
 The hold measure of ``bound-env margins --mismatch pmD`` (``mismatch.hold``), alone, for many
 controllers, error sizes and seeds. Each robot runs on its own plant: m1, m2, I1, I2, kb, kf,
 kc and zeta of the controller's gait each scaled by U(1 - delta, 1 + delta), drawn by the
-library's plant sampling (`bound_env.mismatch.sample_plant_params`) from the library's plant
+library's plant sampling (`bound_env.model.mismatch.sample_plant_params`) from the library's plant
 seed of ``--seed`` (`bound_env.analysis.margins.mismatch_tasks.mismatch_seeds`), so that
 ``--seed 777 --delta 0.05`` names the same plants, in the same order, as
 ``bound-env margins --mismatch pm5 --seed 777`` (the same plants for every controller).
@@ -41,8 +41,8 @@ from bound_env.analysis.margins.mismatch_tasks import (
     plants_of,
     task_mm_hold,
 )
-from bound_env.mismatch import EIGHT, from_dict
-from bound_env.params import load_gait
+from bound_env.model.mismatch import EIGHT, from_dict
+from bound_env.model.params import load_gait
 
 TAIL = 10  # strides of the effort average
 MEASURE = "mm_hold"  # the rows' measure (rows of the earlier stride-map script have none)
@@ -50,7 +50,7 @@ MEASURE = "mm_hold"  # the rows' measure (rows of the earlier stride-map script 
 
 def spec_of(delta: float):
     """The model-error spec of ``--delta``: the eight parameters at +-delta (``pm5`` for
-    0.05, as `bound_env.mismatch.PRESETS`)."""
+    0.05, as `bound_env.model.mismatch.PRESETS`)."""
     return from_dict({"params": dict.fromkeys(EIGHT, delta), "name": f"pm{100 * delta:g}"})
 
 
@@ -76,7 +76,7 @@ def setup_of(ctrl, key: str, delta: float, robots: int, strides: int, seed: int,
 
 
 def plants(delta: float, robots: int, seed: int, gait: str = "default") -> list:
-    """The plants (`bound_env.params.Params`) of ``robots`` robots (`plants_of`)."""
+    """The plants (`bound_env.model.params.Params`) of ``robots`` robots (`plants_of`)."""
     return plants_of(setup_of(None, "", delta, robots, 1, seed, gait), robots)
 
 
@@ -244,7 +244,7 @@ def compact(path: Path) -> None:
     """Rewrite the rows file ``path`` (atomically) with only the newest row of each (policy,
     delta, seed, set, robots): a row recomputed under a new fingerprint replaces the one before
     it, so that a reader finds one row per key."""
-    from bound_env.cache import atomic_write
+    from bound_env.files.cache import atomic_write
 
     lines = path.read_text().splitlines()
     last = {}
@@ -260,8 +260,8 @@ def compact(path: Path) -> None:
 
 def parser() -> argparse.ArgumentParser:
     """The options, typed and range-checked with the command line's own argparse types
-    (`bound_env.cli_args.number`): a bad one is a usage error, exit 2."""
-    from bound_env.cli_args import number
+    (`bound_env.files.values.number`): a bad one is a usage error, exit 2."""
+    from bound_env.files.values import number
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", nargs="+", type=_policy, default=["lqr", "lqr+of"])
@@ -310,7 +310,7 @@ def _of_setting(text: str) -> str:
                 f"estimator must be one of {ESTIMATORS}, got {value!r}"
             )
         return text
-    from bound_env.cli_args import number
+    from bound_env.files.values import number
 
     lo, hi = OF_LIMITS[key]
     try:

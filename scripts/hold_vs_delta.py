@@ -34,9 +34,9 @@ from bound_env.analysis.margins.hold_delta import (
     hold_row,
     spec_name,
 )
-from bound_env.cache import append_line, atomic_write, read_lines
-from bound_env.cli_args import number
-from bound_env.mismatch import as_spec
+from bound_env.files.cache import append_line, atomic_write, read_lines
+from bound_env.files.values import number
+from bound_env.model.mismatch import as_spec
 
 
 def load(name: str, gait: str):

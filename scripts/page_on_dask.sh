@@ -17,7 +17,7 @@ DOCS=${3:-docs}
 PORT=${PORT:-8799}
 BIN=${BIN:-.venv/bin}
 STARTUP_S=${STARTUP_S:-60}
-MAX_WORKERS=256  # bound_env.parallel.MAX_WORKERS
+MAX_WORKERS=256  # bound_env.sim.parallel.MAX_WORKERS
 die() { echo "page_on_dask.sh: $*" >&2; exit 2; }
 [[ "$WORKERS" =~ ^[0-9]{1,6}$ ]] && ((10#$WORKERS >= 1 && 10#$WORKERS <= MAX_WORKERS)) ||
   die "WORKERS must be an integer from 1 to $MAX_WORKERS, got '$WORKERS'"

@@ -18,7 +18,7 @@ An episode returns when the env says so (the apex state back inside the safe rad
 ``--json`` prints the numbers as JSON.
 
 Bad input is a one-line error and exit 2 before any episode runs: the options are typed and
-range-checked as the ``bound-env`` options are (`bound_env.cli_args.number`; ``--env-id`` a
+range-checked as the ``bound-env`` options are (`bound_env.files.values.number`; ``--env-id`` a
 rescue env id); a model trained on another env than the rescue task's (its config.yaml),
 or one whose config names another rescue env than ``--env-id`` (v1 observes a scaled error,
 v0 the apex state: the numbers would be of another policy), is refused.
@@ -38,7 +38,8 @@ import bound_env
 from agents.common.seeds import VALIDATION_SEED
 from bound_env import RESCUE_ENV_ID, RESCUE_ENV_ID_V1
 from bound_env.analysis.margins import DEFAULT_SEED, random_directions
-from bound_env.cli_args import add_json_arg, number, strict_json
+from bound_env.commands.cli_args import add_json_arg, strict_json
+from bound_env.files.values import number
 
 SIZES = (0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45)
 N_DIRS = 32
@@ -58,7 +59,7 @@ def model_env(path: Path, env_id: str | None = None) -> tuple[str, dict]:
     format with a ``run:`` entry), else ``env_id`` (default PassiveBoundRescue-v0). A
     ValueError (one line) for a config that is not readable, trained on an env that is not a
     rescue env, or on another rescue env than ``env_id``."""
-    from bound_env.schema import read_yaml
+    from bound_env.files.schema import read_yaml
 
     path = Path(path)
     cfg = (path if path.is_dir() else path.parent) / "config.yaml"

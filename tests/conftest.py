@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
-from bound_env.params import load_gait
+from bound_env.model.params import load_gait
 
 # Hypothesis: a few examples per property in the fast tier, many in CI (.ci/run sets CI=1);
 # HYPOTHESIS_PROFILE picks one by name. Tests that set max_examples themselves keep theirs.
@@ -68,7 +68,7 @@ def make_env():
 @pytest.fixture
 def cli(capsys):
     """``cli(*argv)``: run ``bound-env argv`` in-process -> (exit code, stdout, stderr)."""
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     def run(*argv):
         code = main([str(a) for a in argv])

@@ -13,11 +13,11 @@ from bound_env.control.adaptive import AdaptiveMPC, check_adaptive
 from bound_env.control.identify import PlantIdentifier
 from bound_env.control.plant_design import plant_overrides
 from bound_env.control.privileged import PrivilegedMPC, is_privileged
-from bound_env.dynamics import make_aux
-from bound_env.mismatch import EIGHT, sample_plant_params
-from bound_env.params import load_gait
-from bound_env.stride_map import EVAL_RTOL, StrideMap
-from bound_env.stride_protocol import reset_controller
+from bound_env.model.dynamics import make_aux
+from bound_env.model.mismatch import EIGHT, sample_plant_params
+from bound_env.model.params import load_gait
+from bound_env.sim.stride_map import EVAL_RTOL, StrideMap
+from bound_env.sim.stride_protocol import reset_controller
 
 NOMINAL = load_gait("default").params
 Z_STAR = load_gait("default").z0
@@ -124,7 +124,7 @@ def test_plant_overrides_refuse_bad_plants():
 def test_the_model_error_loop_hands_the_plant_to_privileged_controllers_only():
     from bound_env.analysis.margins import Setup, as_budget
     from bound_env.analysis.margins.mismatch_tasks import MismatchBudget, task_mm_hold
-    from bound_env.mismatch import as_spec
+    from bound_env.model.mismatch import as_spec
 
     seen = []
 
@@ -266,7 +266,7 @@ def test_plain_policy_hands_the_plant_to_a_privileged_controller_only():
 
     import bound_env
     from bound_env.control import PlainPolicy
-    from bound_env.wrappers import RandomizedPlant
+    from bound_env.envs.wrappers import RandomizedPlant
 
     gym.register_envs(bound_env)
     env = RandomizedPlant(gym.make("PassiveBound-v1"), mismatch="pm5")
@@ -371,7 +371,7 @@ def test_the_fixed_point_of_mpc_adaptive_on_the_nominal_plant_is_mpcs(mpc):
     """The nominal fixed-point task (iterates and central-difference probes) leaves
     mpc-adaptive untaught: its cycle and multipliers are mpc's, bit for bit."""
     from bound_env.analysis.margins import ClosedLoop, fd_steps
-    from bound_env.analysis.numerics import map_fixed_point
+    from bound_env.model.numerics import map_fixed_point
 
     ctrl = load_controller("mpc-adaptive")
     loop = ClosedLoop(ctrl, "default")

@@ -19,8 +19,8 @@ from agents.experts.adaptive import (
     true_map,
 )
 from bound_env.control import load_controller
-from bound_env.mismatch import EIGHT, plant_params
-from bound_env.stride_protocol import reset_controller
+from bound_env.model.mismatch import EIGHT, plant_params
+from bound_env.sim.stride_protocol import reset_controller
 
 
 @pytest.fixture(scope="module")
@@ -218,7 +218,7 @@ def test_train_command_runs_the_recipe(tmp_path):
     """``bound-env train --config adaptive`` (tiny settings): a run folder, an exported policy
     with its model card, loadable by path."""
     from agents.runtime.policy import load_controller
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     argv = ["train", "--config", "adaptive", "--seed", "3", "--out", str(tmp_path / "runs")]
     for kv in ("rounds=1", "episodes_first=2", "strides=3", "val_plants=1", "val_strides=2"):

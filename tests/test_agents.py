@@ -15,7 +15,7 @@ from agents.results.margins import compute_margins
 from agents.runtime.controllers import MLPController, ZeroController
 from agents.runtime.policy import load_controller
 from bound_env.analysis.margins import BUDGETS, random_directions
-from bound_env.analysis.numerics import (
+from bound_env.model.numerics import (
     bisect_threshold,
     fd_jacobian,
     map_fixed_point,
@@ -407,7 +407,7 @@ def test_shipped_policy_files_are_small():
 def test_missing_policy_and_wrong_observation_space(tmp_path, capsys):
     from stable_baselines3 import PPO
 
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     with pytest.raises(FileNotFoundError, match="does not exist"):
         load_controller(tmp_path / "nope")
@@ -432,7 +432,7 @@ def test_budgets_are_ordered():
 
 @pytest.mark.slow
 def test_cli_margins_json_and_compare(tmp_path, capsys):
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     assert (
         main(

@@ -22,8 +22,8 @@ from bound_env.analysis.stability import (
     stability,
 )
 from bound_env.analysis.sweeps import sweep
-from bound_env.cli import main
-from bound_env.params import load_gait, z_to_paper
+from bound_env.commands.cli import main
+from bound_env.model.params import load_gait, z_to_paper
 
 ALPHA_DEG = 1.9343  # the gait's slope [deg]
 
@@ -83,7 +83,7 @@ def test_jacobian_method_validated(gait, fixed):
 
 
 def test_variational_jacobian_matches_fd(gait, fixed):
-    pytest.importorskip("bound_env.analysis.variational")
+    pytest.importorskip("bound_env.model.variational")
     st = stability(fixed.z, gait.params, method="variational")
     assert np.max(np.abs(st.eigenvalues - fixed.eigenvalues)) < 1e-6
 
@@ -165,7 +165,7 @@ def test_paper_search_from_perturbed_slope(gait, fixed):
 
 
 def test_paper_ladder_is_bounded():
-    from bound_env.params import Params
+    from bound_env.model.params import Params
 
     steps = ladder(Params())
     assert steps[0] == {}
@@ -361,7 +361,7 @@ def test_branch_csv_rows_read_back_bit_for_bit(tmp_path):
         csv_line,
         point_row,
     )
-    from bound_env.params import z_to_si
+    from bound_env.model.params import z_to_si
 
     rng = np.random.default_rng(3)
     zs = rng.normal(scale=[0.1, 0.05, 0.05, 1.0, 1.0, 1.0], size=(200, 6)) + [0.3, 0, 0, 1, 0, 0]

@@ -43,7 +43,7 @@ def test_the_batch_is_each_robot_alone(name):
 def test_basin_map_runs_the_same_loop():
     """basin-map's `controller_batch` and margins' `run_many` are one loop: the same outcome,
     stride count and failure per start (basin's reason code names margins' failure)."""
-    from bound_env.events import FAILURES
+    from bound_env.model.events import FAILURES
 
     for name in ("lqr", "step-ppo/s0"):
         ctrl = load_controller(name)
@@ -114,7 +114,7 @@ def test_every_robot_starts_with_a_fresh_controller_state():
     from bound_env.analysis.margins.closed_loop import _LOOPS, Setup
     from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
     from bound_env.analysis.margins.run import run_task
-    from bound_env.mismatch import as_spec
+    from bound_env.model.mismatch import as_spec
 
     z_star = load_controller("lqr").z_ref
     budget = replace(BUDGETS["test"], curve_dirs=4, basin_strides=80)

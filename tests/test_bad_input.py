@@ -1,7 +1,7 @@
 """Issue 40: every new surface refuses bad input in one line naming the parameter, file or key.
 
 One test per case of the issue (each fails on main c8aee56): the model-error spec
-(`bound_env.mismatch`, ``--mismatch``), offset-free names and gains, a controller's gain,
+(`bound_env.model.mismatch`, ``--mismatch``), offset-free names and gains, a controller's gain,
 the apex state a stride controller plans from, and the scripts' arguments. The classes
 behind the cases are property-tested in tests/test_properties.py.
 """
@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 import bound_env
-import bound_env.mismatch as mm
-from bound_env.mismatch import (
+import bound_env.model.mismatch as mm
+from bound_env.model.mismatch import (
     NOISE_SCALES,
     MismatchSpec,
     as_spec,
@@ -135,7 +135,7 @@ def test_a_yaml_key_twice_is_refused_naming_it_and_its_line(tmp_path):
         as_spec(f)
     # the same reader for gait files and controller specs
     from bound_env.control import load_controller
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     g = tmp_path / "gait.yaml"
     g.write_text("kc: 300\nkc: 200\n")
@@ -155,7 +155,7 @@ def test_noise_at_the_limit_is_accepted():
 
 @pytest.mark.parametrize("n, word", [(-3, "n must be"), (2.5, "n must be"), (True, "n must be")])
 def test_a_bad_plant_count_is_refused(n, word):
-    nominal = bound_env.params.load_gait("default").params
+    nominal = bound_env.model.params.load_gait("default").params
     for f in (
         lambda: sample_plants("pm5", n, 0),
         lambda: sample_plant_params("pm5", n, 0, nominal),
@@ -254,7 +254,7 @@ def test_act_refuses_a_non_finite_start_state(key, value):
 
 def test_notify_apex_refuses_a_mis_shaped_apex_state():
     from bound_env.control import load_controller
-    from bound_env.stride_protocol import notify_apex
+    from bound_env.sim.stride_protocol import notify_apex
 
     obs = np.zeros(16, dtype=np.float32)
     for z in ([0.25] * 5, "zzz", None):
@@ -351,7 +351,7 @@ def test_scripts_bad_arguments_are_one_line(name, argv, words, tmp_path, capsys)
 
 def cli_error(argv, capsys) -> str:
     """``bound-env argv`` in-process: exit 2 and one error line (warnings aside), returned."""
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     code = main([str(a) for a in argv])
     err = capsys.readouterr().err.strip()
@@ -418,7 +418,7 @@ def _block(name):
 
 
 def test_render_only_shows_the_model_error_it_was_asked_for(tmp_path, capsys):
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     argv = _render_fixture(tmp_path, {"pm5": _block("pm5"), "pm10": _block("pm10")})
     err = cli_error([*argv, "--mismatch", "pm20"], capsys)
@@ -574,7 +574,7 @@ def test_a_policy_without_its_fingerprint_needs_force(tmp_path, capsys, name, un
 
 
 def test_library_actions_twice_is_refused():
-    from bound_env.wrappers import LibraryActions
+    from bound_env.envs.wrappers import LibraryActions
 
     once = LibraryActions(gym.make("PassiveBoundRescue-v0"))
     with pytest.raises(ValueError) as e:

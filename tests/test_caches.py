@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bound_env.params import load_gait
-from bound_env.resources import gaits_dir, parse_yaml
+from bound_env.files.resources import gaits_dir, parse_yaml
+from bound_env.model.params import load_gait
 
 
 def test_parsed_yaml_is_a_fresh_copy_each_time():
@@ -49,7 +49,7 @@ import numpy as np
 sys.path.insert(0, sys.argv[1])
 from rhs_module import oscillator
 
-from bound_env._dop853 import make_dop853
+from bound_env.model._dop853 import make_dop853
 
 step = make_dop853(oscillator).integrate
 y, t, *_ = step(0.0, np.array([1.0, 0.0]), 1.0, np.zeros(0), 1e-10, 1e-10, 10_000)
@@ -60,14 +60,14 @@ print(sum(step.stats.cache_hits.values()), sum(step.stats.cache_misses.values())
 
 def test_an_integrator_is_compiled_for_its_right_hand_side_alone():
     """A module-level right-hand side gets integrators cached on disk under its own name."""
-    from bound_env import _dop853, fast
-    from bound_env.dynamics import rhs
+    from bound_env.model import _dop853, fast
+    from bound_env.model.dynamics import rhs
 
     ode = _dop853.make_dop853(rhs)
     assert ode is _dop853.make_dop853(rhs) and ode.rk_step is fast.rk_step
     for d in vars(ode).values():
         assert d.py_func.__closure__ is None  # numba keys a closure on a per-process uuid
-        assert d.py_func.__qualname__.split("[")[1].startswith("bound_env.dynamics.rhs-")
+        assert d.py_func.__qualname__.split("[")[1].startswith("bound_env.model.dynamics.rhs-")
         assert d._cache.__class__.__name__ == "FunctionCache"  # on disk
 
 
@@ -99,7 +99,7 @@ def test_right_hand_sides_made_at_run_time_under_one_name_get_their_own_integrat
     integrator (on disk, one would load the other's)."""
     import numba
 
-    from bound_env import _dop853
+    from bound_env.model import _dop853
 
     def made(k):
         @numba.njit

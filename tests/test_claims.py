@@ -6,7 +6,7 @@ import numpy as np
 import yaml
 
 from bound_env.analysis.reproduce.claims import CLAIMS, REPRODUCING_FILE, published
-from bound_env.params import load_gait, z_labels, z_to_paper
+from bound_env.model.params import load_gait, z_labels, z_to_paper
 
 
 def test_published_gait_is_read_from_the_gait_file():

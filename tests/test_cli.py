@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from bound_env.params import z_to_paper
+from bound_env.model.params import z_to_paper
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -95,7 +95,7 @@ def _commands(parser):
 def test_agents_plug_in_through_the_entry_point_group():
     from importlib.metadata import entry_points
 
-    from bound_env.cli import PLUGIN_GROUP, build_parser
+    from bound_env.commands.cli import PLUGIN_GROUP, build_parser
 
     names = {ep.value for ep in entry_points(group=PLUGIN_GROUP)}
     if "agents.cli:register" not in names:
@@ -106,7 +106,7 @@ def test_agents_plug_in_through_the_entry_point_group():
 def test_core_cli_works_without_plugins(monkeypatch, cli):
     from importlib.metadata import EntryPoint
 
-    import bound_env.cli as core
+    import bound_env.commands.cli as core
 
     gone = EntryPoint("gone", "no_such_package.cli:register", core.PLUGIN_GROUP)
     monkeypatch.setattr(core, "entry_points", lambda group: [gone] if group else [])

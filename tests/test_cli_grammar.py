@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from bound_env.cli import main
-from bound_env.cli_args import strict_json
+from bound_env.commands.cli import main
+from bound_env.commands.cli_args import strict_json
 
 ROOT = Path(__file__).resolve().parent.parent
 _ANYWHERE = shutil.ignore_patterns(".git", "*.egg-info", ".pytest_cache", ".ruff_cache")
@@ -44,7 +44,7 @@ def test_strict_json_has_no_nan_tokens():
 
 
 def test_progress_flag_and_alias_on_long_commands():
-    from bound_env.cli import build_parser
+    from bound_env.commands.cli import build_parser
 
     parser = build_parser()
     for cmd in ("train", "margins", "compare", "continue", "sweep", "reproduce", "demo", "animate"):
@@ -150,7 +150,7 @@ def test_commands_in_a_checkout_change_no_tracked_file(tmp_path):
     ]
     for cmd in commands:
         res = subprocess.run(
-            [sys.executable, "-m", "bound_env.cli", *cmd],
+            [sys.executable, "-m", "bound_env.commands.cli", *cmd],
             cwd=repo,
             env=env,
             capture_output=True,
@@ -187,7 +187,7 @@ def test_train_grammar_hp_set_gait_out_and_old_spellings(capsys):
     from agents.cli import train_sets
     from agents.common.config import DEFAULT_CONFIG
     from agents.training.train import resolve_section
-    from bound_env.cli import build_parser
+    from bound_env.commands.cli import build_parser
 
     parser = build_parser()
     new = ["--hp", "n_steps=128", "--set", "kc=300", "--gait", "literal-cycle"]
@@ -225,7 +225,7 @@ def test_train_export_into_a_folder_with_files_is_refused_before_training(tmp_pa
 
 
 def test_fixed_point_out_folder_and_the_old_save(tmp_path, cli):
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     code, out, _ = cli("fixed-point", "--out", tmp_path / "fp", "--json")
     assert code == 0 and json.loads(out)["saved"] == str(tmp_path / "fp" / "gait.yaml")

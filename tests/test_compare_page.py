@@ -55,7 +55,7 @@ def test_keep_defaults_keeps_every_default_column():
 
 def test_keep_defaults_on_the_command_line(monkeypatch):
     import agents.results.compare as compare_mod
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     seen = {}
 
@@ -84,7 +84,7 @@ def _render_here(out, docs, capsys):
     each)."""
     from types import SimpleNamespace
 
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     argv = ["compare", "--budget", "test", "--render-only", "--no-progress", "--entry", "lqr"]
     code = main([*argv, "--out", str(out), "--docs", str(docs)])
@@ -107,7 +107,7 @@ def test_a_users_columns_sit_in_the_headline_and_their_page_is_theirs(tmp_path, 
     says nothing about the project's own page (its measured reproducibility, the literal
     reading's columns, its basin maps); columns.json has every column, with its
     fingerprints (none in this fixture, made before them)."""
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     out, docs = _fixture(tmp_path)
     shutil.copytree(out / "lqr", out / "mine")

@@ -21,8 +21,8 @@ from bound_env.control import (
     lqr_gain,
     spectral_radius,
 )
-from bound_env.params import load_gait
-from bound_env.stride_task import make_basis
+from bound_env.model.params import load_gait
+from bound_env.sim.stride_task import make_basis
 
 gym.register_envs(bound_env)
 Z_STAR = load_gait("default").z0
@@ -32,7 +32,7 @@ def closed_loop_jacobian(ctrl):
     """Fixed point and Jacobian of the closed-loop stride map z -> P(z, u(z)), measured in
     PassiveBoundStride-v1: Newton with a central-difference Jacobian."""
     from bound_env.analysis.margins import fd_steps
-    from bound_env.analysis.numerics import map_fixed_point
+    from bound_env.model.numerics import map_fixed_point
 
     env = gym.make("PassiveBoundStride-v1", **ctrl.stride_env_kwargs).unwrapped
 
@@ -180,7 +180,7 @@ def test_margins_schema_and_acceptance_numbers(tmp_path):
             [
                 sys.executable,
                 "-m",
-                "bound_env.cli",
+                "bound_env.commands.cli",
                 "margins",
                 "--policy",
                 name,

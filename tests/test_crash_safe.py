@@ -32,7 +32,7 @@ def _cmd(runs: Path, resume: bool = False) -> list[str]:
     cmd = [
         sys.executable,
         "-m",
-        "bound_env.cli",
+        "bound_env.commands.cli",
         "train",
         "--name",
         "k",

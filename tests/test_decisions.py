@@ -20,7 +20,7 @@ from agents.results.decisions import (
 )
 from agents.runtime.policy import load_controller
 from bound_env.analysis.margins.curve import Decisions, decision_shares
-from bound_env.task import APEX_SCALES
+from bound_env.sim.task import APEX_SCALES
 
 
 def test_timing_states_are_the_same_for_everyone_and_past_the_safe_radius():

@@ -59,7 +59,7 @@ def test_passive_falls_and_the_default_controller_returns_from_the_start():
 
 
 def test_bound_env_demo_writes_the_comparison(tmp_path, capsys):
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--gif-strides", "0.5", "--no-progress"]) == 0
@@ -88,8 +88,8 @@ def test_bound_env_demo_writes_the_comparison(tmp_path, capsys):
 
 
 def test_the_core_demo_runs_without_the_agents_part(tmp_path, monkeypatch, capsys):
-    from bound_env import render_cli
-    from bound_env.cli import build_parser
+    from bound_env.commands import render_cli
+    from bound_env.commands.cli import build_parser
 
     monkeypatch.setattr(render_cli, "DEMO_PARTS", {})
     args = build_parser([render_cli.register]).parse_args(

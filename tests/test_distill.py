@@ -117,7 +117,7 @@ def test_the_shipped_default_is_a_fingerprinted_choice_policy(tmp_path, capsys):
 
     from agents.runtime.choice_policy import ChoicePolicyController
     from agents.runtime.policy import load_controller, shipped_policies
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     src = shipped_policies()["default"]
     fp = json.loads((src / "fingerprint.json").read_text())
@@ -151,7 +151,7 @@ def test_a_saved_policy_carries_its_fingerprint(run):
 
 
 def test_cli_distill_refuses_an_existing_export(tmp_path):
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     (tmp_path / "e").mkdir()
     args = ["distill", "--out", str(tmp_path / "r"), "--export", str(tmp_path / "e"), "--quiet"]
@@ -209,7 +209,7 @@ def test_finetune_starts_exactly_as_the_student(run, tmp_path):
 
 def test_the_default_controller_runs_in_margins_and_basin_map(tmp_path, capsys):
     """The shipped default (a choice policy) by name through every evaluation command."""
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     m = ["margins", "--policy", "default", "--budget", "test", "--workers", "1", "--no-cache"]
     assert main([*m, "--no-progress", "--json", "--out", str(tmp_path / "m")]) == 0

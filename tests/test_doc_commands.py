@@ -73,7 +73,7 @@ def argv_of(command: str) -> list[str]:
 
 
 def _help_text(sub: str) -> str:
-    from bound_env.cli import build_parser
+    from bound_env.commands.cli import build_parser
 
     action = build_parser()._subparsers._group_actions[0]
     return action.choices[sub].format_help()
@@ -121,7 +121,7 @@ def test_the_pages_show_commands():
     "page,command", DOC_COMMANDS, ids=[f"{p}:{c[:60]}" for p, c in DOC_COMMANDS]
 )
 def test_documented_command_parses_and_names_what_exists(page, command):
-    from bound_env.cli import build_parser
+    from bound_env.commands.cli import build_parser
 
     argv = argv_of(command)
     parser = build_parser()
@@ -194,7 +194,7 @@ def _run_page_step(lang: str, body: str, cwd: Path, env: dict) -> None:
         if "--keep-defaults" in argv:
             continue  # every default column at the test budget: too long for the suite
         r = subprocess.run(
-            [sys.executable, "-m", "bound_env.cli", *argv, "--no-progress"],
+            [sys.executable, "-m", "bound_env.commands.cli", *argv, "--no-progress"],
             cwd=cwd, env=env, capture_output=True, text=True, timeout=1800,
         )  # fmt: skip
         assert r.returncode == 0, f"`{command}` failed:\n{r.stderr[-3000:]}"

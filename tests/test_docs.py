@@ -229,7 +229,7 @@ def test_yardsticks_page_states_the_budgets_the_code_runs():
 
 
 def test_no_issue_numbers_in_product_text():
-    from bound_env.cli import build_parser
+    from bound_env.commands.cli import build_parser
 
     texts = {p.name: p.read_text() for p in [ROOT / "README.md", *DOCS.rglob("*.md")]}
     sub = build_parser()._subparsers._group_actions[0]
@@ -239,7 +239,7 @@ def test_no_issue_numbers_in_product_text():
 
 
 def _subcommands() -> set[str]:
-    from bound_env.cli import build_parser
+    from bound_env.commands.cli import build_parser
 
     action = build_parser()._subparsers._group_actions[0]
     return set(action.choices)

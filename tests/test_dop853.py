@@ -1,11 +1,11 @@
-"""Tests for the numba DOP853 integrator in ``bound_env._dop853``."""
+"""Tests for the numba DOP853 integrator in ``bound_env.model._dop853``."""
 
 import numba
 import numpy as np
 import pytest
 from scipy.integrate import DOP853, solve_ivp
 
-from bound_env import _dop853 as d
+from bound_env.model import _dop853 as d
 
 NO_AUX = np.zeros(0)
 

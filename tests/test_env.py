@@ -9,10 +9,10 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import bound_env
-from bound_env.hybrid import FAILURES
-from bound_env.params import load_gait
-from bound_env.render import BACK_BODY, FRONT_BODY
-from bound_env.task import APEX_SCALES, OBS_NAMES
+from bound_env.envs.render import BACK_BODY, FRONT_BODY
+from bound_env.model.hybrid import FAILURES
+from bound_env.model.params import load_gait
+from bound_env.sim.task import APEX_SCALES, OBS_NAMES
 
 gym.register_envs(bound_env)
 ENV_ID = "PassiveBound-v0"
@@ -339,7 +339,7 @@ def test_no_render_mode_renders_nothing():
 def test_animate_command_writes_a_gif(tmp_path):
     from PIL import Image
 
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     out, png = tmp_path / "bound.gif", tmp_path / "frame.png"
     argv = "animate --gait default --strides 0.5 --width 160 --height 90".split()
@@ -464,8 +464,8 @@ def test_kick_changes_only_the_velocities_and_rejects_nan():
 def test_task_config_is_what_both_envs_take(make_env):
     import pickle
 
-    from bound_env.task import TASK_SETTINGS, TaskConfig
-    from bound_env.vector import PassiveBoundVectorEnv
+    from bound_env.envs.vector import PassiveBoundVectorEnv
+    from bound_env.sim.task import TASK_SETTINGS, TaskConfig
 
     cfg = TaskConfig(max_torque=20.0, reset_noise_scale=0.3, apex_scales=[0.03] * 6)
     assert cfg.apex_scales == (0.03,) * 6 and isinstance(cfg.max_torque, float)
@@ -474,7 +474,7 @@ def test_task_config_is_what_both_envs_take(make_env):
     # the settings are exactly the env's keyword arguments, minus the rendering ones
     import inspect
 
-    from bound_env.env import PassiveBoundEnv
+    from bound_env.envs.env import PassiveBoundEnv
 
     env_kwargs = set(inspect.signature(PassiveBoundEnv).parameters)
     assert set(TASK_SETTINGS) == env_kwargs - {"render_mode", "width", "height", "config"}

@@ -1,7 +1,7 @@
 """Bad input, every sub-command: a one-line error and a non-zero exit, never a traceback.
 
-The CLI table runs in-process (`bound_env.cli.main`): an exception escaping ``main`` is what
-a user would see as a traceback, and fails the test. The env table does the same for the
+The CLI table runs in-process (`bound_env.commands.cli.main`): an exception escaping ``main`` is
+what a user would see as a traceback, and fails the test. The env table does the same for the
 Gymnasium API: a clear ``ValueError``, never another exception or a silent coercion.
 """
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from agents.runtime.policy_table import ARCHIVE_DIR
-from bound_env.cli import main
+from bound_env.commands.cli import main
 
 BAD_GAITS = {
     "list": "- 1\n- 2\n",
@@ -373,7 +373,7 @@ def test_cli_fuzz(files, capsys):
 
 
 def test_gait_file_errors_name_the_file_and_the_key(files):
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     with pytest.raises(ValueError, match="z_star_short.yaml.*z_star must be 6"):
         load_gait(files["z_star_short"])

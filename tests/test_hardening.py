@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import bound_env
-from bound_env.cli import main
+from bound_env.commands.cli import main
 
 gym.register_envs(bound_env)
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,7 +51,7 @@ def test_library_actions_passes_the_env_checkers_and_is_recreated_from_its_spec(
 
     from gymnasium.utils.env_checker import check_env
 
-    from bound_env.wrappers import LibraryActions
+    from bound_env.envs.wrappers import LibraryActions
 
     env = LibraryActions(gym.make("PassiveBoundRescue-v0"), rows=np.zeros((3, 8)))
     with warnings.catch_warnings():
@@ -63,7 +63,7 @@ def test_library_actions_passes_the_env_checkers_and_is_recreated_from_its_spec(
 
 @pytest.mark.parametrize("action", [True, np.bool_(True), np.inf, 1.5, 2.0, "1", None, [1, 2]])
 def test_library_actions_refuses_what_is_not_one_integer(action):
-    from bound_env.wrappers import LibraryActions
+    from bound_env.envs.wrappers import LibraryActions
 
     env = LibraryActions(gym.make("PassiveBoundRescue-v0"))
     env.reset(seed=0)
@@ -74,7 +74,7 @@ def test_library_actions_refuses_what_is_not_one_integer(action):
 
 @pytest.mark.parametrize("action", [66, -1, 10**30])
 def test_library_actions_refuses_rows_out_of_range(action):
-    from bound_env.wrappers import LibraryActions
+    from bound_env.envs.wrappers import LibraryActions
 
     env = LibraryActions(gym.make("PassiveBoundRescue-v0"))
     env.reset(seed=0)
@@ -86,7 +86,7 @@ def test_library_actions_refuses_rows_out_of_range(action):
 
 
 def test_library_actions_rows_are_checked_by_name():
-    from bound_env.wrappers import LibraryActions
+    from bound_env.envs.wrappers import LibraryActions
 
     for rows, word in ((np.full((3, 8), np.nan), "finite"), (np.zeros((3, 4)), "shape")):
         with pytest.raises(ValueError, match=f"LibraryActions rows.*{word}"):
@@ -402,7 +402,7 @@ def test_headline_refuses_a_malformed_headline_json_in_one_line(tmp_path, capsys
 
 
 def test_load_json_strict_names_the_file_and_key(tmp_path):
-    from bound_env.schema import load_json_strict
+    from bound_env.files.schema import load_json_strict
 
     p = tmp_path / "m.json"
     p.write_text('{"a": {"b": [1, 2, NaN]}}')
@@ -513,7 +513,7 @@ def _frames(n, shape=(360, 640, 3)):
 def test_video_writer_holds_one_frame_at_a_time(tmp_path):
     from PIL import Image
 
-    from bound_env.render import write_video
+    from bound_env.envs.render import write_video
 
     peaks = {}
     for n in (4, 40):
@@ -528,7 +528,7 @@ def test_video_writer_holds_one_frame_at_a_time(tmp_path):
 
 
 def test_video_writer_leaves_nothing_on_an_error(tmp_path):
-    from bound_env.render import VideoWriter, write_video
+    from bound_env.envs.render import VideoWriter, write_video
 
     with pytest.raises(ValueError, match="at least one frame"):
         write_video([], tmp_path / "empty.gif", fps=10)
@@ -545,7 +545,7 @@ def test_video_writer_streams_an_mp4(tmp_path):
     pytest.importorskip("imageio_ffmpeg")
     import imageio.v2 as imageio
 
-    from bound_env.render import write_video
+    from bound_env.envs.render import write_video
 
     write_video(_frames(5, (36, 64, 3)), tmp_path / "v.mp4", fps=10)
     assert len(imageio.mimread(tmp_path / "v.mp4")) == 5
@@ -565,7 +565,7 @@ def test_residual_reset_checks_its_options(options, word):
 @pytest.mark.parametrize("env_id", ["PassiveBound-v0", "PassiveBoundStride-v1"])
 @pytest.mark.parametrize("dt", [1e-9, 5.0])
 def test_env_dt_outside_the_files_range_is_refused_at_once(env_id, dt):
-    """The spec files' dt range (`bound_env.schema.dt_value`) applies to the envs' own `dt`:
+    """The spec files' dt range (`bound_env.files.schema.dt_value`) applies to the envs' own `dt`:
     dt = 1e-9 built a 25 GB matrix, dt = 5 s is longer than a stride."""
     t0 = time.perf_counter()
     with pytest.raises(ValueError, match=r"dt must be a finite number in \[0.0001, 0.1\]"):

@@ -15,8 +15,8 @@ import pytest
 from bound_env.analysis.margins.budget import BUDGETS
 from bound_env.analysis.margins.closed_loop import Setup
 from bound_env.analysis.margins.mismatch_tasks import plants_of
-from bound_env.mismatch import as_spec
-from bound_env.params import load_gait
+from bound_env.model.mismatch import as_spec
+from bound_env.model.params import load_gait
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -10,7 +10,8 @@ the classes the run configs name (``env_wrapper``, ``callback``, ``policy`` in c
 shipped policies' config.yaml): the module that calls them imports those modules. Neither
 `bound_env` nor `agents` has an import cycle, `bound_env` never imports `agents`,
 `bound_env.analysis` never imports `bound_env.control` (the stride protocol they share is
-`bound_env.stride_protocol`, below both), and no module imports another one's private
+`bound_env.sim.stride_protocol`, below both), the rooms of both packages point down, and no
+module imports another one's private
 (underscore) name. One check runs a command instead of reading
 imports: the classical margins path (``bound-env margins --policy lqr``) never loads torch.
 """
@@ -24,6 +25,7 @@ from pathlib import Path
 
 import pytest
 
+import bound_env
 from agents import MOVED
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -143,7 +145,8 @@ def _config_modules(keys: tuple[str, ...]) -> frozenset[str]:
             for k, name in _config_entries(yaml.safe_load(f.read_text())):
                 if k in keys:
                     module = name.rsplit(".", 1)[0]
-                    out.add(MOVED.get(module, module))  # an old flat name: its module now
+                    old = {**MOVED, **bound_env.MOVED}
+                    out.add(old.get(module, module))  # an old flat name: its module now
     return frozenset(out)
 
 
@@ -211,8 +214,8 @@ def test_the_walker_sees_deferred_and_string_imports():
     mods, imports, edges = _graph()
     assert len(mods) > 10
     # deferred (function-level) imports count: stride is imported inside a function
-    assert "bound_env.analysis.cli" in imports["bound_env.cli"]
-    assert "bound_env.params" in edges["bound_env.dynamics"]
+    assert "bound_env.commands.analysis_cli" in imports["bound_env.commands.cli"]
+    assert "bound_env.model.params" in edges["bound_env.model.dynamics"]
     assert _cycles({"a": ["b"], "b": ["c"], "c": ["a"], "d": ["a"]}) == [["a", "b", "c"]]
     assert _cycles({"a": ["b"], "b": []}) == []
     # agents: deferred imports, script blocks and imports by name
@@ -258,16 +261,16 @@ def test_nothing_in_bound_env_imports_agents():
 
 
 # An import of bound_env.control that bound_env.analysis keeps until the module that has it is
-# changed by its owner (the names it imports are those of bound_env.stride_protocol, re-exported
+# changed by its owner (the names it imports are those of bound_env.sim.stride_protocol, re-exported
 # by bound_env.control.controllers): the test checks that this is all it takes from control.
 PENDING: dict[str, set[str]] = {}  # analysis modules still importing the protocol through control
 
 
 def test_analysis_never_imports_control():
     """bound_env.analysis (the Poincaré tools and the margins) never imports bound_env.control
-    (whose design imports the analysis numerics), directly or through other modules."""
+    (the numerics both use live in bound_env.model), directly or through other modules."""
     import bound_env.control.controllers as controllers
-    import bound_env.stride_protocol as protocol
+    import bound_env.sim.stride_protocol as protocol
 
     _, imports, edges = _graph()
     for m, names in PENDING.items():
@@ -322,7 +325,7 @@ def stop(*args, **kwargs):
 
 
 run.run_tasks = stop
-from bound_env.cli import main
+from bound_env.commands.cli import main
 
 for argv in json.loads(sys.argv[1]):
     try:
@@ -358,16 +361,16 @@ def test_classical_margins_never_import_torch(tmp_path):
 @pytest.mark.parametrize(
     "low, high",
     [
-        ("bound_env.params", "bound_env.dynamics"),
-        ("bound_env.dynamics", "bound_env.events"),
-        ("bound_env.events", "bound_env.fast"),
-        ("bound_env.events", "bound_env.reference"),
-        ("bound_env.fast", "bound_env.stride"),
-        ("bound_env.reference", "bound_env.stride"),
-        ("bound_env.reference", "bound_env.fast"),
-        ("bound_env.stride", "bound_env.hybrid"),
-        ("bound_env.stride", "bound_env.task"),
-        ("bound_env.task", "bound_env.env"),
+        ("bound_env.model.params", "bound_env.model.dynamics"),
+        ("bound_env.model.dynamics", "bound_env.model.events"),
+        ("bound_env.model.events", "bound_env.model.fast"),
+        ("bound_env.model.events", "bound_env.model.reference"),
+        ("bound_env.model.fast", "bound_env.model.stride"),
+        ("bound_env.model.reference", "bound_env.model.stride"),
+        ("bound_env.model.reference", "bound_env.model.fast"),
+        ("bound_env.model.stride", "bound_env.model.hybrid"),
+        ("bound_env.model.stride", "bound_env.sim.task"),
+        ("bound_env.sim.task", "bound_env.envs.env"),
     ],
 )
 def test_simulator_layers_point_down(low, high):
@@ -386,10 +389,10 @@ def test_simulator_layers_point_down(low, high):
 def test_flat_array_layouts_are_contiguous_and_exported():
     """Each family of offsets comes from one declaration: consecutive, non-overlapping fields,
     and the flat module constants equal the namespace's offsets."""
-    import bound_env.dynamics as dynamics
-    import bound_env.params as params
-    import bound_env.task as task
-    from bound_env.layout import Layout
+    import bound_env.model.dynamics as dynamics
+    import bound_env.model.params as params
+    import bound_env.sim.task as task
+    from bound_env.files.layout import Layout
 
     for module, layout in (
         (params, params.PARAM_LAYOUT),
@@ -413,7 +416,7 @@ def test_flat_array_layouts_are_contiguous_and_exported():
 
 # The longest a module may be, per package: a module longer than that holds more than one
 # concept and is split along them (agents/compare.py was 1,147 lines, agents/stride.py 724;
-# bound_env/task.py 779 and rescue_env.py 659, split by their jobs: issue 39 asks <= 700)
+# bound_env/sim/task.py 779 and rescue_env.py 659, split by their jobs: issue 39 asks <= 700)
 MAX_LINES = {"agents": 600, "bound_env": 700}
 
 
@@ -444,18 +447,19 @@ MAX_MODULES = 15  # per folder of agents/
 
 
 def _room(module: str) -> str:
-    """The room of an agents module: its subpackage, or the top-level module itself."""
+    """The room of a module: its subpackage (``agents.runtime``, ``bound_env.sim``), or the
+    top-level module itself."""
     parts = module.split(".")
     return ".".join(parts[:2])
 
 
-def _arrows_up(edges: dict[str, list[str]]) -> list[str]:
-    """Every import of ``edges`` from a room to another room not below it."""
+def _arrows_up(edges: dict[str, list[str]], rooms: dict[str, int] = ROOMS) -> list[str]:
+    """Every import of ``edges`` from a room to another room not below it (in ``rooms``)."""
     bad = []
     for m, targets in edges.items():
         for n in targets:
             a, b = _room(m), _room(n)
-            if a != b and ROOMS[b] >= ROOMS[a]:
+            if a != b and rooms[b] >= rooms[a]:
                 bad.append(f"{m} -> {n}")
     return bad
 
@@ -517,3 +521,122 @@ def test_old_flat_names_are_aliases_of_the_moved_modules():
     named = _config_modules(("env_wrapper", "callback", "policy"))
     assert {m for m in named if not m.startswith("bound_env.")} <= set(mods)
     assert all(importlib.util.find_spec(m) for m in named if m.startswith("bound_env."))
+
+
+# bound_env/ in rooms by job, lowest first, with the same rule as agents'. The package itself
+# (`bound_env/__init__.py`: the env ids, their registration, the old names' aliases) sits on
+# `files` (it chooses the Numba cache through `files.resources` before anything compiles);
+# `analysis` and `control` are siblings on `sim` (the numerics and the exact Jacobian that both
+# use live in `model`): neither imports the other; the envs sit on `control` (the rescue task
+# designs its LQR, `LibraryActions` takes the MPC's profile library).
+CORE_ROOMS = {
+    "bound_env.files": 0,
+    "bound_env": 1,
+    "bound_env.model": 2,
+    "bound_env.sim": 3,
+    "bound_env.analysis": 4,
+    "bound_env.control": 4,
+    "bound_env.envs": 5,
+    "bound_env.commands": 6,
+}
+# the rooms issue 47 made: each says its job in one sentence
+NEW_CORE_ROOMS = ("files", "model", "sim", "envs", "commands")
+# every module name that moved (the flat core's 33, the analysis commands and the numerics that
+# analysis and control share): configs,
+# fingerprints, pickles, Gymnasium entry points and older console scripts name them
+OLD_CORE_NAMES = (
+    "_dop853 cache cli cli_args dynamics env events fast hybrid layout mismatch parallel params "
+    "randomized reference render render_cli rescue_common rescue_env rescue_v0 rescue_v1 "
+    "resources schema stride stride_env stride_map stride_protocol stride_task task "
+    "task_kernels terrain vector wrappers"
+).split()
+
+
+def test_the_room_check_sees_an_arrow_up_in_the_core():
+    edges = {
+        "bound_env.sim.parallel": ["bound_env.commands.cli_args", "bound_env.model.params"],
+        "bound_env.analysis.margins.run": ["bound_env.control.spec", "bound_env.sim.task"],
+        "bound_env.control.design": ["bound_env.analysis.numerics", "bound_env.model.numerics"],
+        "bound_env.files.schema": ["bound_env"],
+        "bound_env.envs.env": ["bound_env.envs.render", "bound_env.control.mpc"],
+    }
+    assert _arrows_up(edges, CORE_ROOMS) == [
+        "bound_env.sim.parallel -> bound_env.commands.cli_args",
+        "bound_env.analysis.margins.run -> bound_env.control.spec",  # siblings
+        "bound_env.control.design -> bound_env.analysis.numerics",
+        "bound_env.files.schema -> bound_env",
+    ]
+
+
+def test_core_rooms_point_down():
+    """files -> the package -> model -> sim -> analysis, control (side by side) -> envs ->
+    commands: the model never imports the simulation, the simulation never the command line,
+    the analysis never the envs nor control; every module lives in a room."""
+    mods, _, edges = _graph("bound_env")
+    assert {_room(m) for m in mods} == set(CORE_ROOMS)
+    assert _arrows_up(edges, CORE_ROOMS) == []
+
+
+def test_core_rooms_are_small_and_say_their_job():
+    """No room of bound_env/ with more than `MAX_MODULES` modules (bound_env/ itself holds
+    only the package); each new room's ``__init__`` says its job in one sentence."""
+    assert sorted(f.name for f in (ROOT / "bound_env").glob("*.py")) == ["__init__.py"]
+    for folder in sorted(p.parent for p in (ROOT / "bound_env").glob("*/__init__.py")):
+        modules = [f for f in folder.glob("*.py") if f.name != "__init__.py"]
+        assert len(modules) <= MAX_MODULES, folder
+    for room in NEW_CORE_ROOMS:
+        doc = ast.get_docstring(_tree(ROOT / "bound_env" / room / "__init__.py"))
+        assert doc and doc.count(". ") == 0 and doc.endswith("."), room
+
+
+def test_old_core_names_are_aliases_of_the_moved_modules():
+    """``bound_env.task`` & co. name the module that moved, the same object, through every way
+    in: ``import``, ``from ... import``, attributes of the package, Gymnasium's
+    ``module:Name`` entry points and pickles. A name missing from `bound_env.MOVED` fails."""
+    import importlib
+    import pickle
+
+    from gymnasium.envs.registration import load_env_creator
+
+    old = {f"bound_env.{m}" for m in OLD_CORE_NAMES} | {
+        f"bound_env.analysis.{m}" for m in ("cli", "numerics", "variational")
+    }
+    assert set(bound_env.MOVED) == old
+    mods = _modules("bound_env")
+    assert set(bound_env.MOVED.values()) <= set(mods)
+    for name, now in bound_env.MOVED.items():
+        assert not (ROOT / (name.replace(".", "/") + ".py")).exists(), name
+        module = importlib.import_module(name)
+        assert module is importlib.import_module(now), name
+        assert module.__name__ == module.__spec__.name == now, name
+    import bound_env.stride_map as old_map
+    from bound_env.stride_map import StrideMap
+
+    assert old_map is bound_env.stride_map is bound_env.sim.stride_map
+    assert StrideMap is bound_env.sim.stride_map.StrideMap
+    assert (
+        load_env_creator("bound_env.task:PassiveBoundTask") is bound_env.sim.task.PassiveBoundTask
+    )
+    assert load_env_creator("bound_env.env:PassiveBoundEnv") is bound_env.envs.env.PassiveBoundEnv
+    # a pickle written before the move names the old module
+    old_pickle = pickle.dumps(bound_env.sim.task.TaskConfig, protocol=0).replace(
+        b"bound_env.sim.task", b"bound_env.task"
+    )
+    assert b"bound_env.task" in old_pickle
+    assert pickle.loads(old_pickle) is bound_env.sim.task.TaskConfig
+
+
+def test_old_core_names_import_first_in_a_fresh_interpreter():
+    """The old name as the first import of a process (an older ``bound-env`` console script,
+    ``bound_env.cli:main``; a worker unpickling a task): the package's finder is in place."""
+    code = (
+        "import bound_env.cli as old, bound_env.commands.cli as now, sys\n"
+        "assert old is now and old.main is now.main, (old, now)\n"
+        "from bound_env.stride_map import StrideMap\n"
+        "assert sys.modules['bound_env.stride_map'] is sys.modules['bound_env.sim.stride_map']\n"
+        "print('ok')\n"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300
+    )
+    assert res.returncode == 0 and res.stdout.strip() == "ok", res.stderr

@@ -1,5 +1,5 @@
 """Bisections in lockstep: many threshold searches advance together, each step's tests answered
-as one batch (bound_env.analysis.numerics.run_together), and the margins' basin searches of
+as one batch (bound_env.model.numerics.run_together), and the margins' basin searches of
 several directions run that way (`task_basins`: one batch of closed-loop robots per step),
 each with the result it has alone (`task_basin`, one `ClosedLoop.run` per step)."""
 
@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from bound_env.analysis.numerics import bisect_threshold, run_together, threshold_steps
+from bound_env.model.numerics import bisect_threshold, run_together, threshold_steps
 
 
 @pytest.mark.parametrize(
@@ -81,7 +81,7 @@ def test_a_batch_must_answer_every_query():
 def _setup(policy: str):
     from agents.runtime.policy import load_controller
     from bound_env.analysis.margins import BUDGETS, Setup, run_task
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     ctrl = load_controller(policy)
     setup = Setup(ctrl, "default", BUDGETS["test"], np.asarray(load_gait("default").z0, float))

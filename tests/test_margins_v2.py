@@ -29,7 +29,7 @@ from bound_env.analysis.margins.stats import (
     threshold_on_grid,
     wilson_interval,
 )
-from bound_env.analysis.numerics import bisect_threshold
+from bound_env.model.numerics import bisect_threshold
 
 
 def test_bisection_grows_past_one_to_a_known_basin_of_five():
@@ -128,7 +128,7 @@ def test_any_controller_with_the_protocol_runs_in_the_loop():
 
 
 def test_passive_theta1_basin_is_no_longer_capped_at_one():
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     z = np.asarray(load_gait("default").z0)
     b = replace(BUDGETS["test"], basin_strides=300)  # e_max 0.878: ~100 strides to return

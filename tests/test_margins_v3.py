@@ -37,7 +37,7 @@ from bound_env.analysis.paired import (
     sign_test,
 )
 from bound_env.control.spec import CONTROLLERS_DIR
-from bound_env.params import GAITS_DIR, load_gait
+from bound_env.model.params import GAITS_DIR, load_gait
 
 Z_STAR = np.asarray(load_gait("default").z0, dtype=float)
 
@@ -78,7 +78,7 @@ def test_default_seed_is_the_old_test_set():
 
 
 def test_cli_default_seed_is_the_test_set():
-    from bound_env.cli import build_parser
+    from bound_env.commands.cli import build_parser
 
     parser = build_parser()
     for cmd in ("margins", "compare"):
@@ -404,7 +404,7 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
 
     monkeypatch.setattr(keys, "source_files", lambda extra=(): copies + list(extra))
     k0 = setup_key(c, "default", q)
-    fast = tmp_path / "bound_env" / "fast.py"
+    fast = tmp_path / "model" / "fast.py"
     fast.write_text(fast.read_text() + "\n# a comment\n")
     assert setup_key(c, "default", q) == k0  # a comment is no code
     fast.write_text(fast.read_text() + "\nA_CHANGE = 1\n")

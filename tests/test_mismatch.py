@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import bound_env
-from bound_env.mismatch import (
+from bound_env.envs.wrappers import RandomizedPlant
+from bound_env.model.mismatch import (
     EIGHT,
     NOISE_SCALES,
     PLANT_KEYS,
@@ -14,8 +15,7 @@ from bound_env.mismatch import (
     as_spec,
     sample_plants,
 )
-from bound_env.params import load_gait
-from bound_env.wrappers import RandomizedPlant
+from bound_env.model.params import load_gait
 
 gym.register_envs(bound_env)
 ENV_IDS = ("PassiveBound-v1", "PassiveBoundStride-v1", "PassiveBoundRescue-v0")
@@ -84,7 +84,7 @@ def test_sample_plants():
             assert 0.9 * getattr(nominal, k) <= v <= 1.1 * getattr(nominal, k)
     assert sample_plants("none", 3, seed=1) == [{}, {}, {}]
     # the overrides are a plant the stride map takes
-    from bound_env.stride_map import StrideMap
+    from bound_env.sim.stride_map import StrideMap
 
     sm = StrideMap("default", a[0])
     assert sm.params.m1 == pytest.approx(a[0]["m1"])

@@ -24,7 +24,7 @@ from agents.results.margins import compute_margins
 from agents.results.page import model_error_section
 from agents.results.page_inputs import load_model_error
 from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
-from bound_env.mismatch import parse_specs
+from bound_env.model.mismatch import parse_specs
 
 
 def test_the_sections_columns_specs_and_budget():
@@ -155,7 +155,7 @@ def test_the_headline_gains_held_at_10_and_15_percent(tmp_path):
 def test_the_section_is_on_by_default_for_the_pages_own_columns(
     monkeypatch, tmp_path, argv, model_error, mismatch
 ):
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     seen = {}
 

@@ -118,7 +118,7 @@ def test_a_plan_holds_in_the_step_env(mpc):
 
 def predicted_apex(ctrl, z, u):
     """The planning model's first stride at the evaluation tolerance."""
-    from bound_env.stride_map import EVAL_RTOL, StrideMap
+    from bound_env.sim.stride_map import EVAL_RTOL, StrideMap
 
     plant = StrideMap(ctrl.gait, None, ctrl.dt, ctrl.max_torque, EVAL_RTOL)
     return plant.map(z, ctrl.profile_actions(u)[0])
@@ -206,7 +206,7 @@ def test_margins_reports_the_mpcs_decision_times(tmp_path):
         [
             sys.executable,
             "-m",
-            "bound_env.cli",
+            "bound_env.commands.cli",
             "margins",
             "--policy",
             "mpc",

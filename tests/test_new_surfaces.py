@@ -150,7 +150,7 @@ def _privileged_run(label="mpc-privileged") -> dict:
 @pytest.mark.parametrize("name", ["mpc-privileged+of"])
 def test_offset_free_over_a_privileged_controller_is_refused(name, capsys):
     from agents.runtime.policy import load_controller
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     with pytest.raises(ValueError, match="'mpc-privileged' is privileged.*no offset"):
         load_controller(name)
@@ -377,7 +377,7 @@ def test_adaptive_recipe_refuses_ppo_options(train_cli, args, option):
     "hp, words",
     [
         (
-            "env_wrapper=[{bound_env.wrappers.RandomizedPlant: {mismatch: pm10+delay1}}]",
+            "env_wrapper=[{bound_env.envs.wrappers.RandomizedPlant: {mismatch: pm10+delay1}}]",
             "RandomizedPlant mismatch 'pm10+delay1'",
         ),
         ("env_kwargs.gait_overrides.kc=300", "env_kwargs.gait_overrides"),
@@ -458,7 +458,7 @@ def test_adaptive_recipe_without_seed_trains_seed_0(tmp_path, monkeypatch):
     ],
 )
 def test_an_adaptive_spec_refuses_what_it_cannot_mean(tmp_path, capsys, block, words):
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
     from bound_env.control.spec import load_spec
 
     spec = tmp_path / "spec.yaml"
@@ -491,8 +491,8 @@ def test_adaptive_mpc_refuses_a_tiny_sigma_or_prior(key):
     ],
 )
 def test_mismatch_presets_that_overlap_are_refused(capsys, text, words):
-    from bound_env.cli import main
-    from bound_env.mismatch import as_spec, parse_specs
+    from bound_env.commands.cli import main
+    from bound_env.model.mismatch import as_spec, parse_specs
 
     with pytest.raises(ValueError, match=r"^mismatch ") as e:
         as_spec(text)
@@ -504,7 +504,7 @@ def test_mismatch_presets_that_overlap_are_refused(capsys, text, words):
 
 
 def test_mismatch_presets_that_do_not_overlap_combine():
-    from bound_env.mismatch import as_spec
+    from bound_env.model.mismatch import as_spec
 
     s = as_spec("pm10+noise+delay1")
     assert dict(s.ranges)["m1"] == 0.1 and s.has_noise and s.delay == 1
@@ -512,7 +512,7 @@ def test_mismatch_presets_that_do_not_overlap_combine():
 
 @pytest.mark.parametrize("content", ["", "\n\n", "# nothing\n", "{}\n"])
 def test_an_empty_mismatch_file_is_refused(tmp_path, content):
-    from bound_env.mismatch import as_spec
+    from bound_env.model.mismatch import as_spec
 
     p = tmp_path / "mine.yaml"
     p.write_text(content)
@@ -747,7 +747,7 @@ def test_a_tampered_adaptive_policy_without_fingerprint_needs_force(
     adaptive_copy, capsys, fingerprint
 ):
     from agents.runtime.policy import load_controller
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     fp = adaptive_copy / "fingerprint.json"
     fp.unlink()
@@ -763,7 +763,7 @@ def test_a_tampered_adaptive_policy_without_fingerprint_needs_force(
 
 def test_a_learned_adaptive_policy_on_another_gait_needs_force(capsys):
     from agents.runtime.policy import load_controller
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     with pytest.raises(ValueError, match="trained on gait 'default', not 'literal-cycle'"):
         load_controller("adaptive/s0", gait="literal-cycle")
@@ -777,7 +777,7 @@ def test_a_learned_adaptive_policy_on_another_gait_needs_force(capsys):
 
 
 def _cli_line(argv, capsys) -> str:
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     try:
         code = main([str(a) for a in argv])

@@ -15,8 +15,9 @@ from pathlib import Path
 import pytest
 
 from agents.runtime.policy_table import ARCHIVE_DIR
-from bound_env.cli import main
-from bound_env.cli_args import check_name, check_writable, name_key
+from bound_env.commands.cli import main
+from bound_env.commands.cli_args import check_writable
+from bound_env.files.values import check_name, name_key
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -160,7 +161,7 @@ def test_scheduler_and_workers_are_bounded_and_named(tmp_path, capsys, argv, wor
 def test_rollout_video_streams_its_frames_and_thins_long_runs(tmp_path, monkeypatch):
     from agents.runtime import rollout as ro
 
-    class Sink:  # stands for bound_env.render.VideoWriter: counts what reaches the file
+    class Sink:  # stands for bound_env.envs.render.VideoWriter: counts what reaches the file
         def __init__(self, path, fps):
             self.fps, self.n = fps, 0
             seen.append(self)
@@ -219,7 +220,7 @@ def test_interrupted_margins_stops_its_workers_and_says_how_to_resume(tmp_path, 
     cmd = [
         sys.executable,
         "-c",
-        "import sys; from bound_env.cli import main; sys.exit(main())",
+        "import sys; from bound_env.commands.cli import main; sys.exit(main())",
         "margins",
         "--policy",
         "passive",

@@ -1,4 +1,4 @@
-"""The shared numerics (`bound_env.analysis.numerics`) and job files (`bound_env.cache`) on
+"""The shared numerics (`bound_env.model.numerics`) and job files (`bound_env.files.cache`) on
 known answers: linear maps, a synthetic threshold, a cache line cut short by a kill."""
 
 from __future__ import annotations
@@ -10,21 +10,21 @@ import threading
 import numpy as np
 import pytest
 
-from bound_env.analysis.numerics import (
-    MapFailure,
-    bisect_threshold,
-    fd_jacobian,
-    map_fixed_point,
-    newton,
-    sorted_eigenvalues,
-)
-from bound_env.cache import (
+from bound_env.files.cache import (
     TaskCache,
     append_line,
     atomic_path,
     atomic_write,
     read_lines,
     settings_hash,
+)
+from bound_env.model.numerics import (
+    MapFailure,
+    bisect_threshold,
+    fd_jacobian,
+    map_fixed_point,
+    newton,
+    sorted_eigenvalues,
 )
 
 

@@ -9,9 +9,9 @@ import pytest
 import bound_env
 from bound_env.control import OffsetFree, PlainPolicy, is_controller, load_controller
 from bound_env.control.offset_free import interval_model
-from bound_env.dynamics import make_aux
-from bound_env.params import load_gait
-from bound_env.stride_map import StrideMap
+from bound_env.model.dynamics import make_aux
+from bound_env.model.params import load_gait
+from bound_env.sim.stride_map import StrideMap
 
 gym.register_envs(bound_env)
 Z_STAR = load_gait("default").z0

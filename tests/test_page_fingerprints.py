@@ -102,19 +102,19 @@ def test_the_audited_columns_are_fresh_as_recorded(loaded):
 # (file, old, new, {column: the parts it must name}; every other audited column: "sources")
 AUDITED_EDITS = {
     "stride_map.EVAL_RTOL 1e-10 -> 1e-6": (
-        "bound_env/stride_map.py",
+        "bound_env/sim/stride_map.py",
         "EVAL_RTOL = 1e-10",
         "EVAL_RTOL = 1e-6",
         {"mpc": ["sources", "constants"], "mpc-adaptive": ["sources", "constants"]},
     ),
     "stride_map.RETURN_TOL": (
-        "bound_env/stride_map.py",
+        "bound_env/sim/stride_map.py",
         "RETURN_TOL = 1e-4",
         "RETURN_TOL = 1e-3",
         {},
     ),
     "task._ANGLE_BOUND (the fall criterion)": (
-        "bound_env/task.py",
+        "bound_env/sim/task.py",
         "_ANGLE_BOUND = 2.0 * math.pi",
         "_ANGLE_BOUND = 1.5 * math.pi",
         {"mpc": ["sources", "constants"]},
@@ -139,8 +139,8 @@ AUDITED_EDITS = {
     ),
     "mpc's StrideMap swapped for another class": (
         "bound_env/control/mpc.py",
-        "from ..stride_map import StrideMap\n",
-        "from ..stride_map import Strides as StrideMap\n",
+        "from ..sim.stride_map import StrideMap\n",
+        "from ..sim.stride_map import Strides as StrideMap\n",
         {"mpc": ["sources", "code"], "mpc-adaptive": ["sources", "code"]},
     ),
 }
@@ -213,13 +213,13 @@ def test_passive_on_two_gaits_has_two_fingerprints(loaded):
 
 
 def test_a_docstring_or_comment_edit_stales_nothing(loaded, monkeypatch):
-    text = (ROOT / "bound_env/stride_map.py").read_text()
+    text = (ROOT / "bound_env/sim/stride_map.py").read_text()
     first = text.index('"""') + 3
     edited = text[:first] + "Edited. " + text[first:]
     edited = edited.replace("EVAL_RTOL = 1e-10  #", "EVAL_RTOL = 1e-10  # edited comment;", 1)
     edited = edited.replace('    """', '    """Edited: ', 1)  # a function's docstring
     assert edited != text
-    edit_source(monkeypatch, "bound_env/stride_map.py", text, edited)
+    edit_source(monkeypatch, "bound_env/sim/stride_map.py", text, edited)
     assert stale_after(loaded) == {p: [] for p in AUDITED}
 
 
@@ -328,10 +328,10 @@ def test_a_data_row_is_stale_after_a_code_edit_and_fresh_after_a_docstring_edit(
     row = {"policy": "lqr", "delta": 0.1, "seed": 777, "fingerprint": fp}
     assert provenance.row_staleness(row) is None
     assert provenance.row_staleness(dict(row, fingerprint=None)) == "no fingerprint recorded"
-    text = (ROOT / "bound_env/stride_map.py").read_text()
-    edit_source(monkeypatch, "bound_env/stride_map.py", '"""', '"""Edited. ')
+    text = (ROOT / "bound_env/sim/stride_map.py").read_text()
+    edit_source(monkeypatch, "bound_env/sim/stride_map.py", '"""', '"""Edited. ')
     assert provenance.row_staleness(row) is None
     monkeypatch.undo()
-    edit_source(monkeypatch, "bound_env/stride_map.py", "EVAL_RTOL = 1e-10", "EVAL_RTOL = 1e-6")
+    edit_source(monkeypatch, "bound_env/sim/stride_map.py", "EVAL_RTOL = 1e-10", "EVAL_RTOL = 1e-6")
     assert provenance.row_staleness(row) == "its sources changed"
-    assert text == (ROOT / "bound_env/stride_map.py").read_text()  # the file itself untouched
+    assert text == (ROOT / "bound_env/sim/stride_map.py").read_text()  # the file itself untouched

@@ -13,8 +13,8 @@ import pytest
 
 from agents.results.headline import PageProgress, columns_json, previous_seconds
 from bound_env.analysis.margins import run as margins_run
-from bound_env.cache import TaskCache
-from bound_env.parallel import SerialExecutor
+from bound_env.files.cache import TaskCache
+from bound_env.sim.parallel import SerialExecutor
 
 
 def _busy(setup, cpu_ms: float, sleep_ms: float) -> dict:

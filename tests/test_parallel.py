@@ -1,4 +1,4 @@
-"""Executors (bound_env.parallel), Dask clusters with real processes, and the basin atlas.
+"""Executors (bound_env.sim.parallel), Dask clusters with real processes, and the basin atlas.
 
 Cluster tests bind to 127.0.0.1 on free ports, are bounded in time, and kill every process
 they start (process groups, in ``finally``).
@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from agents.runtime.policy_table import ARCHIVE_DIR
-from bound_env.cli import main
-from bound_env.parallel import (
+from bound_env.commands.cli import main
+from bound_env.sim.parallel import (
     MAX_RESTARTS,
     RestartingProcessPool,
     SerialExecutor,
@@ -261,8 +261,8 @@ def basin_cli(out: Path, *extra) -> subprocess.CompletedProcess:
 def test_passive_batch_is_the_iterated_passive_map():
     """The compiled batch gives exactly the strides of simulate_stride chained."""
     from bound_env.analysis.basin import FELL, REASONS, RETURNED, BasinSpec, run_chunk
-    from bound_env.hybrid import simulate_stride
-    from bound_env.params import load_gait
+    from bound_env.model.hybrid import simulate_stride
+    from bound_env.model.params import load_gait
 
     g = load_gait("default")
     zs = np.asarray(g.z0)
@@ -302,7 +302,7 @@ def test_zero_action_through_the_vector_kernel_matches_the_passive_map():
     basin's edge."""
     from agents.runtime.controllers import ZeroController
     from bound_env.analysis.basin import BasinSpec, run_chunk
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     zs = np.asarray(load_gait("default").z0)
     vals = (zs[3] + np.linspace(-0.25, 0.25, 6), zs[0] + np.linspace(-0.02, 0.02, 5))
@@ -543,7 +543,7 @@ def test_failing_task_on_a_dask_worker_does_not_stop_the_run(capsys):
 @pytest.mark.slow
 def test_sweep_directions_as_two_tasks_give_the_serial_sweep():
     from bound_env.analysis.sweeps import sweep
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     g = load_gait("default")
     kw = dict(n_strides=30, polish=False)
@@ -620,7 +620,7 @@ def test_per_observation_controllers_run_one_copy_per_robot():
     as the same law with batch()."""
     from agents.runtime.policy import load_controller
     from bound_env.analysis.basin import BasinSpec, run_chunk
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     class RowByRow:  # the shipped policy, seen through __call__ only
         def __init__(self, inner):

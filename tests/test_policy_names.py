@@ -87,7 +87,7 @@ def _squash(text: str) -> str:  # argparse wraps lines, also at hyphens
 
 def test_help_and_docs_list_the_same_names():
     """``margins --help`` and docs/learned.md's list come from `names_text`."""
-    from bound_env.cli import build_parser
+    from bound_env.commands.cli import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if getattr(a, "choices", None) and "margins" in a.choices)

@@ -1,5 +1,5 @@
 """The step-level residual batched end to end (issue 49): the bases' interval torques of all
-robots in one array (`bound_env.stride_protocol.profile_rows`) are each base's own call bit for
+robots in one array (`bound_env.sim.stride_protocol.profile_rows`) are each base's own call bit for
 bit, the residual's features of all rows are each row's, and the closed loop ends every robot
 exactly as the per-robot loop does."""
 
@@ -15,8 +15,8 @@ from agents.runtime.policy import load_controller
 from agents.runtime.residual import residual_features, residual_features_rows
 from bound_env.analysis.margins import random_directions
 from bound_env.analysis.margins.closed_loop import ClosedLoop
-from bound_env.stride_protocol import OBS_TIME, profile_rows
-from bound_env.task import OBS_NAMES
+from bound_env.sim.stride_protocol import OBS_TIME, profile_rows
+from bound_env.sim.task import OBS_NAMES
 
 
 def _copies_and_obs(ctrl, n: int, seed: int):

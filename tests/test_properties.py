@@ -29,7 +29,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import bound_env
-from bound_env.mismatch import (
+from bound_env.model.mismatch import (
     MAX_DELAY,
     MAX_NOISE,
     NOISE_SCALES,

@@ -8,9 +8,9 @@ import pytest
 from gymnasium.envs.registration import registry
 
 import bound_env
-from bound_env.mismatch import NOISE_SCALES, plant_params
-from bound_env.stride_map import EVAL_RTOL, StrideMap
-from bound_env.wrappers import LibraryActions, RandomizedPlant
+from bound_env.envs.wrappers import LibraryActions, RandomizedPlant
+from bound_env.model.mismatch import NOISE_SCALES, plant_params
+from bound_env.sim.stride_map import EVAL_RTOL, StrideMap
 
 gym.register_envs(bound_env)
 ENV_IDS = sorted(k for k in registry if k.startswith("PassiveBound"))
@@ -85,7 +85,7 @@ def test_the_stride_envs_rough_terrain_draws_around_the_drawn_slope():
 def test_one_holder_of_the_plant():
     """Each env's robot, start check and strides read one task's plant: the stride map keeps
     no copy, so setting the holder's parameters changes the next stride."""
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     sm = StrideMap()
     z = load_gait("default").z0
@@ -292,7 +292,9 @@ def test_the_loader_refuses_a_policy_trained_on_the_privileged_observation(polic
     shutil.copytree(bound_env_root() / "agents" / "policies" / policy, folder)
     data = yaml.safe_load((folder / "config.yaml").read_text())
     section = data[data["run"]["env_id"]]
-    entry = {"bound_env.randomized.RandomizedPlant": {"mismatch": "pm10", "privileged_obs": True}}
+    entry = {
+        "bound_env.envs.randomized.RandomizedPlant": {"mismatch": "pm10", "privileged_obs": True}
+    }
     section["env_wrapper"] = [entry, *section["env_wrapper"]]
     (folder / "config.yaml").write_text(yaml.safe_dump(data))
     with pytest.raises(ValueError, match="trained with a privileged observation") as e:

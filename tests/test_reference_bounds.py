@@ -7,9 +7,9 @@ import time
 
 import pytest
 
-import bound_env.hybrid as hybrid
-import bound_env.reference as reference
-from bound_env.params import load_gait
+import bound_env.model.hybrid as hybrid
+import bound_env.model.reference as reference
+from bound_env.model.params import load_gait
 
 
 @pytest.fixture

@@ -8,9 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from bound_env.dynamics import A_XB, back_hip, front_hip, make_aux
-from bound_env.params import Params
-from bound_env.render import (
+from bound_env.envs.render import (
     BACK_BODY,
     FRONT_BODY,
     GROUND_ROW_FRAC,
@@ -22,6 +20,8 @@ from bound_env.render import (
     slope_to_pixel,
     spring_points,
 )
+from bound_env.model.dynamics import A_XB, back_hip, front_hip, make_aux
+from bound_env.model.params import Params
 
 W, H, METERS = 640, 360, 1.6
 SCALE = W / METERS  # pixels per metre
@@ -170,7 +170,7 @@ def test_renderer_modes():
 
 def test_import_is_lazy():
     code = (
-        "import sys, bound_env.render; "
+        "import sys, bound_env.envs.render; "
         "assert 'matplotlib' not in sys.modules, 'matplotlib imported'; "
         "assert 'pygame' not in sys.modules"
     )

@@ -11,8 +11,8 @@ import yaml
 
 from bound_env.analysis.fixed_point import find_fixed_point
 from bound_env.analysis.reproduce import run, write_gait_files
-from bound_env.cli import main
-from bound_env.params import load_gait, z_to_paper
+from bound_env.commands.cli import main
+from bound_env.model.params import load_gait, z_to_paper
 
 pytestmark = pytest.mark.slow  # the quick reproduction run takes ~20 s (idle)
 

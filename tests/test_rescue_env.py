@@ -1,5 +1,5 @@
 """Tests of the rescue task PassiveBoundRescue-v0/-v1 (bound_env/rescue_*.py) and its discrete
-wrapper (bound_env.wrappers.LibraryActions): the env checkers, the task's rules, the same
+wrapper (bound_env.envs.wrappers.LibraryActions): the env checkers, the task's rules, the same
 strides as the stride env, bad input, and plain SB3 PPO learning on it."""
 
 import warnings
@@ -10,7 +10,7 @@ import pytest
 
 import bound_env
 from bound_env import RESCUE_ENV_ID, RESCUE_ENV_ID_V1
-from bound_env.wrappers import LibraryActions, default_library
+from bound_env.envs.wrappers import LibraryActions, default_library
 
 gym.register_envs(bound_env)
 
@@ -175,9 +175,13 @@ def test_v0_is_deprecated_on_make_and_points_to_v1():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         gym.make(RESCUE_ENV_ID_V1)  # v1: no warning
-    from bound_env.rescue_env import PassiveBoundRescueEnv, PassiveBoundRescueV1Env, sample_starts
-    from bound_env.rescue_v0 import PassiveBoundRescueEnv as V0
-    from bound_env.rescue_v1 import PassiveBoundRescueV1Env as V1
+    from bound_env.envs.rescue_env import (
+        PassiveBoundRescueEnv,
+        PassiveBoundRescueV1Env,
+        sample_starts,
+    )
+    from bound_env.envs.rescue_v0 import PassiveBoundRescueEnv as V0
+    from bound_env.envs.rescue_v1 import PassiveBoundRescueV1Env as V1
 
     assert (PassiveBoundRescueEnv, PassiveBoundRescueV1Env) == (V0, V1) and callable(sample_starts)
 

@@ -15,7 +15,7 @@ import json
 import shutil
 from pathlib import Path
 
-from bound_env.resources import controllers_dir
+from bound_env.files.resources import controllers_dir
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -101,7 +101,7 @@ def test_adaptive_hold_reuses_an_entry_only_under_its_fingerprint(tmp_path, monk
     calls = []
 
     def hold_entry(policy, spec_text, seed, ctrl=None):
-        from bound_env.mismatch import as_spec
+        from bound_env.model.mismatch import as_spec
 
         calls.append(policy)
         spec = as_spec(spec_text)

@@ -16,7 +16,7 @@ import yaml
 from agents.runtime.policy import find_policy_files, load_controller, shipped_policies
 from agents.runtime.policy_table import ARCHIVE_DIR
 from agents.runtime.rollout import load_policy, rollout
-from bound_env.cli import main
+from bound_env.commands.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from bound_env.dynamics import back_hip, front_hip, make_aux, total_energy
-from bound_env.hybrid import FAILURES, GUARD_NAMES, TIME_UP, simulate_stride, state_from_z
-from bound_env.params import Params, load_gait, z_to_si
+from bound_env.model.dynamics import back_hip, front_hip, make_aux, total_energy
+from bound_env.model.hybrid import FAILURES, GUARD_NAMES, TIME_UP, simulate_stride, state_from_z
+from bound_env.model.params import Params, load_gait, z_to_si
 
 # Apex states [paper units] and touchdown angles [deg] that end in each failure (found by a
 # random search over states and angles; the test checks the simulator still names them).
@@ -257,7 +257,7 @@ def test_damping_from_zeta(gait):
 
 def test_spine_torque_is_a_generalized_force_on_theta2_only(gait):
     """tau changes theta2's equation but conserves linear momentum: xddot, yddot unchanged."""
-    from bound_env.dynamics import accelerations
+    from bound_env.model.dynamics import accelerations
 
     y = state_from_z(gait.z0)
     a0 = accelerations(y, make_aux(gait.params.to_array(0.0)))
@@ -289,10 +289,10 @@ def test_both_back_ends_run_through_apexes_alike(default_gait):
     """Without stopping at the apex, every apex ends a stride and starts the next one (the
     touched-down flags are cleared by the events layer): both back-ends pass the same apexes,
     and each apex state is the next stride's start, as `simulate_stride` chains them."""
-    from bound_env.dynamics import make_aux
-    from bound_env.events import N_FLAGS
-    from bound_env.fast import EV_APEXES, EV_LOGGED, Options, advance, event_log, recorder
-    from bound_env.reference import simulate_reference
+    from bound_env.model.dynamics import make_aux
+    from bound_env.model.events import N_FLAGS
+    from bound_env.model.fast import EV_APEXES, EV_LOGGED, Options, advance, event_log, recorder
+    from bound_env.model.reference import simulate_reference
 
     g, t_end = default_gait, 1.0  # ~2.6 strides of 0.39 s
     y0 = state_from_z(g.z0)

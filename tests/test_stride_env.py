@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import bound_env
-from bound_env.dynamics import make_aux
-from bound_env.hybrid import (
+from bound_env.model.dynamics import make_aux
+from bound_env.model.hybrid import (
     APEX,
     FAILURES,
     N_FLAGS,
@@ -21,9 +21,9 @@ from bound_env.hybrid import (
     state_from_z,
     z_from_state,
 )
-from bound_env.params import P_TAU, load_gait
-from bound_env.stride_task import make_basis
-from bound_env.task import APEX_SCALES
+from bound_env.model.params import P_TAU, load_gait
+from bound_env.sim.stride_task import make_basis
+from bound_env.sim.task import APEX_SCALES
 
 gym.register_envs(bound_env)
 ENV_ID = "PassiveBoundStride-v1"
@@ -256,7 +256,7 @@ def test_gymnasium_and_sb3_env_checkers_pass_without_warnings(kw):
 
 
 def test_one_config_holds_the_stride_tasks_settings():
-    from bound_env.stride_task import StrideTask, StrideTaskConfig
+    from bound_env.sim.stride_task import StrideTask, StrideTaskConfig
 
     cfg = StrideTaskConfig(K=8, max_torque=80.0, dt=0.02)
     task = StrideTask(cfg, slope_noise_deg=0.1)

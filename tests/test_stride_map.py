@@ -1,5 +1,5 @@
-"""The one stride map (bound_env.stride_map): a stride of the step env, bit for bit; the batch is
-the single robot; and everything that advances a stride under a profile lands on the same apex
+"""The one stride map (bound_env.sim.stride_map): a stride of the step env, bit for bit; the batch
+is the single robot; and everything that advances a stride under a profile lands on the same apex
 for the same (z, u): the stride env, the MPC's planning model, distillation, fine-tuning and
 margins' closed loop, on one-switch bang-bang rows from r = 0.1 starts."""
 
@@ -10,7 +10,7 @@ import pytest
 import bound_env
 from bound_env.analysis.margins import ClosedLoop, random_directions
 from bound_env.control import load_controller
-from bound_env.stride_map import (
+from bound_env.sim.stride_map import (
     EVAL_RTOL,
     NO_KICK,
     StrideMap,

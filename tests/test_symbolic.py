@@ -1,6 +1,6 @@
 """The compiled equations of motion against an independent sympy derivation (paper eqs. 1-16).
 
-The model is rebuilt here from the paper, not from `bound_env.dynamics`: q = [x_g, y_g, th1,
+The model is rebuilt here from the paper, not from `bound_env.model.dynamics`: q = [x_g, y_g, th1,
 th2]; body COMs by eqs. (5)-(8); T by eq. (3); V by eq. (2) with the leg lengths of eqs.
 (9)-(14) (a stance leg's length is the hip-to-toe distance, a flight leg stores no energy);
 the spine spring rests at th2 = 0; the dissipation Delta = c_c th2dot^2 / 2 (eq. 4) enters
@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from bound_env.dynamics import kinetic_energy, make_aux, potential_energy, rhs
-from bound_env.params import P_L1, Params
+from bound_env.model.dynamics import kinetic_energy, make_aux, potential_energy, rhs
+from bound_env.model.params import P_L1, Params
 
 CONDITIONS = {"df": (False, False), "bs": (True, False), "fs": (False, True), "ds": (True, True)}
 N_STATES = 20

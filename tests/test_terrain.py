@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import bound_env
-from bound_env.dynamics import kinetic_energy, make_aux, total_energy
-from bound_env.hybrid import state_from_z
-from bound_env.params import P_ALPHA, P_GX, P_GY, load_gait
-from bound_env.task import S_XI
-from bound_env.terrain import change_slope
+from bound_env.model.dynamics import kinetic_energy, make_aux, total_energy
+from bound_env.model.hybrid import state_from_z
+from bound_env.model.params import P_ALPHA, P_GX, P_GY, load_gait
+from bound_env.model.terrain import change_slope
+from bound_env.sim.task import S_XI
 
 gym.register_envs(bound_env)
 

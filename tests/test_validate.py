@@ -230,7 +230,7 @@ def test_cli_parses_before_importing_the_heavy_modules():
     """Importing the CLI and building its parser (every sub-command registered) imports no
     numba, scipy, torch or stable_baselines3 (benchmarks/cli_startup.py times it)."""
     code = (
-        "import sys\nfrom bound_env.cli import build_parser\nbuild_parser()\n"
+        "import sys\nfrom bound_env.commands.cli import build_parser\nbuild_parser()\n"
         "print(sorted(m for m in ('numba', 'scipy', 'torch', 'stable_baselines3') "
         "if m in sys.modules))"
     )
@@ -238,7 +238,7 @@ def test_cli_parses_before_importing_the_heavy_modules():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "[]"
-    code = "from bound_env.cli import main; import sys; sys.exit(main())"
+    code = "from bound_env.commands.cli import main; import sys; sys.exit(main())"
     r = subprocess.run(
         [sys.executable, "-c", code, "--help"], capture_output=True, text=True, env=env
     )
@@ -257,7 +257,7 @@ def test_compare_defaults_to_quick_and_its_help_says_where_its_time_is(capsys):
     the help points there instead of quoting a time of its own."""
     import re
 
-    from bound_env.cli import build_parser, main
+    from bound_env.commands.cli import build_parser, main
 
     args = build_parser().parse_args(["compare"])
     assert args.budget == "quick"
@@ -269,7 +269,7 @@ def test_compare_defaults_to_quick_and_its_help_says_where_its_time_is(capsys):
 def test_progress_lines_when_stderr_is_not_a_terminal(capsys, monkeypatch):
     from concurrent.futures import ThreadPoolExecutor
 
-    from bound_env.parallel import ProgressLines, run_tasks
+    from bound_env.sim.parallel import ProgressLines, run_tasks
 
     monkeypatch.setattr(ProgressLines, "EVERY_S", 1e9)  # by the 10 % rule only
     tasks = {i: (abs, (-i,)) for i in range(20)}

@@ -3,14 +3,8 @@
 import numpy as np
 import pytest
 
-from bound_env.analysis.variational import (
-    augmented_jacobian,
-    guard,
-    jacobian_variational,
-    saltation_matrix,
-)
-from bound_env.dynamics import A_XB, A_XF, make_aux, rhs
-from bound_env.hybrid import (
+from bound_env.model.dynamics import A_XB, A_XF, make_aux, rhs
+from bound_env.model.hybrid import (
     G_LO_B,
     G_LO_F,
     G_TD_B,
@@ -21,7 +15,13 @@ from bound_env.hybrid import (
     simulate_stride,
     state_from_z,
 )
-from bound_env.params import load_gait
+from bound_env.model.params import load_gait
+from bound_env.model.variational import (
+    augmented_jacobian,
+    guard,
+    jacobian_variational,
+    saltation_matrix,
+)
 
 TOL = 1e-12
 

@@ -33,7 +33,7 @@ from typing import Any
 
 import yaml
 
-from bound_env.resources import configs_dir
+from bound_env.files.resources import configs_dir
 
 CONFIG_DIR = configs_dir()  # the repository's configs/, or the wheel's copy (package data)
 DEFAULT_CONFIG = CONFIG_DIR / "ppo.yaml"

@@ -163,10 +163,10 @@ def read_policy_section(files: PolicyFiles) -> tuple[dict, str, int | None]:
 
 def refuse_privileged(section: dict, where) -> None:
     """ValueError (one line) when the run's ``env_wrapper`` handed the policy a privileged
-    observation (`bound_env.randomized.RandomizedPlant` with ``privileged_obs: true``, the true
+    observation (`bound_env.envs.randomized.RandomizedPlant` with ``privileged_obs: true``, the true
     plant's factors; `RandomizedPlant.reads_privileged`): such a policy reads what no robot
     shows, so it is never scored or deployed."""
-    from bound_env.randomized import RandomizedPlant
+    from bound_env.envs.randomized import RandomizedPlant
 
     from .config import class_entries
 
@@ -265,7 +265,7 @@ def write_fingerprint(folder: str | Path, base: dict | None = None, **extra) -> 
     controller of a residual policy (`agents.runtime.policy.write_policy_fingerprint` finds it)."""
     import json
 
-    from bound_env.cache import atomic_write
+    from bound_env.files.cache import atomic_write
 
     folder = Path(folder)
     data = {"model.zip": file_sha256(folder / "model.zip")}

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from bound_env.cache import atomic_write
+from bound_env.files.cache import atomic_write
 
 EVAL_FIELDS = (
     "timesteps",

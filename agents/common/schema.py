@@ -3,7 +3,7 @@
 A fingerprint (``fingerprint.json``) proves that a folder's files were not changed by accident;
 these schemas say whether they make sense: types, shapes, finite values, ranges, and sizes that
 bound the work a policy can ask for. Each kind has its checks here, written with the field
-checkers of `bound_env.schema`; every error is one line naming the file and the field.
+checkers of `bound_env.files.schema`; every error is one line naming the file and the field.
 
 - a distilled or fine-tuned choice policy (`agents.experts.distill`): ``choice.npz``
   (`check_choice_npz`) and ``config.json`` (`check_choice_config`);
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env import schema as field
+from bound_env.files import schema as field
 
 CHOICE_FILE = "choice.npz"  # a choice policy's network and library
 CHOICE_CONFIG = "config.json"  # its frozen expert
@@ -96,7 +96,7 @@ def check_choice_npz(path) -> tuple[list, np.ndarray]:
     """(layers [(W, b), ...], library rows) of a ``choice.npz``: ``n_layers`` one integer from
     1 to `MAX_LAYERS`; ``W<k>`` (width, inputs) and ``b<k>`` (width,) chained from the 6 apex
     numbers to one logit per library row; ``rows`` (n, K) in [-1, 1]; all real and finite."""
-    from bound_env.stride_task import MAX_K
+    from bound_env.sim.stride_task import MAX_K
 
     arrays = field.read_npz(path)
     where = str(path)
@@ -139,7 +139,7 @@ def check_choice_config(path) -> dict:
     basis, K, max_torque, dt, gain (K x 6) and search settings, as an mpc spec's:
     `bound_env.control.spec.check_mpc_settings`). Provenance keys are not checked."""
     from bound_env.control.spec import MAX_TORQUE_LIMIT, check_mpc_settings
-    from bound_env.stride_task import BASES, MAX_K
+    from bound_env.sim.stride_task import BASES, MAX_K
 
     cfg = field.read_json(path)
     where = str(path)

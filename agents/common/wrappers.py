@@ -4,7 +4,7 @@
 state z = z* + s * apex_scales * xi (``reset(options={"apex_state": z})``), where
 
 - ``apex_scales`` are the environment's units of apex deviation (about the half-width of the
-  *passive* basin along each axis, `bound_env.task.APEX_SCALES`), so s = 1 is the passive edge;
+  *passive* basin along each axis, `bound_env.sim.task.APEX_SCALES`), so s = 1 is the passive edge;
 - the size s is drawn uniformly from [0, ``noise_scale``] for each episode, so that easy
   and hard starts stay mixed however far the curriculum has gone;
 - the direction xi is, with probability ``axis_prob``, one axis (a single component, either

@@ -41,7 +41,7 @@ nominal cycle keeps exactly zero torque while a robot off its model is corrected
 z*; the no-history ablation (k = 0) gates on the radius alone.
 
 **DAgger** (`train_adaptive`): each round draws ``episodes`` robots (plants from
-``mismatch``, a `bound_env.mismatch` spec; starts at z* or near it), runs ``strides`` strides
+``mismatch``, a `bound_env.model.mismatch` spec; starts at z* or near it), runs ``strides`` strides
 of the teacher (round 0) or of the current student, labels every state the gate does not
 take with the teacher on that robot's plant, aggregates, and refits. Every round's data is
 saved (``round_<k>.npz``, atomic), so a killed run resumes at the first missing round; after
@@ -49,7 +49,7 @@ each fit the validation hold (the plants of validation seed 777, nominal z*, the
 is recorded: the validation curve of the model card.
 
 **State.** The history belongs to an episode: ``reset()`` clears it, and the loops call it at
-every start (`bound_env.stride_protocol.reset_controller`, ``stateful = True``). So this
+every start (`bound_env.sim.stride_protocol.reset_controller`, ``stateful = True``). So this
 controller offers no stateless ``interval_actions`` or ``apex_torques`` (the margins' batched
 stride paths would share one history among many robots): loops run it through its own
 ``on_apex`` / ``__call__``, a copy per robot.
@@ -66,11 +66,11 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.cache import atomic_write
 from bound_env.control.mpc import MPCController
-from bound_env.mismatch import as_spec, plant_params, plant_values, sample_factors
-from bound_env.params import Z_NAMES
-from bound_env.stride_map import EVAL_RTOL, StrideMap
+from bound_env.files.cache import atomic_write
+from bound_env.model.mismatch import as_spec, plant_params, plant_values, sample_factors
+from bound_env.model.params import Z_NAMES
+from bound_env.sim.stride_map import EVAL_RTOL, StrideMap
 
 from ..common.mlp import linear_layers
 from ..common.seeds import VALIDATION_SEED
@@ -97,7 +97,7 @@ class AdaptiveConfig:
     gate_surprise: float = 0.02  # the gate: within safe and the last surprise at most this
     summary: bool = True  # the episode's means of the history slots as inputs too (k > 0)
     beta: float = 0.5  # DAgger round r >= 1: the teacher acts at a stride with probability beta^r
-    mismatch: str = "pm10+noise"  # the training plants and sensor noise (bound_env.mismatch)
+    mismatch: str = "pm10+noise"  # the training plants and sensor noise (bound_env.model.mismatch)
     k: int = 3  # strides of history (0: the no-history ablation)
     rounds: int = 4  # DAgger rounds (round 0: the teacher acts)
     episodes_first: int = 150
@@ -251,7 +251,7 @@ def episode(
 
 def draw_episodes(cfg: AdaptiveConfig, expert, n: int, rng):
     """n (params, factors, z0) of the training distribution (plants of ``cfg.mismatch``)."""
-    from bound_env.rescue_env import sample_starts
+    from bound_env.envs.rescue_env import sample_starts
 
     spec = as_spec(cfg.mismatch)
     out = []
@@ -269,7 +269,7 @@ def draw_episodes(cfg: AdaptiveConfig, expert, n: int, rng):
 def validation_plants(expert, spec, n: int) -> list:
     """The first n plants the margins draw for validation seed 777 (`mismatch_tasks`)."""
     from bound_env.analysis.margins.mismatch_tasks import mismatch_seeds
-    from bound_env.mismatch import sample_plant_params
+    from bound_env.model.mismatch import sample_plant_params
 
     seed = mismatch_seeds(VALIDATION_SEED)["plants"]
     return sample_plant_params(as_spec(spec), n, seed, expert.params)

@@ -13,9 +13,9 @@ import json
 import sys
 from pathlib import Path
 
-from bound_env import schema as check
-from bound_env.cache import atomic_write
-from bound_env.mismatch import as_spec
+from bound_env.files import schema as check
+from bound_env.files.cache import atomic_write
+from bound_env.model.mismatch import as_spec
 
 from .adaptive import AdaptiveConfig, train_adaptive
 
@@ -25,7 +25,12 @@ from .adaptive import AdaptiveConfig, train_adaptive
 # --------------------------------------------------------------------------------------------
 
 ALGO = "adaptive-dagger"
-_RANDOMIZED = ("bound_env.wrappers.RandomizedPlant", "bound_env.randomized.RandomizedPlant")
+_RANDOMIZED = (  # the old flat paths, which stored configs name, and the paths now
+    "bound_env.wrappers.RandomizedPlant",
+    "bound_env.randomized.RandomizedPlant",
+    "bound_env.envs.wrappers.RandomizedPlant",
+    "bound_env.envs.randomized.RandomizedPlant",
+)
 _SECTION_KEYS = ("algo", "env_wrapper", "env_kwargs", "adaptive")
 
 

@@ -37,11 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.cache import atomic_write
 from bound_env.control import load_controller as load_classical
 from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library
-from bound_env.rescue_env import sample_starts  # noqa: F401  (moved there; re-exported)
-from bound_env.stride_map import EVAL_RTOL, StrideMap
+from bound_env.envs.rescue_env import sample_starts  # noqa: F401  (moved there; re-exported)
+from bound_env.files.cache import atomic_write
+from bound_env.sim.stride_map import EVAL_RTOL, StrideMap
 
 from ..common.learn_config import DistillConfig  # noqa: F401 - importable from here as before
 from ..common.mlp import linear_layers
@@ -85,7 +85,7 @@ def good_rows(outcome, strides, scores) -> np.ndarray | None:
 
 def plant_of(ctrl: MPCController) -> StrideMap:
     """The plant a stride controller acts on in training: the one stride map
-    (`bound_env.stride_map`) at the evaluation tolerance, as `margins` measures it."""
+    (`bound_env.sim.stride_map`) at the evaluation tolerance, as `margins` measures it."""
     return StrideMap(ctrl.gait, None, ctrl.dt, ctrl.max_torque, EVAL_RTOL)
 
 
@@ -279,8 +279,8 @@ def write_run_info(folder: Path, seed: int, command: str, seconds: float, made: 
 
 def check_export(export, force: bool) -> None:
     """``--export`` of distill and finetune, before the run: refused if it exists, unless
-    ``force``, and where it could not be written (`bound_env.cli_args.check_writable`)."""
-    from bound_env.cli_args import check_writable
+    ``force``, and where it could not be written (`bound_env.commands.cli_args.check_writable`)."""
+    from bound_env.commands.cli_args import check_writable
 
     if export and Path(export).exists() and not force:
         raise ValueError(f"--export {export} exists; give --force to replace it")
@@ -290,7 +290,7 @@ def check_export(export, force: bool) -> None:
 
 def export_folder(src: Path, dest) -> Path:
     """Copy a policy folder to ``dest`` whole: a copy beside it under a name of its own (a
-    folder: `bound_env.cache.atomic_path` writes files), then a rename; removed on failure."""
+    folder: `bound_env.files.cache.atomic_path` writes files), then a rename; removed on failure."""
     import shutil
     import tempfile
 
@@ -308,7 +308,7 @@ def export_folder(src: Path, dest) -> Path:
 
 
 def cmd_distill(args) -> int:
-    from bound_env.cli_args import check_writable
+    from bound_env.commands.cli_args import check_writable
 
     out = Path(args.out or f"runs/distill_s{args.seed}")
     check_writable(out, "--out")

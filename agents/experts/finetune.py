@@ -1,10 +1,10 @@
 """PPO fine-tuning of a distilled stride controller (agents/experts/distill.py).
 
-**The task** is the public env PassiveBoundRescue-v0 (`bound_env.rescue_env`, made by
+**The task** is the public env PassiveBoundRescue-v0 (`bound_env.envs.rescue_env`, made by
 `gymnasium.make` in `rescue_env`): one step = one stride of the one stride map
-(`bound_env.stride_map`, the step env's own kernel at the evaluation tolerance 1e-10, as
+(`bound_env.sim.stride_map`, the step env's own kernel at the evaluation tolerance 1e-10, as
 PassiveBoundStride-v1 and `margins`), so what is learned is what `margins` measures. The
-action is a row of the student's library (Discrete, `bound_env.wrappers.LibraryActions`; row 0
+action is a row of the student's library (Discrete, `bound_env.envs.wrappers.LibraryActions`; row 0
 the LQR's plan u_lqr(z)); the observation the normalized apex error x = (z - z*) / s. Episodes
 start past the safe radius at z* + r |z*| xi (r ~ U(0, ``r_max``), the distillation's start
 distribution). Reward: 1 per stride survived;
@@ -32,8 +32,8 @@ import numpy as np
 
 import bound_env
 from bound_env import RESCUE_ENV_ID
-from bound_env.cache import atomic_write
-from bound_env.wrappers import LibraryActions
+from bound_env.envs.wrappers import LibraryActions
+from bound_env.files.cache import atomic_write
 
 from ..common.learn_config import FinetuneConfig
 from ..common.mlp import linear_layers
@@ -63,7 +63,7 @@ def rescue_env_kwargs(policy: ChoicePolicyController, r_max=0.45, horizon=30) ->
 def rescue_env(policy: ChoicePolicyController, r_max=0.45, horizon=30, axis_prob=0.25):
     """The env fine-tuning trains on: PassiveBoundRescue-v0 (`gymnasium.make`) on the
     student's LQR and safe radius, with the student's library as its discrete actions
-    (`bound_env.wrappers.LibraryActions`, row 0 the LQR's plan)."""
+    (`bound_env.envs.wrappers.LibraryActions`, row 0 the LQR's plan)."""
     import warnings
 
     kwargs = rescue_env_kwargs(policy, r_max, horizon)
@@ -251,7 +251,7 @@ def finetune(student_dir, out_dir, cfg: FinetuneConfig, progress: bool = True) -
         )
     final = out_dir / f"ckpt_{model.num_timesteps}_steps.zip"
     if not final.is_file():  # a longer rerun resumes from the end of this one
-        from bound_env.cache import atomic_path
+        from bound_env.files.cache import atomic_path
 
         with atomic_path(final, suffix=".zip") as tmp:  # SB3 appends .zip otherwise
             model.save(tmp)
@@ -284,7 +284,7 @@ def cmd_finetune(args) -> int:
         raise ValueError(f"--student {args.student}: not a distilled policy (no choice.npz)")
     check_export(args.export, args.force)
     out = Path(args.out or f"runs/finetune_s{args.seed}")
-    from bound_env.cli_args import check_writable
+    from bound_env.commands.cli_args import check_writable
 
     check_writable(out, "--out")
     cfg = FinetuneConfig(timesteps=args.timesteps, seed=args.seed)

@@ -18,7 +18,8 @@ def _run(module: str, name: str):
 
 
 def register_distill(sub) -> None:
-    from bound_env.cli_args import add_json_arg, add_progress_args, number
+    from bound_env.commands.cli_args import add_json_arg, add_progress_args
+    from bound_env.files.values import number
 
     p = sub.add_parser(
         "distill",
@@ -55,7 +56,8 @@ def register_distill(sub) -> None:
 
 
 def register_finetune(sub) -> None:
-    from bound_env.cli_args import add_json_arg, add_progress_args, number
+    from bound_env.commands.cli_args import add_json_arg, add_progress_args
+    from bound_env.files.values import number
 
     p = sub.add_parser(
         "finetune", help="PPO fine-tuning of a distilled stride controller (runs/finetune_s<seed>/)"

@@ -35,7 +35,7 @@ def stride_curve(
     z_cl + r |z*| xi). Returned: within ``tol`` (SI, max-abs) of z_cl in ``strides`` strides
     without a fall. ``effort``: mean |tau| over a stride of the cycle [N m].
     A validation curve, cheaper than `bound_env.analysis.margins` and no substitute for it."""
-    from bound_env.stride_task import StrideTask
+    from bound_env.sim.stride_task import StrideTask
 
     task = StrideTask(gait=gait, basis="windows", K=getattr(getattr(ctrl, "basis", None), "K", 4))
     act = getattr(ctrl, "stride_action", None)

@@ -17,8 +17,9 @@ def register(sub) -> None:
         MAX_GRID,
         MAX_STRIDES,
     )
-    from bound_env.cli_args import POLICY_GAIT_HELP, add_gait_args, add_progress_args, number
-    from bound_env.parallel import add_scheduler_args
+    from bound_env.commands.cli_args import POLICY_GAIT_HELP, add_gait_args, add_progress_args
+    from bound_env.files.values import number
+    from bound_env.sim.parallel import add_scheduler_args
 
     p = sub.add_parser(
         "basin-map", help="2-D basin map (basin.npz, basin.png) of the passive gait or a policy"
@@ -98,7 +99,7 @@ def resolve(policy: str, gait: str | None, force: bool = False):
 
 def cmd_basin_map(args) -> int:
     from bound_env.analysis.basin import basin_map, summary_text
-    from bound_env.cli_args import strict_json
+    from bound_env.commands.cli_args import strict_json
 
     controller, label, gait = resolve(args.policy, args.gait, args.force)
     s = basin_map(
@@ -117,7 +118,7 @@ def cmd_basin_map(args) -> int:
         overlay_passive=not args.no_overlay,
     )
     if args.png:
-        from bound_env.cache import atomic_write
+        from bound_env.files.cache import atomic_write
 
         atomic_write(args.png, (Path(args.out) / "basin.png").read_bytes())
         s["png"] = str(args.png)

@@ -28,10 +28,10 @@ from pathlib import Path
 
 from bound_env.analysis.margins import DEFAULT_SEED, check_seed, plot_margins
 from bound_env.analysis.paired_text import paired_text as paired_text
-from bound_env.cache import atomic_write
-from bound_env.cli_args import strict_json
-from bound_env.parallel import open_pool
-from bound_env.schema import load_json_strict
+from bound_env.commands.cli_args import strict_json
+from bound_env.files.cache import atomic_write
+from bound_env.files.schema import load_json_strict
+from bound_env.sim.parallel import open_pool
 
 from ..runtime.policy import SHIPPED_DIR
 
@@ -144,7 +144,7 @@ def chosen_entries(parsed, keep_defaults: bool = False) -> list[tuple[str, list[
     the default-gait passive) and the ``parsed`` entries; with ``keep_defaults`` every default
     column (`default_entries`) stays, and an entry of the same label (or folder) replaces the
     default column of that name. No entries: the default columns."""
-    from bound_env.cli_args import name_key
+    from bound_env.files.values import name_key
 
     defaults = default_entries()
     if not parsed:
@@ -165,7 +165,7 @@ def check_entries(entries) -> None:
     no path, no ``|``), two labels that share a folder or a column name, two policies of one
     entry that share a folder, and a policy or gait that does not load (`load_controller`,
     with its checks, as `compute_margins` loads it)."""
-    from bound_env.cli_args import check_name, name_key
+    from bound_env.files.values import check_name, name_key
 
     from .margins import as_controller
 
@@ -230,10 +230,10 @@ def compare(
     An entry is (label, policies, gait); an old-style (label, policy, gait) is accepted. Each
     policy of an entry is one seed of the same recipe: the page reports per measure the mean
     and a 95 % Student-t interval over them, and every seed's value in a collapsible detail.
-    One executor (``executor``, else `bound_env.parallel.open_pool` of ``scheduler`` and
+    One executor (``executor``, else `bound_env.sim.parallel.open_pool` of ``scheduler`` and
     ``workers``) serves every entry.
 
-    ``mismatch`` (specs of `bound_env.mismatch`, e.g. ``["pm5", "pm10"]``) measures every
+    ``mismatch`` (specs of `bound_env.model.mismatch`, e.g. ``["pm5", "pm10"]``) measures every
     column under model error too, and the page gets a "Model error" section
     (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`, paired against lqr).
 
@@ -420,7 +420,7 @@ def run_model_error(
     (or taken from the cache) under ``specs``, or with ``render_only`` read from their
     ``margins.json`` (a ValueError naming the file where one is missing or of another budget,
     seed or spec). ``on_column(label, policy, result)`` is called after each."""
-    from bound_env.mismatch import parse_specs
+    from bound_env.model.mismatch import parse_specs
 
     parsed = parse_specs(",".join(specs))
     mb = model_error_budget(budget)
@@ -554,6 +554,6 @@ def paired_comparisons(groups, n_boot: int = 2000) -> list[dict]:
 if __name__ == "__main__":  # python -m agents.results.compare ARGS is bound-env compare ARGS
     import sys
 
-    from bound_env.cli import main
+    from bound_env.commands.cli import main
 
     sys.exit(main(["compare", *sys.argv[1:]]))

@@ -38,7 +38,7 @@ def timing_states(z_star, seed: int, n_dirs: int = 32, sizes=FAIR_SIZES) -> np.n
     directions d of ``seed`` and each r, kept where max |z - z*| / s > `FAIR_SAFE`."""
     from bound_env.analysis.margins import sample_seeds
     from bound_env.analysis.margins.budget import random_directions
-    from bound_env.task import APEX_SCALES
+    from bound_env.sim.task import APEX_SCALES
 
     zs = np.asarray(z_star, dtype=float)
     dirs = random_directions(n_dirs, sample_seeds(seed)["directions"])
@@ -101,7 +101,7 @@ def fair_decision_times(groups, load_controller, seed: int, repeats: int = DECIS
     """{label: times of its first policy} for every column whose controller decides at the
     apex (`decider_of`), each timed on its gait's `timing_states` (``gait`` per controller;
     ``states`` counts the default gait's, ``states_by_gait`` every gait's)."""
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     by_gait: dict = {}
     out: dict = {

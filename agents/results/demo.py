@@ -17,12 +17,12 @@ direction 1, showed passive vs learned only: the LQR alone returns from it as fa
 **The runs** are those of the margins (`bound_env.analysis.margins.ClosedLoop.run`, the
 closed-loop apex map at the evaluation tolerance): *returned* means within 1e-4 (SI) of z*
 within ``DEMO_STRIDES`` strides. ``bound_env`` never imports ``agents`` (tests/test_layers.py):
-`agents.cli.register` adds `demo_comparison` to `bound_env.render_cli`'s demo parts when
+`agents.cli.register` adds `demo_comparison` to `bound_env.commands.render_cli`'s demo parts when
 ``bound-env`` builds its parser (the ``bound_env.commands`` entry point).
 
 **The animation** (``compare.gif``) shows the three robots side by side, one frame pair per two
 control intervals (50 frames per second of simulated time, played in real time), drawn by
-`bound_env.render.render_frame`; a fallen robot holds its last frame. The learned robot is
+`bound_env.envs.render.render_frame`; a fallen robot holds its last frame. The learned robot is
 shown for ``SHOW_AFTER`` more strides once it has returned. The one-stride episodes of the
 apex map are drawn as one run: each starts where the last one's apex was.
 """
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.params import Z_SI_UNITS
+from bound_env.model.params import Z_SI_UNITS
 
 from ..common.seeds import VALIDATION_SEED
 
@@ -53,7 +53,7 @@ FRAME_STEPS = 2  # control intervals per frame (50 frames per simulated second a
 def demo_start(gait="default") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(z0, z*, xi): the perturbed start of the comparison (module docstring), SI."""
     from bound_env.analysis.margins import random_directions
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     z_star = np.asarray(load_gait(gait).z0, dtype=float)
     xi = random_directions(DEMO_DIRECTIONS, DEMO_SEED)[DEMO_INDEX]
@@ -105,7 +105,7 @@ class _Recorded:
         return out
 
     def _snap(self, t: float, tau: float) -> None:
-        from bound_env.params import A_XB, A_XF
+        from bound_env.model.params import A_XB, A_XF
 
         b = self._env._b
         y, aux = b.y[0].copy(), b.aux[0].copy()
@@ -208,7 +208,7 @@ def compare_from_start(policy: str = DEMO_POLICY, gait="default", show_after: in
 
 
 def _panel(state, label: str, note: str, size=PANEL) -> np.ndarray:
-    from bound_env.render import render_frame
+    from bound_env.envs.render import render_frame
 
     y, aux, t, strides, tau = state
     text = f"{label}{note}\nt {t:5.2f} s   stride {strides}   tau {tau:+5.1f} N m"
@@ -282,10 +282,10 @@ def table_lines(comparison: dict) -> list[str]:
 
 
 def demo_comparison(gait="default", out=None, progress: bool = False):
-    """The demo part `bound_env.render_cli.cmd_demo` runs (registered by `agents.cli`):
+    """The demo part `bound_env.commands.render_cli.cmd_demo` runs (registered by `agents.cli`):
     ``(comparison, lines to print)``; writes ``compare.gif`` into ``out``. On a gait the
     ``default`` controller was not made for, the comparison is skipped (and says why)."""
-    from bound_env.render import write_video
+    from bound_env.envs.render import write_video
 
     from ..runtime.controllers import same_gait
     from ..runtime.policy import load_controller

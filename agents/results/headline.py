@@ -41,8 +41,8 @@ from pathlib import Path
 
 from bound_env.analysis.margins.fingerprint import git_commit
 from bound_env.analysis.margins.stats import t_interval
-from bound_env.cache import atomic_write
-from bound_env.schema import check_keys, load_json_strict
+from bound_env.files.cache import atomic_write
+from bound_env.files.schema import check_keys, load_json_strict
 
 from .formatting import ROOT, num3, rel, slug, value
 

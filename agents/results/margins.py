@@ -25,13 +25,13 @@ import numpy as np
 from bound_env.analysis import margins as core
 from bound_env.analysis.margins import *  # noqa: F403 - the old names, for users' scripts
 from bound_env.analysis.margins import DEFAULT_SEED, Budget, as_budget, check_seed
-from bound_env.analysis.numerics import (  # noqa: F401 - old names, for users' scripts
+from bound_env.model.numerics import (  # noqa: F401 - old names, for users' scripts
     bisect_threshold,
     fd_jacobian,
     map_fixed_point,
     sorted_eigenvalues,
 )
-from bound_env.parallel import SerialExecutor  # noqa: F401 - its old home, kept as an alias
+from bound_env.sim.parallel import SerialExecutor  # noqa: F401 - its old home, kept as an alias
 
 from ..runtime.policy import load_controller
 
@@ -160,7 +160,7 @@ def compute_margins(
 
 
 # --------------------------------------------------------------------------------------------
-# Old names of `bound_env.analysis.numerics` functions (they were defined here)
+# Old names of `bound_env.model.numerics` functions (they were defined here)
 # --------------------------------------------------------------------------------------------
 
 
@@ -171,6 +171,6 @@ def central_jacobian(f, z, steps) -> np.ndarray:
 
 
 def find_fixed_point(f, z0, steps, settle: int = 60, newton_iters: int = 8, tol: float = 1e-11):
-    """Old name of `bound_env.analysis.numerics.map_fixed_point` (returns (z, residual,
+    """Old name of `bound_env.model.numerics.map_fixed_point` (returns (z, residual,
     Jacobian)); `bound_env.analysis.find_fixed_point` is the Poincare map's."""
     return tuple(map_fixed_point(f, z0, steps, settle=settle, newton_iters=newton_iters, tol=tol))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bound_env.cli_args import check_writable, strict_json
+from bound_env.commands.cli_args import check_writable, strict_json
 
 from ..runtime.policy_args import policy_label
 
@@ -21,11 +21,11 @@ def run_margins(args) -> int:
         name += f"-seed{args.seed}"
     out = Path(args.out or Path("out") / "margins" / name)
     check_writable(out, "--out")  # made by the run
-    # a bar on a terminal, else a line every 30 s or 10 % of the tasks (bound_env.parallel)
+    # a bar on a terminal, else a line every 30 s or 10 % of the tasks (bound_env.sim.parallel)
     progress = not args.no_progress
     mismatch = None
     if args.mismatch is not None:
-        from bound_env.mismatch import parse_specs
+        from bound_env.model.mismatch import parse_specs
 
         mismatch = parse_specs(args.mismatch)  # a bad spec fails before a policy is loaded
     ctrl = load_controller(args.policy, gait=args.gait, force=args.force, env_id=args.env_id)

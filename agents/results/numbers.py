@@ -14,7 +14,7 @@ The key is a quantity and its arguments, a column label first (`QUANTITIES`: e.g
 ``basinmap(mpc)``). The text between the comments is what `value` makes of the JSON (the
 comments do not render), so it is regenerated, never edited. A whole table or paragraph is a
 block ``<!-- table:NAME -->...<!-- /table:NAME -->`` (`TABLES`: the page's model-error tables
-from ``model_error.json``, the model-error presets printed from `bound_env.mismatch`,
+from ``model_error.json``, the model-error presets printed from `bound_env.model.mismatch`,
 compare's default columns). ``python -m agents.results.prose`` rewrites every block with the
 generated sentences, ``--check`` says whether they are up to date. A number quoted for the
 wrong controller, or changed in its last digit, is a stale block; tests/test_docs_numbers.py
@@ -463,7 +463,7 @@ def _model_error_tables(s: Sources) -> str:
 
 
 def _presets(_s: Sources) -> str:
-    from bound_env.mismatch import presets_markdown
+    from bound_env.model.mismatch import presets_markdown
 
     return "\n\n" + presets_markdown() + "\n\n"
 
@@ -480,7 +480,7 @@ def _default_columns(_s: Sources) -> str:
 # generated tables and text between <!-- table:NAME --> and <!-- /table:NAME -->
 TABLES = {
     "compare-default-columns": _default_columns,  # compare's default columns, from the code
-    "mismatch-presets": _presets,  # bound_env.mismatch.PRESETS, from the code
+    "mismatch-presets": _presets,  # bound_env.model.mismatch.PRESETS, from the code
     "model-error-run": _model_error_run,  # how model_error.json was made
     "model-error": _model_error_tables,  # the page's model-error section, from its JSON
     "hold-eval": _hold_eval_table,  # scripts/hold_eval.py's table of docs/hold_eval.jsonl

@@ -281,7 +281,7 @@ def yardsticks_section(r0: dict) -> str:
   crossing (the JSON keeps the grid value as `r50_grid`).
 - **Rough terrain.** The slope becomes α_k = α + σ ξ_k at every apex (ξ_k standard normal
   from the env's RNG; `slope_noise_deg`), the ground tilting under the robot in flight about
-  the point below its centre of mass (`bound_env/terrain.py`). σ50 = the σ at which the
+  the point below its centre of mass (`bound_env/model/terrain.py`). σ50 = the σ at which the
   fraction of {terrain.get("runs", "?")} runs (env seeds {terrain.get("seeds", ["?"])[0]}…) that
   survive {terrain.get("strides", "?")} strides first falls below one half (log-interpolated
   like r50; the JSON keeps the largest grid σ with survival ≥ 1/2 as

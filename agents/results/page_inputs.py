@@ -21,7 +21,7 @@ import math
 from pathlib import Path
 
 from bound_env.analysis.margins import DEFAULT_SEED, Z_LABELS
-from bound_env.schema import check_keys, read_json
+from bound_env.files.schema import check_keys, read_json
 
 
 def _is_num(v) -> bool:

@@ -17,8 +17,8 @@ import re
 import sys
 from pathlib import Path
 
-from bound_env.cache import atomic_write
-from bound_env.schema import check_keys, read_json
+from bound_env.files.cache import atomic_write
+from bound_env.files.schema import check_keys, read_json
 
 from .formatting import ROOT, num3
 from .headline import HEADLINE_JSON, load_headline

@@ -13,7 +13,7 @@ u = clip(u_lqr(z) + Delta, -1, 1), and the eight plant factors' estimate (auxili
 The gate: the LQR alone within ``safe`` of z* while the last surprise is at most
 ``gate_surprise`` (the radius alone without history), so the nominal cycle keeps zero
 torque. The history is per episode: ``reset()``, called by every loop through
-`bound_env.stride_protocol.reset_controller` (``stateful``); there is no stateless
+`bound_env.sim.stride_protocol.reset_controller` (``stateful``); there is no stateless
 ``interval_actions`` / ``apex_torques``, so loops run a copy per robot.
 """
 
@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.cache import atomic_write
 from bound_env.control.mpc import MPCController
-from bound_env.mismatch import EIGHT
+from bound_env.files.cache import atomic_write
+from bound_env.model.mismatch import EIGHT
 
 from ..common.mlp import mlp_forward
 from ..common.policy_files import FINGERPRINT_FILE, file_sha256, source_name

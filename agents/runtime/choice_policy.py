@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.cache import atomic_write
 from bound_env.control import load_controller as load_classical
 from bound_env.control.mpc import MPCController
+from bound_env.files.cache import atomic_write
 
 from ..common.mlp import mlp_forward
 from ..common.policy_files import FINGERPRINT_FILE, file_sha256, source_name

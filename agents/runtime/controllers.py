@@ -104,7 +104,7 @@ class MLPController:
 
 def same_gait(a, b) -> bool:
     """Whether two gait names/paths give the same parameters and reference apex state."""
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     ga, gb = load_gait(a), load_gait(b)
     return ga.params == gb.params and np.array_equal(ga.z0, gb.z0)

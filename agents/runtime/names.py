@@ -22,7 +22,7 @@ from pathlib import Path
 
 from bound_env import STRIDE_ENV_IDS
 from bound_env.control.offset_free import SUFFIX as OF_SUFFIX
-from bound_env.resources import controllers_dir
+from bound_env.files.resources import controllers_dir
 
 from ..common.policy_files import find_policy_files, read_policy_section
 from ..common.schema import policy_kind

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bound_env.resources import controllers_dir
+from bound_env.files.resources import controllers_dir
 
 from .policy_table import names_text
 
@@ -33,7 +33,7 @@ def check_run_arguments(ap, policies, specs, skip=()) -> None:
     """A script's ``--policy`` and ``--mismatch`` values, before any run: every policy loads
     (but those in ``skip``) and every model-error spec reads, else ``ap.error`` naming the
     option and the value (a one-line usage error, exit 2)."""
-    from bound_env.mismatch import as_spec
+    from bound_env.model.mismatch import as_spec
 
     from .policy import load_controller
 

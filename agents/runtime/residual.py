@@ -45,8 +45,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from bound_env import schema as check
-from bound_env.stride_protocol import (
+from bound_env.files import schema as check
+from bound_env.sim.stride_protocol import (
     OBS_TIME,
     OBS_Z,
     notify_apex,
@@ -218,11 +218,11 @@ class ResidualOver(gym.Wrapper):
         return f.astype(np.float32)
 
     def reset(self, *, seed=None, options=None):
-        from bound_env.task import check_reset_options
+        from bound_env.sim.task import check_reset_options
 
         options = check_reset_options(options) or None  # a list or a typo: one line
         if self.r_max is not None and not (options and options.get("apex_state") is not None):
-            from bound_env.rescue_env import sample_starts
+            from bound_env.envs.rescue_env import sample_starts
 
             if seed is not None:  # seed the env's generator first, then draw from it
                 self.env.reset(seed=seed)
@@ -308,7 +308,7 @@ class ResidualController:
         """The actions of ``copies`` (copies of this controller, one per robot, each told its
         own apexes) on their observations ``obs`` (one row each): each copy's ``__call__``,
         end to end for all rows at once. The bases' interval torques in one array
-        (`bound_env.stride_protocol.profile_rows`: bit for bit each base's call; a base that
+        (`bound_env.sim.stride_protocol.profile_rows`: bit for bit each base's call; a base that
         does not offer it is called row by row), the features of every gated row in one array
         (`residual_features`' entries, copied), and one forward pass of the network for them
         (`MLPController.batch`, each row computed alone; equal to the row-by-row actions to

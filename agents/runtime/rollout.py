@@ -48,7 +48,7 @@ from .controllers import MLPController, check_gait
 from .policy import load_controller, resolve_policy, unwrapped_name
 
 # About how many frames a rollout's video has at most. Frames are streamed to the file
-# (`bound_env.render.VideoWriter`), so memory does not grow with them; the cap keeps the
+# (`bound_env.envs.render.VideoWriter`), so memory does not grow with them; the cap keeps the
 # file's size and the rendering time bounded (a frame is ~0.7 MB raw, ~50-100 kB in a GIF).
 MAX_VIDEO_FRAMES = 2000
 ENV_ID = "PassiveBound-v0"  # the env class; the policy's env id only adds its registered kwargs
@@ -143,10 +143,10 @@ def rollout(
     (N m, average over control intervals of equal length), ``max_torque`` (N m), ``steps``,
     ``time`` (s), ``video`` (path or null), ``video_every`` (a frame of every that many
     control intervals: 1 unless the run would give more than about `MAX_VIDEO_FRAMES` frames,
-    `video_every`). The frames are streamed to the file (`bound_env.render.VideoWriter`), so
+    `video_every`). The frames are streamed to the file (`bound_env.envs.render.VideoWriter`), so
     memory does not grow with ``strides``.
     """
-    from bound_env.task import NO_APEX_TIME
+    from bound_env.sim.task import NO_APEX_TIME
 
     if not (isinstance(strides, int) and 1 <= strides <= 100_000):
         raise ValueError(f"--strides must be an integer from 1 to 100000, got {strides!r}")
@@ -157,7 +157,7 @@ def rollout(
     if video is not None and Path(video).suffix.lower() not in (".gif", ".mp4"):
         raise ValueError(f"--video must end in .gif or .mp4, got {str(video)!r}")
     if video is not None:  # before the run, not after it
-        from bound_env.cli_args import check_writable
+        from bound_env.commands.cli_args import check_writable
 
         check_writable(video, "--video", folder=False)
     make_env, act = load_policy(policy, gait=gait, force=force)
@@ -230,8 +230,8 @@ def video_every(task, strides: int, dt: float) -> int:
     """Frames are taken of every ``video_every``-th control interval: 1 unless ``strides``
     strides of the gait's own period (one passive stride from z*) would give more than
     `MAX_VIDEO_FRAMES` frames. Chosen before the run, so frames can be streamed."""
-    from bound_env.stride import simulate_stride
-    from bound_env.task import NO_APEX_TIME
+    from bound_env.model.stride import simulate_stride
+    from bound_env.sim.task import NO_APEX_TIME
 
     period = simulate_stride(task.z_ref, task.params).t_end
     if not (math.isfinite(period) and period > 0):  # a gait that fails: its longest stride
@@ -240,9 +240,9 @@ def video_every(task, strides: int, dt: float) -> int:
 
 
 def _video_writer(path, fps):
-    """A `bound_env.render.VideoWriter` (a GIF, or an MP4 through imageio-ffmpeg) that streams
+    """A `bound_env.envs.render.VideoWriter` (a GIF, or an MP4 through imageio-ffmpeg) that streams
     the frames to ``path`` and writes it atomically."""
-    from bound_env.render import VideoWriter
+    from bound_env.envs.render import VideoWriter
 
     return VideoWriter(path, fps)
 

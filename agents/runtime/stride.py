@@ -2,7 +2,7 @@
 
 The policy acts once per stride on `PassiveBoundStride-v1` (one step = one apex-to-apex
 stride; its action is the K coefficients u of the stride's spine-torque profile,
-`bound_env.stride_task`). Three rl-zoo3 ``env_wrapper`` entries (innermost first) turn that
+`bound_env.sim.stride_task`). Three rl-zoo3 ``env_wrapper`` entries (innermost first) turn that
 env into the training task of ``configs/ppo-stride.yaml``:
 
 - `DirectionStarts`: every episode starts at z* + r |z*| xi, the yardstick's own perturbation
@@ -41,7 +41,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from bound_env import STRIDE_ENV_ID as STRIDE_ENV_ID  # the env of these wrappers
-from bound_env.rescue_env import sample_direction  # noqa: F401  (moved there; re-exported)
+from bound_env.envs.rescue_env import sample_direction  # noqa: F401  (moved there; re-exported)
 
 BASE_FILE = "base.json"
 # tolerance of the nominal stride that sets the basis' window edges in the step env: that of

@@ -77,7 +77,7 @@ class StridePolicyController:
 
     @property
     def basis(self):
-        from bound_env.stride_task import TorqueBasis
+        from bound_env.sim.stride_task import TorqueBasis
 
         return TorqueBasis("policy", self.edges, self.phi)
 
@@ -113,7 +113,7 @@ class StridePolicyController:
     def interval_actions(self, Z) -> np.ndarray:
         """The step env's actions of the strides from the apex states Z (the protocol of
         `bound_env.control.controllers`)."""
-        from bound_env.stride_protocol import interval_actions_of, observed_times
+        from bound_env.sim.stride_protocol import interval_actions_of, observed_times
 
         U = [self.coefficients(z) for z in np.atleast_2d(np.asarray(Z, dtype=float))]
         return interval_actions_of(self.basis, self.max_torque, U, observed_times(self.dt), self.dt)
@@ -129,11 +129,11 @@ class StridePolicyController:
 
     def planned_profile(self):
         """(taus [N m], t0) of the last apex's profile, as ``__call__`` reads it (None before
-        the first apex; `bound_env.stride_protocol.profile_rows`)."""
+        the first apex; `bound_env.sim.stride_protocol.profile_rows`)."""
         return None if self._taus is None else (self._taus, 0.0)
 
     def __call__(self, obs) -> float:
-        from bound_env.stride_protocol import OBS_TIME, OBS_Z
+        from bound_env.sim.stride_protocol import OBS_TIME, OBS_Z
 
         t = float(obs[OBS_TIME])
         if self._taus is None:
@@ -191,7 +191,7 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
     gait (another ``gait`` than the policy's own is refused unless ``force``)."""
     from stable_baselines3 import PPO
 
-    from bound_env.stride_task import StrideTask
+    from bound_env.sim.stride_task import StrideTask
 
     files = find_policy_files(path)
     model_path, vecnorm_path = files.model, files.vecnormalize
@@ -264,7 +264,7 @@ def write_base(run_dir: Path, venv) -> None:
     # the worker process (the parent then sees EOFError).
     if not venv.has_attr("base"):
         return
-    from bound_env.cache import atomic_write
+    from bound_env.files.cache import atomic_write
 
     bases = venv.get_attr("base")
     if bases and bases[0] is not None:

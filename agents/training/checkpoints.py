@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from bound_env.cache import atomic_path, atomic_write
+from bound_env.files.cache import atomic_path, atomic_write
 
 _CKPT = re.compile(r"rl_model_(\d+)_steps\.zip$")
 

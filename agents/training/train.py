@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 from stable_baselines3.common.callbacks import EvalCallback
 
-from bound_env.cache import atomic_write
+from bound_env.files.cache import atomic_write
 
 from ..common.config import (
     DEFAULT_CONFIG,
@@ -295,7 +295,7 @@ def train(
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from bound_env.cli_args import check_name
+    from bound_env.files.values import check_name
 
     given = {"env_id": env_id, "seed": seed, "sets": sets, "init_from": init_from}
     if env_id is None:

@@ -116,7 +116,7 @@ class BasinValidationCallback(BaseCallback):
         return True
 
     def controller(self):
-        import bound_env.task as task_mod
+        import bound_env.sim.task as task_mod
 
         from ..common.mlp import extract_actor
         from ..common.policy_files import DYNAMICS_KWARGS
@@ -144,8 +144,8 @@ class BasinValidationCallback(BaseCallback):
 
     def score(self, ctrl) -> float:
         from bound_env.analysis.margins import BASIN_HI, BASIN_LO, ClosedLoop, fd_steps
-        from bound_env.analysis.numerics import bisect_threshold, map_fixed_point
-        from bound_env.params import load_gait
+        from bound_env.model.numerics import bisect_threshold, map_fixed_point
+        from bound_env.model.params import load_gait
 
         gait = self.env_kwargs.get("gait", "default")
         loop = ClosedLoop(ctrl, gait)

@@ -37,7 +37,7 @@ def _full_obs(filtered, idx_time: int, full_time: int, size: int) -> np.ndarray:
 
 def collect(env, teacher, seed: int, n_steps: int = BC_STEPS, progress: bool = True):
     """(observations, actions) of the teacher in ``env`` (the wrapped training env)."""
-    from bound_env.stride_protocol import OBS_TIME, notify_apex
+    from bound_env.sim.stride_protocol import OBS_TIME, notify_apex
 
     from ..common.wrappers import ObservationFilter
 

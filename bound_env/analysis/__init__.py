@@ -17,8 +17,11 @@ Modules, read top to bottom:
 - `continuation`: `continue_branch` in kc or alpha with fold, period-doubling and
   Neimark-Sacker flags (Figs. 3-4), its files and plot (the engine's names re-exported).
 - `sweeps`: e_max against alpha and kc the paper's way, stability windows (Figs. 7-8).
-- `numerics`: finite-difference Jacobian, Newton, fixed points of a map, eigenvalue sort,
-  bisection, on any map ``f(z) -> z | None`` (the margins use them too).
+- `bound_env.model.numerics` (its old name ``bound_env.analysis.numerics`` still imports):
+  finite-difference Jacobian, Newton, fixed points of a map, eigenvalue sort, bisection, on
+  any map ``f(z) -> z | None`` (the margins and the controllers' designs use them too);
+  `bound_env.model.variational` (old name ``bound_env.analysis.variational``), the exact
+  Jacobian.
 - `margins` (a package): stability margins of a closed loop with any controller (basin,
   ceiling, basin stability, rough terrain and MFPT, windows, push; ``bound-env margins``).
 - `paired`: paired comparisons of two closed loops scored on the same random samples
@@ -26,14 +29,14 @@ Modules, read top to bottom:
 - `reproduce` (a package; `reproduce_report` is its old name for the figures and report):
   ``bound-env reproduce``, every published number measured again (Figs. 3-8,
   REPRODUCTION.md).
-- `cli`: ``bound-env fixed-point``, ``bound-env continue``, ``bound-env sweep``,
-  ``bound-env reproduce``.
+- `bound_env.commands.analysis_cli` (old name ``bound_env.analysis.cli``): ``bound-env
+  fixed-point``, ``bound-env continue``, ``bound-env sweep``, ``bound-env reproduce``.
 """
 
 import importlib
 
-# Names re-exported lazily, so that ``bound_env.analysis.cli`` (imported by every run of the
-# ``bound-env`` command to register its sub-commands) does not load the simulator.
+# Names re-exported lazily, so that ``bound_env.commands.analysis_cli`` (imported by every run of
+# the ``bound-env`` command to register its sub-commands) does not load the simulator.
 _EXPORTS = {
     "continuation": ("Branch", "BranchPoint", "continue_branch", "plot_branch"),
     "fixed_point": ("FixedPointResult", "find_fixed_point", "paper_search", "slope_secant"),

@@ -4,13 +4,13 @@
 step-level runs (`bound_env.analysis.margins.ClosedLoop.run_many`), the rough-terrain
 episodes (`margins.closed_loop.rough_episodes`), the runs under model error
 (`margins.mismatch_tasks.plant_runs`) and the basin atlas (`bound_env.analysis.basin`) all
-step their robots here, through the task's batch kernel (`bound_env.task.PassiveBoundTask.step`),
-with one reset rule: **every robot starts with a fresh controller state** (a stateful
-controller, e.g. `bound_env.control.offset_free.OffsetFree`, runs as one reset copy per robot,
-so nothing it learned before, in this worker or in another task, reaches a robot). A caller
-chooses what differs: restart at every apex (the apex map) or one long episode (rough
-terrain, with its slope draws), per-robot plants, sensor noise, actuation delay, kicks, a
-return test, effort bookkeeping (`interval_loop`'s docstring).
+step their robots here, through the task's batch kernel
+(`bound_env.sim.task.PassiveBoundTask.step`), with one reset rule: **every robot starts with a
+fresh controller state** (a stateful controller, e.g. `bound_env.control.offset_free.OffsetFree`,
+runs as one reset copy per robot, so nothing it learned before, in this worker or in another
+task, reaches a robot). A caller chooses what differs: restart at every apex (the apex map) or
+one long episode (rough terrain, with its slope draws), per-robot plants, sensor noise,
+actuation delay, kicks, a return test, effort bookkeeping (`interval_loop`'s docstring).
 
 `apex_loop` iterates the closed-loop apex map from every start: every robot starts at its apex
 state z (x_g = 0, both legs in flight, t = 0) and, at each apex it reached, is started again
@@ -24,7 +24,7 @@ z})``), until
 Two ways to advance the batch, one per kind of controller:
 
 - **a stride controller** (``interval_actions``): one batch of whole strides per stride count
-  through the one stride map (``strides(Z, kicks)``, `bound_env.stride_map.StrideMap.run`);
+  through the one stride map (``strides(Z, kicks)``, `bound_env.sim.stride_map.StrideMap.run`);
 - **a step-level controller**: `interval_loop`, one controller call per control interval for
   the whole batch (``batch(obs)``) or one fresh copy per robot (with ``on_apex(z, 0.0)`` at
   each stride's start apex: a step-level residual over a stride controller, an offset-free
@@ -42,11 +42,11 @@ import time
 
 import numpy as np
 
-from ..events import F_NO_APEX, FAIL_FIRST, FAILURES
-from ..params import Z_IN_Y
-from ..stride_map import RETURN_TOL, max_intervals, to_next_apex
-from ..stride_protocol import StridePlans, reset_controller
-from ..task import S_NAPEX, S_PHASE, S_STATUS, S_STRIDES, S_T, S_T_APEX, S_TAU
+from ..model.events import F_NO_APEX, FAIL_FIRST, FAILURES
+from ..model.params import Z_IN_Y
+from ..sim.stride_map import RETURN_TOL, max_intervals, to_next_apex
+from ..sim.stride_protocol import StridePlans, reset_controller
+from ..sim.task import S_NAPEX, S_PHASE, S_STATUS, S_STRIDES, S_T, S_T_APEX, S_TAU
 
 RETURNED, FELL, UNDECIDED = 0, 1, 2  # a robot's outcome
 NON_FINITE = FAILURES.index("non_finite") + FAIL_FIRST
@@ -132,7 +132,7 @@ def apex_loop(
     push (interval, state index 4..7, delta) or None.
 
     Returns a dict of arrays per robot: ``outcome`` (RETURNED, FELL, UNDECIDED), ``reason``
-    (0 or 1 + failure index in `bound_env.events.FAILURES`), ``strides`` (strides to the
+    (0 or 1 + failure index in `bound_env.model.events.FAILURES`), ``strides`` (strides to the
     return, the stride that failed, or ``max_strides``), ``phase`` (stance condition index at
     the failure, -1 if none), ``error`` (last max-abs apex error to ``z_target``), ``z_last``
     (the last apex reached); and ``apexes``, the strides completed in all."""
@@ -232,7 +232,7 @@ class _Controllers:
     - a memoryless stride controller with ``apex_torques`` on the nominal plant with nothing
       between its plan and the torque (no per-robot plant, sensor noise, delay, kick or
       effort bookkeeping): every robot's plan in one array (`StridePlans`), stepped from
-      apex to apex by a compiled loop (`bound_env.stride_map.to_next_apex`: the copies'
+      apex to apex by a compiled loop (`bound_env.sim.stride_map.to_next_apex`: the copies'
       intervals and actions, to rounding);
     - any other controller: one copy per robot, reset (`reset_controller`: a stateful one,
       e.g. `OffsetFree`, forgets whatever it learned before), called row by row, with
@@ -321,7 +321,7 @@ def interval_loop(
 ) -> dict:
     """The one per-interval batched closed loop: robot i starts at the apex state Z0[i] and
     is stepped with ``controller`` through the ``task``'s batch kernel
-    (`bound_env.task.PassiveBoundTask.step`), all robots together, one control interval at
+    (`bound_env.sim.task.PassiveBoundTask.step`), all robots together, one control interval at
     a time, each robot's intervals its own (so its outcome is that of a single env), until
     it falls, returns (``z_target``) or completes ``max_strides`` strides. The controller
     side (batch, compiled plans or one fresh copy per robot) is `_Controllers`: every robot
@@ -333,7 +333,7 @@ def interval_loop(
       stride there. False: one long episode per robot (the env's loop: a failure in the
       interval of an apex ends it; the stride count is the env's, ``info["stride"]``).
     - ``aux``: per-robot parameters (n, N_AUX) (model error), else the task's; ``plants``:
-      the same robots' `bound_env.params.Params`, handed (``set_plant``) only to a
+      the same robots' `bound_env.model.params.Params`, handed (``set_plant``) only to a
       controller that declares itself ``privileged`` (the privileged reference).
     - ``terrain``: per-robot generators of the slope draws (rough terrain: the task's
       ``slope_noise_deg``; long episodes only), drawn at the start and after each apex as

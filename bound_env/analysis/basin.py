@@ -8,15 +8,15 @@ start ends as one of
 
 - ``returned``: the max-abs apex error to the cycle fell below ``tol`` (SI; 1e-4, as in
   `bound_env.analysis.margins`); ``strides`` = strides taken to get there;
-- ``fell``: a stride failed; ``reason`` = its `bound_env.hybrid` failure, ``phase`` = the
+- ``fell``: a stride failed; ``reason`` = its `bound_env.model.hybrid` failure, ``phase`` = the
   stance condition it failed in, ``strides`` = the stride that failed;
 - ``undecided``: neither within ``max_strides`` (= ``strides``).
 
 Two ways to run a batch of starts:
 
 - **passive**: `passive_batch`, one compiled function that loops over the starts and over
-  their strides with the fast back-end's `bound_env.fast.advance` (the same call
-  `bound_env.hybrid.simulate_stride` makes);
+  their strides with the fast back-end's `bound_env.model.fast.advance` (the same call
+  `bound_env.model.hybrid.simulate_stride` makes);
 - **a controller**: `controller_batch`, the one batched closed loop of the project
   (`bound_env.analysis.apex_loop`, which margins runs too): a stride controller's strides
   through the one stride map, any other controller (``batch(obs)``, or one copy per robot
@@ -26,7 +26,7 @@ Two ways to run a batch of starts:
   `bound_env.analysis.margins` measures.
 
 The grid is cut into chunks of ``chunk`` starts (row-major), one task each, through any
-executor (`bound_env.parallel`). A chunk's result depends only on its starts, so the map is
+executor (`bound_env.sim.parallel`). A chunk's result depends only on its starts, so the map is
 the same for every executor. Finished chunks are cached as ``<out>/chunks/<key>-<i>.npz``
 (written atomically), so a killed run resumes with the missing chunks only.
 """
@@ -44,14 +44,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cache import atomic_write
-from ..dynamics import jit, make_aux
-from ..events import APEX, F_NO_APEX, FAIL_FIRST, FAILURES, N_FLAGS, PHASES, TIME_UP
-from ..events import phase_index as _phase_index
-from ..fast import EVENT_CAPACITY, Options, advance, event_log, recorder
-from ..params import Z_IN_Y, Z_NAMES, Z_PAPER_UNITS, load_gait, z_to_paper, z_to_si
-from ..stride import DEFAULT_T_MAX
-from ..stride_map import EVAL_RTOL, RETURN_TOL
+from ..files.cache import atomic_write
+from ..model.dynamics import jit, make_aux
+from ..model.events import APEX, F_NO_APEX, FAIL_FIRST, FAILURES, N_FLAGS, PHASES, TIME_UP
+from ..model.events import phase_index as _phase_index
+from ..model.fast import EVENT_CAPACITY, Options, advance, event_log, recorder
+from ..model.params import Z_IN_Y, Z_NAMES, Z_PAPER_UNITS, load_gait, z_to_paper, z_to_si
+from ..model.stride import DEFAULT_T_MAX
+from ..sim.stride_map import EVAL_RTOL, RETURN_TOL
 from .apex_loop import FELL, RETURNED, UNDECIDED, apex_loop, empty_outputs  # noqa: F401
 from .basin_defaults import (  # noqa: F401 - the command line reads them without numba
     DEFAULT_CHUNK,
@@ -80,7 +80,7 @@ def passive_batch(
 ):
     """Iterate the passive map P (eq. 18) from each row of ``Z`` (SI apex states).
 
-    Every stride starts like `bound_env.hybrid.simulate_stride`: y from z with x_g = 0,
+    Every stride starts like `bound_env.model.hybrid.simulate_stride`: y from z with x_g = 0,
     ydot_g = 0 (eq. 17), both legs in flight (``aux0``), t = 0. Fills ``outcome`` (RETURNED,
     FELL, UNDECIDED), ``reason`` (0 or 1 + failure index), ``strides``, ``phase`` (stance
     condition at the failure, -1 if none), ``error`` (last max-abs apex error to z_ref) and
@@ -132,7 +132,7 @@ _TASKS: dict = {}  # (controller fingerprint, gait, rtol) -> PassiveBoundTask, p
 
 
 def _task_for(controller, gait: str, rtol: float):
-    from ..task import PassiveBoundTask
+    from ..sim.task import PassiveBoundTask
 
     key = (controller.fingerprint(), gait, rtol)
     if key not in _TASKS:
@@ -173,8 +173,8 @@ def controller_batch(
 
 def _map_for(controller, gait: str, rtol: float):
     """The one stride map of ``controller``'s task settings (kept per process)."""
-    from ..stride_map import StrideMap
-    from ..task import DEFAULT_DT, DEFAULT_MAX_TORQUE
+    from ..sim.stride_map import StrideMap
+    from ..sim.task import DEFAULT_DT, DEFAULT_MAX_TORQUE
 
     kwargs = controller.env_kwargs  # the env's defaults where the controller names none
     key = ("map", controller.fingerprint(), gait, rtol)
@@ -310,7 +310,7 @@ def run_chunk(spec: BasinSpec, i: int) -> dict:
 
 
 def _save_npz(path: Path, **arrays) -> None:
-    """Atomic (`bound_env.cache.atomic_write`): complete, or not there."""
+    """Atomic (`bound_env.files.cache.atomic_write`): complete, or not there."""
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     atomic_write(path, buf.getvalue())
@@ -325,7 +325,7 @@ def run_grid(
 ) -> dict:
     """All chunks of ``spec`` through ``executor`` (cached per chunk under ``out_dir``);
     returns the outputs reshaped to the grid (rows: axis 1, columns: axis 0)."""
-    from ..parallel import TasksFailed, run_tasks
+    from ..sim.parallel import TasksFailed, run_tasks
 
     key = spec.key()
     cache_dir = out_dir / "chunks" if out_dir is not None else None
@@ -431,7 +431,7 @@ def basin_map(
     ``basin.npz`` and ``basin.png`` there (and caches chunks). Returns a summary dict."""
     import contextlib
 
-    from ..parallel import open_pool
+    from ..sim.parallel import open_pool
 
     ax = parse_axes(axes)
     if not 2 <= int(grid) <= MAX_GRID:

@@ -36,8 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cache import append_line, atomic_write, read_lines
-from ..params import GAIT_KEYS, Z_SI_UNITS, Params, z_labels, z_to_paper, z_to_si
+from ..files.cache import append_line, atomic_write, read_lines
+from ..model.params import GAIT_KEYS, Z_SI_UNITS, Params, z_labels, z_to_paper, z_to_si
 
 # the engine (re-exported: ``from bound_env.analysis.continuation import natural`` keeps working)
 from .continuation_engine import (  # noqa: F401

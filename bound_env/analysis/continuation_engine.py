@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..params import Params
+from ..model.numerics import NewtonOutcome, newton
+from ..model.params import Params
 from .fixed_point import NEWTON_TOL, make_residual, param_step
-from .numerics import NewtonOutcome, newton
 from .stability import DZ
 
 CORRECTOR_MAX_ITER = 12  # Newton iterations per corrector before the step is halved

@@ -29,8 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..params import GAIT_KEYS, Z_NAMES, Params, z_to_paper
-from .numerics import (  # noqa: F401 - NewtonOutcome, scaled_rcond: re-exported (old home)
+from ..model.numerics import (  # noqa: F401 - NewtonOutcome, scaled_rcond: re-exported (old home)
     NEWTON_MAX_ITER,
     NEWTON_TOL,
     NewtonOutcome,
@@ -38,6 +37,7 @@ from .numerics import (  # noqa: F401 - NewtonOutcome, scaled_rcond: re-exported
     newton,
     scaled_rcond,
 )
+from ..model.params import GAIT_KEYS, Z_NAMES, Params, z_to_paper
 from .poincare import (
     PAPER_STRIDES,
     IterationResult,

@@ -1,7 +1,7 @@
 """The Poincare map on S_apex (eqs. 17-18), stride iteration and the paper's convergence check.
 
 ``z = [y_g, theta1, theta2, xdot_g, theta1dot, theta2dot]`` in SI (m, rad, m/s, rad/s). One
-application of the map is one apex-to-apex stride of `bound_env.hybrid.simulate_stride`.
+application of the map is one apex-to-apex stride of `bound_env.model.hybrid.simulate_stride`.
 
 Tolerances: analysis integrates with ``rtol = atol = 1e-12`` (`ANALYSIS_TOL`) unless told
 otherwise. The map is then reproducible to ~1e-13, so central differences with dz = 1e-6
@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..dynamics import make_aux, total_energy
-from ..hybrid import StrideResult, simulate_stride, state_from_z
-from ..params import Params
-from .numerics import MapFailure
+from ..model.dynamics import make_aux, total_energy
+from ..model.hybrid import StrideResult, simulate_stride, state_from_z
+from ..model.numerics import MapFailure
+from ..model.params import Params
 
 ANALYSIS_TOL = 1e-12  # rtol = atol of the integrator for every analysis stride
 PAPER_STRIDES = 100  # strides simulated before the convergence check (III.D.4 C, IV.B.3)

@@ -3,7 +3,7 @@ from perturbations (Fig. 6) and the number of spine oscillations per stride (Fig
 
 Jacobians. ``method="fd"`` is the paper's central difference (eq. 23) with dz = 1e-6 on every
 component of z in SI units; ``method="variational"`` integrates the variational equations with
-saltation matrices (`bound_env.analysis.variational`, imported only when asked for).
+saltation matrices (`bound_env.model.variational`, imported only when asked for).
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..params import Params
-from .numerics import MapFailure, fd_jacobian, sorted_eigenvalues  # both once defined here
+from ..model.numerics import MapFailure, fd_jacobian, sorted_eigenvalues  # both once defined here
+from ..model.params import Params
 from .poincare import StrideFailure, poincare_map, sim_options, stride
 
 DZ = 1e-6  # central-difference step of eq. (23), SI units
@@ -38,7 +38,7 @@ def jacobian(z, params: Params, method: str = "fd", dz: float = DZ, **sim_kw) ->
     if method == "fd":
         return jacobian_fd(z, params, dz=dz, **sim_kw)
     if method == "variational":
-        from .variational import jacobian_variational
+        from ..model.variational import jacobian_variational
 
         kw = sim_options(**sim_kw)
         try:

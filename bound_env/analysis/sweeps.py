@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..params import GAIT_KEYS, Params, z_to_paper
+from ..model.params import GAIT_KEYS, Params, z_to_paper
 from .continuation import Z_COLUMNS
 from .fixed_point import find_fixed_point
 from .poincare import PAPER_CONV_TOL, PAPER_STRIDES, iterate, stride
@@ -156,7 +156,7 @@ def sweep(
     Values above it are visited upwards, values below downwards, each starting from the
     previous value's fixed point (or z_100 where Newton did not polish, else the last start).
     The two directions are independent after the base value: with an ``executor``
-    (`bound_env.parallel`) they run as two tasks, with the same result.
+    (`bound_env.sim.parallel`) they run as two tasks, with the same result.
     """
     if param not in GAIT_KEYS:
         raise ValueError(f"cannot sweep {param!r}: not a gait key")

@@ -5,7 +5,7 @@ states the loop hands it (noisy under sensor noise) and the actions it chose its
 apex it
 
 1. adds the last stride to its record: the apex state it started from, the interval actions
-   it commanded (its plan's, `bound_env.stride_protocol.interval_actions_of`) and the apex
+   it commanded (its plan's, `bound_env.sim.stride_protocol.interval_actions_of`) and the apex
    state it reached;
 2. checks how well its current estimate predicted that stride (the innovation, normalized
    max |z_{k+1} - P(z_k, a_k; f^)|_i / s_i);
@@ -24,7 +24,7 @@ apex it
    estimated plant.
 
 The estimate, the record and the design are the episode's: ``reset()`` (called by the loops
-at every start, `bound_env.stride_protocol.reset_controller`) forgets them. Like
+at every start, `bound_env.sim.stride_protocol.reset_controller`) forgets them. Like
 `bound_env.control.offset_free.OffsetFree` it has no stateless ``interval_actions``: the
 loops step it through the env, one robot per copy.
 """
@@ -36,8 +36,8 @@ import time
 
 import numpy as np
 
-from ..mismatch import EIGHT
-from ..stride_protocol import grid_times, interval_actions_of
+from ..model.mismatch import EIGHT
+from ..sim.stride_protocol import grid_times, interval_actions_of
 from .anytime import Slices
 from .controllers import OBS_TIME, OBS_Z
 from .identify import PlantIdentifier

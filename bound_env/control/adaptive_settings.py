@@ -4,7 +4,7 @@ block) and their check, apart from the controller so that the spec reader
 
 from __future__ import annotations
 
-from .. import schema
+from ..files import schema
 
 # settings (spec key ``adaptive``) and their defaults, chosen on the validation plants (seed
 # 777; docs/controllers.md)

@@ -19,7 +19,7 @@ def design_controller(s: ControllerSpec, gait: str | None = None):
     """The controller of the checked spec ``s`` (its ``privileged`` and ``adaptive`` blocks
     are the caller's), designed for ``gait`` (default: the spec's); held offset-free where
     the spec says so."""
-    from ..stride_task import StrideTask
+    from ..sim.stride_task import StrideTask
 
     if s.offset_free is not None:
         inner = design_controller(replace(s, offset_free=None), gait)

@@ -14,13 +14,13 @@ PassiveBound-v0 env use):
   was designed for: gait, max_torque, dt);
 - ``interval_actions(Z) -> A`` (a stride controller): for n apex states at once, the actions
   ``__call__`` outputs on each control interval of the stride from each (after
-  ``on_apex(z, 0.0)``), bit for bit, for `bound_env.stride_map.max_intervals` intervals, so
+  ``on_apex(z, 0.0)``), bit for bit, for `bound_env.sim.stride_map.max_intervals` intervals, so
   that a closed loop can advance whole strides through the one stride map
-  (`bound_env.stride_map`) instead of one Python call per interval;
+  (`bound_env.sim.stride_map`) instead of one Python call per interval;
 - ``planned_profile() -> (taus, t0) | None`` (a stride controller, optional): the torques of
   the profile planned at the last apex and the time since the apex it was announced at, as
   ``__call__`` reads them (None before the first apex), so that the copies of n robots act in
-  one array (`bound_env.stride_protocol.profile_rows`, bit for bit their calls; a step-level
+  one array (`bound_env.sim.stride_protocol.profile_rows`, bit for bit their calls; a step-level
   residual's bases).
 
 A stride-level controller chooses the coefficients u = sat(-G (z - z*)) in ``on_apex`` and then
@@ -39,9 +39,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# The loop side of the protocol lives beside the stride map (`bound_env.stride_protocol`), so
+# The loop side of the protocol lives beside the stride map (`bound_env.sim.stride_protocol`), so
 # that `bound_env.analysis` needs nothing from here; re-exported for the controllers' users.
-from ..stride_protocol import (  # noqa: F401
+from ..sim.stride_protocol import (  # noqa: F401
     OBS_TH2DOT,
     OBS_TIME,
     OBS_Z,
@@ -53,7 +53,7 @@ from ..stride_protocol import (  # noqa: F401
     observed_times,
     reset_controller,
 )
-from ..stride_task import TorqueBasis
+from ..sim.stride_task import TorqueBasis
 
 
 @dataclass
@@ -118,7 +118,7 @@ class StrideFeedback:
 
     def planned_profile(self):
         """(taus [N m], t0) of the last apex's profile, as ``__call__`` reads it (None before
-        the first apex; `bound_env.stride_protocol.profile_rows`)."""
+        the first apex; `bound_env.sim.stride_protocol.profile_rows`)."""
         return None if self._taus is None else (self._taus, 0.0)
 
     def __call__(self, obs) -> float:

@@ -1,12 +1,12 @@
 """Linearized stride map and the classical gain designs (LQR, deadbeat).
 
-The controlled stride map z_{k+1} = P(z_k, u_k) (`bound_env.stride_task.StrideSimulator`) is
+The controlled stride map z_{k+1} = P(z_k, u_k) (`bound_env.sim.stride_task.StrideSimulator`) is
 linearized at the passive fixed point z* with u = 0:
 
     z_{k+1} - z* ~ A (z_k - z*) + B u_k,   A = dP/dz (6 x 6, SI),  B = dP/du (6 x K),
 
 A and B by central differences through the simulator (``jacobian="fd"``), or A from the exact
-variational equations with saltation matrices (`bound_env.analysis.variational`,
+variational equations with saltation matrices (`bound_env.model.variational`,
 ``jacobian="variational"``; B is always by central differences, the torque being a parameter).
 
 The designs work in normalized apex coordinates x = S (z - z*) with S = diag(1 / s) and s the
@@ -43,9 +43,9 @@ class Linearization:
 
 
 def central_jacobian(f, x0, steps) -> np.ndarray:
-    """Jacobian of f at x0 by central differences (`bound_env.analysis.numerics.fd_jacobian`);
+    """Jacobian of f at x0 by central differences (`bound_env.model.numerics.fd_jacobian`);
     ValueError if f fails (returns None) at a probe."""
-    from ..analysis.numerics import MapFailure, fd_jacobian
+    from ..model.numerics import MapFailure, fd_jacobian
 
     try:
         return fd_jacobian(f, x0, steps, one_sided=False)
@@ -63,7 +63,7 @@ def linearize(sim, z_ref, jacobian: str = "fd") -> Linearization:
         steps = FD_REL_Z * np.maximum(np.abs(z_ref), FD_FLOOR_Z)
         A = central_jacobian(lambda z: sim.map(z, u0), z_ref, steps)
     elif jacobian == "variational":
-        from ..analysis.variational import jacobian_variational
+        from ..model.variational import jacobian_variational
 
         A, _ = jacobian_variational(z_ref, sim.params, rtol=sim.rtol, atol=sim.rtol)
     else:

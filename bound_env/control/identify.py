@@ -2,11 +2,11 @@
 
 A robot that observes its apex states z_k and knows the interval actions a_k it commanded
 sees transitions (z_k, a_k, z_{k+1}). Its plant differs from the model by the factors
-f = (m1, m2, I1, I2, kb, kf, kc, zeta) / nominal (`bound_env.mismatch.EIGHT`), and
+f = (m1, m2, I1, I2, kb, kf, kc, zeta) / nominal (`bound_env.model.mismatch.EIGHT`), and
 
     z_{k+1} = P(z_k, a_k; f) + noise
 
-with P the stride map on the plant of the factors f (the step env's, `bound_env.stride_map`;
+with P the stride map on the plant of the factors f (the step env's, `bound_env.sim.stride_map`;
 all transitions and all probes of one fitting step in one batch of strides, each row on
 its own parameters). `PlantIdentifier.fit` is maximum a posteriori in theta = log f with a
 Gaussian prior theta ~ N(0, prior^2) toward the nominal plant and Gaussian errors of standard
@@ -28,10 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..dynamics import make_aux
-from ..mismatch import EIGHT, plant_params, plant_values
-from ..params import load_gait
-from ..stride_map import StrideMap
+from ..model.dynamics import make_aux
+from ..model.mismatch import EIGHT, plant_params, plant_values
+from ..model.params import load_gait
+from ..sim.stride_map import StrideMap
 
 FD_THETA = 1e-4  # central-difference step in each log factor
 FAILED_RESIDUAL = 10.0  # normalized residual of a transition that falls on a trial plant
@@ -80,7 +80,7 @@ class PlantIdentifier:
         sigma: float = 0.01,
         candidates: int = 128,
     ):
-        from ..task import APEX_SCALES
+        from ..sim.task import APEX_SCALES
 
         self.nominal = load_gait(gait).params
         self.map = StrideMap(gait, None, dt, max_torque, rtol, segments=True)

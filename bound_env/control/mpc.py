@@ -16,7 +16,7 @@ A candidate's score puts a **return** first (the normalized error falls to ``saf
 sooner is better), then **survival** of the whole horizon (a smaller final error is better),
 then the **progress** of a fall (strides and the fraction of a stride survived).
 
-The model is the plant itself: the one stride map (`bound_env.stride_map.StrideMap.run`), the
+The model is the plant itself: the one stride map (`bound_env.sim.stride_map.StrideMap.run`), the
 step env's own kernel, which holds the profile's average over each control interval
 [k dt, (k + 1) dt] from the apex, as a stride-level controller outputs it
 (`bound_env.control.controllers`), at the planning tolerance ``rtol``, with each run of equal
@@ -42,9 +42,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..events import APEX
-from ..stride_map import StrideMap
-from ..stride_protocol import (
+from ..model.events import APEX
+from ..sim.stride_map import StrideMap
+from ..sim.stride_protocol import (
     DECISION_KINDS,  # noqa: F401 - who decides (the protocol's)
     ProfileActions,
 )
@@ -156,7 +156,7 @@ class MPCController:
 
     name: str
     lqr: StrideFeedback
-    params: object  # bound_env.params.Params of the gait (the planning model)
+    params: object  # bound_env.model.params.Params of the gait (the planning model)
     safe: float = 0.05  # normalized error at or below which the LQR acts alone
     horizon: int = 12  # LQR strides after a candidate stride
     n_random: int = 24
@@ -193,7 +193,7 @@ class MPCController:
         self.model = StrideMap(
             self.gait, None, self.dt, self.max_torque, self.rtol, segments=self.segments
         )
-        from ..task import APEX_SCALES
+        from ..sim.task import APEX_SCALES
 
         self.scales = np.asarray(APEX_SCALES, dtype=float)
         self.searches = 0  # decisions that searched beyond the LQR's own plan
@@ -333,7 +333,7 @@ class MPCController:
 
     def planned_profile(self):
         """(taus [N m], t0) of the last apex's plan, as ``__call__`` reads it (None before the
-        first apex; `bound_env.stride_protocol.profile_rows`)."""
+        first apex; `bound_env.sim.stride_protocol.profile_rows`)."""
         if self._u is None:
             return None
         memo = self.__dict__.get("_profile_memo")  # this plan's torques, made once per apex

@@ -57,8 +57,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..schema import real
-from ..stride_map import StrideMap, max_intervals
+from ..files.schema import real
+from ..sim.stride_map import StrideMap, max_intervals
 from .controllers import OBS_TIME
 from .design import DESIGN_RTOL, FD_FLOOR_Z, FD_REL_Z, FD_U
 
@@ -87,7 +87,7 @@ class IntervalModel:
 
 @lru_cache(maxsize=8)
 def _interval_model(gait: str, dt: float, max_torque: float) -> IntervalModel:
-    from ..task import APEX_SCALES
+    from ..sim.task import APEX_SCALES
 
     sm = StrideMap(gait, None, dt, max_torque, DESIGN_RTOL)
     z0 = sm.z_ref.copy()
@@ -291,7 +291,7 @@ class OffsetFree:
 
     def record(self, state: OffsetFreeState, rows, Z, A) -> None:
         """Robots ``rows`` start a stride from Z with the interval actions A (the last one
-        holds past its end, as in `bound_env.stride_map`)."""
+        holds past its end, as in `bound_env.sim.stride_map`)."""
         rows = np.asarray(rows, dtype=np.int64)
         A = np.atleast_2d(np.asarray(A, dtype=float))
         n = self.model.n

@@ -32,7 +32,7 @@ It fails loudly where the loop would silently go wrong:
 
 A privileged controller (``privileged`` true: `bound_env.control.privileged`, an upper
 reference that reads the robot's true plant) gets ``info["plant"]`` at each reset of an env
-that reports it (`bound_env.wrappers.RandomizedPlant`); no other controller ever does.
+that reports it (`bound_env.envs.wrappers.RandomizedPlant`); no other controller ever does.
 """
 
 from __future__ import annotations
@@ -43,8 +43,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..stride_protocol import notify_apex, reset_controller
-from ..task import DEFAULT_DT, OBS_NAMES
+from ..sim.stride_protocol import notify_apex, reset_controller
+from ..sim.task import DEFAULT_DT, OBS_NAMES
 
 FULL_OBS_DIM = len(OBS_NAMES) - 1  # the default observation (x_g excluded)
 _MAKE = 'gym.make("PassiveBound-v1") (or the env factory of agents.runtime.rollout.load_policy)'

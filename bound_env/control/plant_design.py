@@ -7,7 +7,7 @@ place (`PlantDesigner.design`):
 
 1. **The target: the plant's own cycle.** Newton on the plant's passive apex map,
    F(z) = P(z, 0) - z, from the nominal z* (or a hint), with the Jacobian by central
-   differences in one batch of strides (`bound_env.analysis.numerics.newton`). A passive cycle
+   differences in one batch of strides (`bound_env.model.numerics.newton`). A passive cycle
    needs no torque, so the loop that holds it spends nothing on it. It is kept if Newton
    converges within ``max_shift`` (normalized apex error max |z - z*|_i / s_i) of z*.
 2. **Where the plant has none near z\\*** (the passive cycle ends in a fold within a few
@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..mismatch import PLANT_KEYS, plant_values
-from ..params import Params, load_gait
-from ..stride_map import EVAL_RTOL, StrideMap, interval_weights
+from ..model.mismatch import PLANT_KEYS, plant_values
+from ..model.params import Params, load_gait
+from ..sim.stride_map import EVAL_RTOL, StrideMap, interval_weights
 from .controllers import StrideFeedback
 from .design import FD_FLOOR_Z, FD_REL_Z, FD_U, lqr_gain, spectral_radius
 
@@ -95,9 +95,9 @@ class PlantDesign:
 
 def plant_overrides(plant, gait="default") -> dict:
     """The gait-file values of ``plant`` that differ from ``gait``'s: ``plant`` is a
-    `bound_env.params.Params` or a mapping of some of `bound_env.mismatch.PLANT_KEYS` to values
-    in gait-file units (``info["plant"]`` of `bound_env.wrappers.RandomizedPlant`). ValueError
-    naming the key for anything else."""
+    `bound_env.model.params.Params` or a mapping of some of `bound_env.model.mismatch.PLANT_KEYS`
+    to values in gait-file units (``info["plant"]`` of `bound_env.envs.wrappers.RandomizedPlant`).
+    ValueError naming the key for anything else."""
     nominal = plant_values(load_gait(gait).params)
     if isinstance(plant, Params):
         values = plant_values(plant)
@@ -124,7 +124,7 @@ class PlantDesigner:
     with the weights Q, R (diagonal matrices, normalized coordinates) on any plant."""
 
     def __init__(self, lqr: StrideFeedback, Q, R, max_shift: float = MAX_SHIFT):
-        from ..task import APEX_SCALES
+        from ..sim.task import APEX_SCALES
 
         self.lqr = lqr
         self.Q, self.R = np.asarray(Q, dtype=float), np.asarray(R, dtype=float)
@@ -164,7 +164,7 @@ class PlantDesigner:
 
     def passive_cycle(self, sm: StrideMap, z0):
         """Newton on P(z, 0) = z from z0: (z, residual, converged)."""
-        from ..analysis.numerics import newton
+        from ..model.numerics import newton
 
         K = self.lqr.basis.K
         u0 = np.zeros(K)
@@ -177,7 +177,7 @@ class PlantDesigner:
         def jac(z):
             out = self.jacobians(sm, z, u0)
             if out is None:
-                from ..analysis.numerics import MapFailure
+                from ..model.numerics import MapFailure
 
                 raise MapFailure("a stride fails near the point", z)
             return out[1] - np.eye(6)

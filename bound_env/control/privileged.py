@@ -24,7 +24,7 @@ The plant stays until the next ``set_plant``: an episode's reset (`reset_control
 Who hands it the plant: the model-error loop (`bound_env.analysis.margins.mismatch_tasks.
 plant_runs`) calls ``set_plant`` with each robot's plant, for a controller whose
 ``privileged`` is true only; `bound_env.control.plain.PlainPolicy` passes ``info["plant"]`` at
-each reset of an env that reports one (`bound_env.wrappers.RandomizedPlant`). A DAgger teacher
+each reset of an env that reports one (`bound_env.envs.wrappers.RandomizedPlant`). A DAgger teacher
 (issue 38) calls ``set_plant`` itself. The tools that ship or deploy a policy refuse it
 (`is_privileged`).
 """
@@ -80,8 +80,8 @@ class PrivilegedMPC(RedesignedMPC):
 
     # -- the plant -------------------------------------------------------------------------------
     def set_plant(self, plant) -> PlantDesign | None:
-        """Re-design on ``plant``: a `bound_env.params.Params` or a mapping of
-        `bound_env.mismatch.PLANT_KEYS` to values in gait-file units (``info["plant"]``);
+        """Re-design on ``plant``: a `bound_env.model.params.Params` or a mapping of
+        `bound_env.model.mismatch.PLANT_KEYS` to values in gait-file units (``info["plant"]``);
         None or the nominal plant: the shipped mpc. Returns the design (None: nominal)."""
         overrides = {} if plant is None else plant_overrides(plant, self.base.gait)
         if not overrides:

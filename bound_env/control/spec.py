@@ -4,7 +4,7 @@ A spec names the controller and its design settings, e.g. ``configs/controllers/
 
 ```yaml
 controller: lqr      # lqr | deadbeat | damping
-basis: windows       # torque basis of the stride (bound_env.stride_task.BASES)
+basis: windows       # torque basis of the stride (bound_env.sim.stride_task.BASES)
 K: 6                 # number of basis functions
 Q: 1.0               # weight(s) on the normalized apex error (z - z*)/s: a number or 6
 R: 1.0               # weight(s) on the coefficients u: a number or K
@@ -23,10 +23,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .. import schema
-from ..resources import controllers_dir, parse_yaml
+from ..files import schema
+from ..files.resources import controllers_dir, parse_yaml
 
-# the repository's configs/controllers, or the wheel's copy (package data, bound_env.resources)
+# the repository's configs/controllers, or the wheel's copy (package data,
+# bound_env.files.resources)
 CONTROLLERS_DIR = controllers_dir()
 KINDS = ("lqr", "deadbeat", "damping", "mpc")
 COMMON_KEYS = ("controller", "gait", "max_torque", "dt")
@@ -273,7 +274,7 @@ def weights(path, key: str, value, n: int) -> np.ndarray:
 
 def _gait_key(gains: dict, gait) -> str | None:
     """The key of ``gains`` that names the gait file ``gait`` (a name or a path), or None."""
-    from ..params import load_gait
+    from ..model.params import load_gait
 
     if str(gait) in gains:
         return str(gait)
@@ -322,7 +323,7 @@ def read_gain(spec: ControllerSpec, K: int, basis: str, gait: str | None = None)
             f"K={K} needs a ({K}, 6) gain (one row per basis function)"
         )
     G = schema.real_array(G, where, shape=(K, 6))  # finite: no NaN or inf
-    from ..task import APEX_SCALES
+    from ..sim.task import APEX_SCALES
 
     big = float(np.max(np.abs(G * np.asarray(APEX_SCALES)[None, :])))
     if big > MAX_GAIN:

@@ -33,7 +33,7 @@ Measures (JSON keys)
   are tried first; while the loop returns, the bracket grows by doubling from the last
   success, up to the direction's *physical cap*: the smallest s at which the start state
   itself is invalid (a hip or the spine joint at or below the ground, or x_dot <= 0, as
-  `bound_env.hybrid.start_status` says), else ``BASIN_CAP`` (64 |z*_i|). Then bisection on
+  `bound_env.model.hybrid.start_status` says), else ``BASIN_CAP`` (64 |z*_i|). Then bisection on
   log s. An entry that reaches its cap says ``capped: true`` (and ``cap``, ``cap_reason``).
   Each entry has ``rel`` (units of |z*_i|), ``abs`` (SI), ``rel_cycle`` (units of the
   component's passive peak-to-peak range, below), ``capped``, ``share`` (= abs / the
@@ -73,7 +73,7 @@ Measures (JSON keys)
   controllers on the same directions (`agents.results.compare`, `bound_env.analysis.paired`).
 - ``terrain``: survival of ``terrain_runs`` runs of ``terrain_strides`` strides from z_cl on
   rough terrain (``slope_noise_deg`` = sigma: the slope changes by sigma xi at every apex,
-  `bound_env.terrain`), each run one long episode with its own seed (``TERRAIN_SEED`` + k),
+  `bound_env.model.terrain`), each run one long episode with its own seed (``TERRAIN_SEED`` + k),
   against sigma [deg], with Wilson intervals; ``terrain_sigma50_deg`` = the sigma at which the
   survival first falls below one half (log-interpolated as r50; ``terrain_sigma50_grid_deg``:
   the largest grid sigma with survival >= 1/2; ``terrain_sigma50_ci_deg`` from the interval's
@@ -98,7 +98,7 @@ Measures (JSON keys)
   ``effort_frac`` = effort / max_torque.
 - ``mismatch`` (with ``mismatch=``, ``--mismatch SPEC``): {spec name: block} of the margins
   under model error, each robot on its own plant with the spec's sensor noise and actuation
-  delay (`bound_env.mismatch`): ``hold``, ``curve`` and ``r50`` (settled, not returned),
+  delay (`bound_env.model.mismatch`): ``hold``, ``curve`` and ``r50`` (settled, not returned),
   ``mfpt``; the reference is `mismatch_tasks`' docstring, the text and the results page's
   section `mismatch_report`.
 - ``seconds``, ``tasks``: the run's wall time and how many of its tasks it took from the cache

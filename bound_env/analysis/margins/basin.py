@@ -3,7 +3,7 @@ the start geometry, the physical cap of a direction, and the grown-then-bisected
 the ceiling uses too (`grown_search`).
 
 A direction's search is a generator (`basin_steps`): `task_basins` runs the searches of
-several directions in lockstep (`bound_env.analysis.numerics.run_together`), each step's
+several directions in lockstep (`bound_env.model.numerics.run_together`), each step's
 closed-loop runs as one batch of robots advanced together (`closed_loop_runs`); each search
 sees the outcomes it would see alone, so its result is `task_basin`'s."""
 
@@ -13,9 +13,9 @@ import math
 
 import numpy as np
 
-from ...events import PHASES
+from ...model.events import PHASES
+from ...model.numerics import run_together, threshold_steps
 from ..apex_loop import RETURNED, apex_loop
-from ..numerics import run_together, threshold_steps
 from .closed_loop import FAILURES_BY_REASON, STRIDES, ClosedLoop, Setup, loop_for
 
 BASIN_LO, BASIN_HI = 1e-3, 1.0  # first bracket of the relative basin search (then it grows)
@@ -28,9 +28,9 @@ BASIN_GROUPS = tuple(tuple((i, sign) for i in range(6)) for sign in (1, -1))
 def start_geometry(z, loop: ClosedLoop) -> dict:
     """What the apex start state z itself rules out: ``invalid`` (the start failure, or None)
     and ``mechanisms``: geometric reasons a stride from z cannot go as the gait does."""
-    from bound_env.dynamics import back_hip, front_hip, make_aux
-    from bound_env.hybrid import failure_name, start_status, state_from_z
-    from bound_env.params import P_GB, P_GF, P_LB, P_LF
+    from bound_env.model.dynamics import back_hip, front_hip, make_aux
+    from bound_env.model.hybrid import failure_name, start_status, state_from_z
+    from bound_env.model.params import P_GB, P_GF, P_LB, P_LF
 
     y = state_from_z(z)
     aux = make_aux(loop.env.params.to_array())
@@ -106,7 +106,7 @@ def grown_search(ok, cap: float, iters: int) -> tuple[float, bool, float | None]
 
 
 def grown_steps(cap: float, iters: int):
-    """`grown_search` as a generator (`bound_env.analysis.numerics.threshold_steps`): it
+    """`grown_search` as a generator (`bound_env.model.numerics.threshold_steps`): it
     yields each size to test, is sent whether it held, and returns what `grown_search`
     returns."""
     fails = []

@@ -10,10 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...events import PHASES
-from ...stride_map import EVAL_RTOL, RETURN_TOL, StrideMap, Strides, max_intervals
-from ...stride_protocol import reset_controller
-from ...task import FAIL_FIRST, FAILURE_NAMES
+from ...model.events import PHASES
+from ...sim.stride_map import EVAL_RTOL, RETURN_TOL, StrideMap, Strides, max_intervals
+from ...sim.stride_protocol import reset_controller
+from ...sim.task import FAIL_FIRST, FAILURE_NAMES
 from ..apex_loop import (
     RETURNED,
     apex_loop,
@@ -255,7 +255,7 @@ class ClosedLoop:
 
 def apply_kick(env, index: int, delta: float) -> None:
     """Add ``delta`` to velocity entry ``index`` (4..7) of the simulator state y between two
-    control intervals (`bound_env.env.PassiveBoundEnv.kick`). The controller sees it in the
+    control intervals (`bound_env.envs.env.PassiveBoundEnv.kick`). The controller sees it in the
     next observation (a push is sensed one control interval later, like a sampled sensor)."""
     if not 4 <= index <= 7:
         raise ValueError(f"a kick changes a velocity (state index 4..7), got index {index}")
@@ -310,7 +310,9 @@ class Setup:
     key: str = ""
     period: float = math.nan  # closed-loop stride period [s]
     seed: int = DEFAULT_SEED  # --seed: the random directions, terrain and push samples
-    mismatch: object = None  # model error (`bound_env.mismatch.MismatchSpec`) of the mm_ tasks
+    mismatch: object = (
+        None  # model error (`bound_env.model.mismatch.MismatchSpec`) of the mm_ tasks
+    )
     mismatch_budget: object = None  # their `mismatch_tasks.MismatchBudget`
 
 

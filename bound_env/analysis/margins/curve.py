@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...stride_protocol import DECISION_KINDS
+from ...sim.stride_protocol import DECISION_KINDS
 from .budget import random_directions, sample_seeds
 from .closed_loop import Setup, loop_for
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..numerics import map_fixed_point, sorted_eigenvalues
+from ...model.numerics import map_fixed_point, sorted_eigenvalues
 from .closed_loop import Setup, loop_for
 
 FD_REL = 1e-4  # central-difference step, relative to max(|z*_i|, FD_FLOOR_i)

@@ -151,7 +151,7 @@ def margins_parts(gait="default", budget=None, seed=None, extra_sources=()) -> d
     ``sources``, ``margins_settings``, ``budget`` (None without a budget) and ``gait``."""
     from dataclasses import asdict
 
-    from ...cache import settings_hash
+    from ...files.cache import settings_hash
     from .budget import DEFAULT_SEED, as_budget, check_seed, sample_seeds
     from .keys import SETTINGS, gait_key, source_files, source_hash
 
@@ -272,7 +272,7 @@ def run_fingerprint(
     code the script runs besides the controller) and data (``config``, ``files``), the
     ``gait`` file and the row's ``inputs`` (a spec's contents, the strides, the robots: one
     hash, ``inputs``). A resumed row is reused only under the same one (`differing`)."""
-    from ...cache import settings_hash
+    from ...files.cache import settings_hash
     from .code_closure import object_roots
 
     fp = column_fingerprint(controller, commit=False, gait=gait, files=files)

@@ -23,8 +23,8 @@ DELTAS = (0.025, 0.05, 0.075, 0.10, 0.15)
 
 
 def spec_name(delta: float) -> str:
-    """The preset of ``delta`` (`bound_env.mismatch.PRESETS`: pm2.5, pm5, ..., pm15)."""
-    from ...mismatch import PRESETS
+    """The preset of ``delta`` (`bound_env.model.mismatch.PRESETS`: pm2.5, pm5, ..., pm15)."""
+    from ...model.mismatch import PRESETS
 
     name = f"pm{100.0 * float(delta):g}"
     if name not in PRESETS:
@@ -35,8 +35,8 @@ def spec_name(delta: float) -> str:
 
 def hold_row(controller, delta: float, seed: int, gait="default", budget: str = "quick") -> dict:
     """The hold of ``controller`` at ``delta`` on ``seed``'s plants (module docstring)."""
-    from ...mismatch import as_spec
-    from ...params import load_gait
+    from ...model.mismatch import as_spec
+    from ...model.params import load_gait
     from ..apex_loop import CLOCK
     from .budget import as_budget
     from .closed_loop import Setup
@@ -95,7 +95,7 @@ def hold_delta_figure(data: dict, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ...cache import atomic_path
+    from ...files.cache import atomic_path
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for label, col in data["columns"].items():

@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import asdict
 from pathlib import Path
 
-from bound_env.cache import settings_hash
+from bound_env.files.cache import settings_hash
 
 from .basin import BASIN_CAP, BASIN_HI, BASIN_LO
 from .budget import (
@@ -88,7 +88,7 @@ def gait_key(gait) -> dict:
     """The gait's name and the sha256 of its file's contents (a changed file, a new key)."""
     import hashlib
 
-    from bound_env.params import resolve_gait_path
+    from bound_env.model.params import resolve_gait_path
 
     digest = hashlib.sha256(resolve_gait_path(gait).read_bytes()).hexdigest()
     return {"name": str(gait), "file_sha256": digest}

@@ -1,7 +1,7 @@
 """Margins under model error (JSON ``mismatch``; ``bound-env margins --mismatch SPEC``).
 
 The controller keeps its nominal design (model, gains, network); robot i runs on its own
-plant, drawn from the spec (`bound_env.mismatch`: relative parameter ranges, sensor noise,
+plant, drawn from the spec (`bound_env.model.mismatch`: relative parameter ranges, sensor noise,
 actuation delay) with the seed's plant seed (`mismatch_seeds`), so every controller meets the
 same plants in the same order (paired comparisons: `mismatch_report`). Every run steps the
 step env interval by interval (`plant_runs`, through the one batched loop
@@ -43,11 +43,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...dynamics import make_aux
-from ...mismatch import MismatchSpec, sample_plant_params
-from ...params import Z_NAMES
-from ...stride_map import RETURN_TOL
-from ...task import FAILURE_NAMES
+from ...model.dynamics import make_aux
+from ...model.mismatch import MismatchSpec, sample_plant_params
+from ...model.params import Z_NAMES
+from ...sim.stride_map import RETURN_TOL
+from ...sim.task import FAILURE_NAMES
 from ..apex_loop import SensorNoise, interval_loop
 from .budget import DEFAULT_SEED, random_directions, sample_seeds
 from .closed_loop import STRIDES, Setup, loop_for
@@ -116,8 +116,8 @@ def mismatch_seeds(seed: int = DEFAULT_SEED) -> dict:
 
 
 def plants_of(setup: Setup, n: int) -> list:
-    """The first ``n`` plants (`bound_env.params.Params`) of ``setup``'s spec and seed."""
-    from ...params import load_gait
+    """The first ``n`` plants (`bound_env.model.params.Params`) of ``setup``'s spec and seed."""
+    from ...model.params import load_gait
 
     nominal = load_gait(setup.gait).params
     return sample_plant_params(setup.mismatch, n, mismatch_seeds(setup.seed)["plants"], nominal)
@@ -314,7 +314,7 @@ def assemble_mismatch(setup: Setup, res: dict) -> dict:
     mb, spec = setup.mismatch_budget, setup.mismatch
     from dataclasses import asdict
 
-    from ...mismatch import plant_values
+    from ...model.mismatch import plant_values
 
     hold = res[("mm_hold", ())]
     k = int(sum(hold["outcomes"]))

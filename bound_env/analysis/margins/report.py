@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.cache import atomic_write
-from bound_env.params import Z_NAMES, Z_SI_UNITS
+from bound_env.files.cache import atomic_write
+from bound_env.model.params import Z_NAMES, Z_SI_UNITS
 
 from .budget import MFPT_LEVEL
 

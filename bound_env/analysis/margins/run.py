@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.cache import TaskCache, atomic_write
-from bound_env.parallel import TasksFailed, open_pool, run_tasks
+from bound_env.files.cache import TaskCache, atomic_write
+from bound_env.sim.parallel import TasksFailed, open_pool, run_tasks
 
 from ..apex_loop import CLOCK
 from .assemble import assemble, controller_name
@@ -169,8 +169,8 @@ def check_controller(controller):
 def cycle_scale(gait: str) -> np.ndarray:
     """Peak-to-peak range of each apex component [y_g, th1, th2, xdot_g, th1dot, th2dot]
     over one passive stride from the gait's z* (SI): the ``cycle`` yardstick."""
-    from bound_env.hybrid import simulate_stride
-    from bound_env.params import load_gait
+    from bound_env.model.hybrid import simulate_stride
+    from bound_env.model.params import load_gait
 
     g = load_gait(gait)
     res = simulate_stride(
@@ -205,13 +205,13 @@ def compute_margins(
     MFPT robots (`sample_seeds`): the default is the test set of docs/MARGINS.md, any other
     a held-out (validation) set.
     ``executor``: any `concurrent.futures.Executor`-like object; default: the one
-    `bound_env.parallel.open_pool` builds from ``scheduler`` and ``workers`` (a process pool
+    `bound_env.sim.parallel.open_pool` builds from ``scheduler`` and ``workers`` (a process pool
     of ``workers`` processes, in-process when ``workers == 1``, or Dask). ``out``: directory
     for the CSV/PNG outputs and the task cache. ``extra_sources``: files of the controller's
     code outside bound_env/ (e.g. a learned policy's modules), hashed into the cache key with
     bound_env/'s own sources (`setup_key`), so that a change of that code never returns a stale
     result; the controller's ``fingerprint()`` covers its data (weights, gains, settings).
-    ``mismatch``: a model-error spec (`bound_env.mismatch.as_spec`: a preset, a YAML file or
+    ``mismatch``: a model-error spec (`bound_env.model.mismatch.as_spec`: a preset, a YAML file or
     a `MismatchSpec`) or a list of them: the result then has the key ``mismatch`` too,
     {spec name: its block} (`mismatch_tasks`), each spec's tasks cached under `mismatch_key`.
     ``files``: the sha256 of the controller's files (its spec, a policy's weights), recorded
@@ -224,8 +224,8 @@ def compute_margins(
     seconds, tasks), ``mismatch`` and ``"nominal": false``, and only ``margins.json`` is
     written.
     """
-    from bound_env.mismatch import as_spec, check_distinct
-    from bound_env.params import load_gait
+    from bound_env.model.mismatch import as_spec, check_distinct
+    from bound_env.model.params import load_gait
 
     budget = as_budget(budget)
     many = mismatch if isinstance(mismatch, (list, tuple)) else [mismatch]

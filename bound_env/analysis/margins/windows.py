@@ -11,7 +11,7 @@ from .closed_loop import Setup, loop_for
 
 def task_window(setup: Setup, key: str, side: int) -> dict:
     """Edge of the survival window of gait parameter ``key`` on one side of nominal."""
-    from bound_env.params import load_gait
+    from bound_env.model.params import load_gait
 
     nominal = load_gait(setup.gait).params.to_gait_dict()[key]
     overrides0 = dict(setup.controller.env_kwargs.get("gait_overrides") or {})

@@ -16,7 +16,7 @@ from functools import cache
 import numpy as np
 import yaml
 
-from ...params import GAITS_DIR, Gait, load_gait, z_to_paper
+from ...model.params import GAITS_DIR, Gait, load_gait, z_to_paper
 
 REPRODUCING_FILE = GAITS_DIR / "paper.yaml"  # Table II, reproducing reading
 LITERAL_FILE = GAITS_DIR / "paper-literal.yaml"  # Table II, literal reading

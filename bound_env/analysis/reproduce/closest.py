@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...params import Params, z_to_paper
+from ...model.params import Params, z_to_paper
 from ..fixed_point import find_fixed_point, slope_secant
 from .claims import CLAIMS, reproducing_gait
 from .points import point_summary, rel_distance

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...params import z_labels
+from ...model.params import z_labels
 from .claims import CLAIMS, published
 
 Z_LABELS = z_labels("text")  # θ1 [deg]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...params import GAITS_DIR, save_gait
+from ...model.params import GAITS_DIR, save_gait
 from .claims import literal_gait, reproducing_gait
 
 

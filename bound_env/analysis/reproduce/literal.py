@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ...params import Params, z_to_paper, z_to_si
+from ...model.params import Params, z_to_paper, z_to_si
 from ..fixed_point import find_fixed_point, slope_secant
 from ..poincare import apex_energy, stride
 from ..stability import spine_oscillations

@@ -8,7 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...params import Params, z_to_si
+from ...model.numerics import NEWTON_MAX_ITER, newton
+from ...model.params import Params, z_to_si
 from ..continuation_engine import (
     CORRECTOR_MAX_ITER,
     FixedPointPath,
@@ -17,7 +18,6 @@ from ..continuation_engine import (
     natural,
 )
 from ..fixed_point import ladder
-from ..numerics import NEWTON_MAX_ITER, newton
 from ..poincare import StrideFailure
 from ..stability import DZ, stability
 from .settings import FP_TOL

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...cache import atomic_write
+from ...files.cache import atomic_write
 from .claims import gait_config, literal_gait, reproducing_gait
 from .closest import stage_closest
 from .figures import write_figures

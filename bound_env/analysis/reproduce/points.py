@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ...params import Params, z_to_paper
+from ...model.params import Params, z_to_paper
 from ..poincare import StrideFailure, apex_energy, stride
 from ..stability import stability
 

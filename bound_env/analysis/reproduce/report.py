@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ...cache import atomic_write
+from ...files.cache import atomic_write
 from .claims import CLAIMS, published
 from .figures import PATH_STYLE, Z_LABELS, Z_LABELS_UNITS
 from .report_format import eig_text, millis_text, num_text, pair_text, vec_text, window_text, z_text

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ...params import Params, z_to_paper
+from ...model.params import Params, z_to_paper
 from ..fixed_point import find_fixed_point
 from ..poincare import apex_energy, stride
 from ..stability import RECOVERY_REL, recovery, recovery_all, spine_oscillations
@@ -24,7 +24,7 @@ def hip_margins(z, params: Params, record_dt: float = 1e-4) -> dict:
     liftoff (and the hip's vertical velocity there), the smallest margin while the leg is in
     flight, and at the final apex (metres; negative would trigger the rule).
     """
-    from ...dynamics import body_points, make_aux, trig
+    from ...model.dynamics import body_points, make_aux, trig
 
     res = stride(z, params, record_dt=record_dt)
     if res.trajectory is None:

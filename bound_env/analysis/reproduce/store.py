@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...cache import atomic_write, settings_hash
+from ...files.cache import atomic_write, settings_hash
 
 
 class ProgressLog:

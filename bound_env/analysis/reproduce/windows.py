@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...params import z_to_paper
+from ...model.params import z_to_paper
 from .claims import reproducing_gait
 from .points import eig_list
 from .settings import Budget
