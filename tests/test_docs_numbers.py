@@ -108,13 +108,14 @@ CONTEXT = {
 # the controllers a sentence may name, bare (``mpc``, the LQR) or in a code span (`default`)
 CONTROLLERS = (
     "passive", "lqr", "lqr-of", "lqr+of", "deadbeat", "mpc", "mpc+of", "mpc-adaptive",
-    "mpc-adaptive-bounded", "mpc-privileged", "mpc-true-plant", "fine-tuned", "finetuned", "default", "default+of",
+    "mpc-adaptive-bounded", "mpc-privileged", "mpc-true-plant", "fine-tuned", "finetuned",
+    "default", "default+of",
     "step-ppo", "ppo-v1", "learned", "adaptive", "adaptive-nohist", "adaptive-nominal",
     "cycle-teacher", "cycle-teacher-blind1", "cycle-teacher-blind2", "stride-residual",
     "warm-started", "distilled",
 )  # fmt: skip
-BARE = {"lqr", "mpc", "lqr-of", "mpc-adaptive", "mpc-adaptive-bounded", "mpc-privileged", "fine-tuned", "step-ppo",
-        "ppo-v1", "lqr+of", "mpc+of", "default+of"}  # fmt: skip
+BARE = {"lqr", "mpc", "lqr-of", "mpc-adaptive", "mpc-adaptive-bounded", "mpc-privileged",
+        "fine-tuned", "step-ppo", "ppo-v1", "lqr+of", "mpc+of", "default+of"}  # fmt: skip
 _NAMES = "|".join(re.escape(c) for c in sorted(CONTROLLERS, key=len, reverse=True))
 NAMED = re.compile(rf"(?<![\w+-])(`?)({_NAMES})(?![\w+-])(`?)", re.I)
 ALIASES = {"finetuned": "fine-tuned", "lqr+of": "lqr-of"}

@@ -43,7 +43,7 @@ def test_hold_vs_delta_reuses_a_row_only_under_its_fingerprint(tmp_path, monkeyp
     mod = _script("hold_vs_delta")
     calls = []
 
-    def hold_row(ctrl, delta, seed, gait="default", budget="quick"):
+    def hold_row(ctrl, delta, seed, gait="default", budget="quick", spec="pm10"):
         calls.append((delta, str(gait)))
         return {"k": 1, "n": 2, "effort_median": 0.5, "delta": delta, "seed": seed}
 
