@@ -210,6 +210,24 @@ def stale_columns(rows=None, load=None) -> list[str]:
     return out
 
 
+def _adaptive_hold_command(rows: list, out: str) -> str:
+    """The ``scripts/adaptive_hold.py`` runs that remake ``rows``: one per seed and set of
+    policies, with the specs that set was measured on (not every policy on every spec)."""
+    groups: dict = {}  # (seed, policies) -> specs
+    for seed in dict.fromkeys(r["seed"] for r in rows):
+        by_spec: dict = {}
+        for r in rows:
+            if r["seed"] == seed:
+                by_spec.setdefault(r["spec_name"], []).append(r["policy"])
+        for spec, pols in by_spec.items():
+            groups.setdefault((seed, tuple(dict.fromkeys(pols))), []).append(spec)
+    return "; ".join(
+        f"python scripts/adaptive_hold.py --policy {' '.join(pols)} --mismatch "
+        f"{' '.join(specs)} --seed {seed} --out {out}"
+        for (seed, pols), specs in groups.items()
+    )
+
+
 def _data_rows(docs: Path) -> dict:
     """{file: (its rows, the command that regenerates it)} of the data files the docs quote."""
     out = {}
@@ -223,14 +241,7 @@ def _data_rows(docs: Path) -> dict:
         if not path.is_file():
             continue
         rows = json.loads(path.read_text()).get("entries", [])
-        pols = " ".join(dict.fromkeys(r["policy"] for r in rows))
-        specs = " ".join(dict.fromkeys(r["spec_name"] for r in rows))
-        seeds = sorted({r["seed"] for r in rows})
-        out[f"data/{name}"] = (
-            rows,
-            f"for s in {' '.join(map(str, seeds))}; do python scripts/adaptive_hold.py "
-            f"--policy {pols} --mismatch {specs} --seed $s --out {rel(str(path))}; done",
-        )
+        out[f"data/{name}"] = (rows, _adaptive_hold_command(rows, rel(str(path))))
     path = docs / "data" / "adaptive_budget.json"
     if path.is_file():
         rows = json.loads(path.read_text()).get("rows", [])
