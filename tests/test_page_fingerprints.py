@@ -314,9 +314,10 @@ def test_compare_records_the_new_fingerprint(tmp_path, monkeypatch):
 
 
 def test_every_quoted_data_file_records_a_current_fingerprint():
-    """docs/data/hold_vs_delta.json, adaptive_hold_test.json, adaptive_factors.json and
-    docs/hold_eval.jsonl: every row records the fingerprint of what made it, and it is what
-    the code and its policy's files make now."""
+    """docs/data/hold_vs_delta.json and hold_vs_delta_families.json, adaptive_hold_test.json and
+    adaptive_hold_validation.json, adaptive_factors.json, adaptive_budget.json and
+    docs/hold_eval.jsonl: every row records the fingerprint of what made it, and it is what the
+    code and its policy's files make now."""
     stale = provenance.stale_data()
     assert not stale, "a data file the docs quote is stale:\n" + "\n".join(stale)
 

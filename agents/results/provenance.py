@@ -231,11 +231,12 @@ def _adaptive_hold_command(rows: list, out: str) -> str:
 def _data_rows(docs: Path) -> dict:
     """{file: (its rows, the command that regenerates it)} of the data files the docs quote."""
     out = {}
-    path = docs / "data" / "hold_vs_delta.json"
-    if path.is_file():
-        data = json.loads(path.read_text())
-        rows = [r for c in data.get("columns", {}).values() for r in c.get("rows", [])]
-        out["data/hold_vs_delta.json"] = (rows, data.get("made_with"))
+    for name in ("hold_vs_delta.json", "hold_vs_delta_families.json"):
+        path = docs / "data" / name
+        if path.is_file():
+            data = json.loads(path.read_text())
+            rows = [r for c in data.get("columns", {}).values() for r in c.get("rows", [])]
+            out[f"data/{name}"] = (rows, data.get("made_with"))
     for name in ("adaptive_hold_test.json", "adaptive_hold_validation.json"):
         path = docs / "data" / name
         if not path.is_file():
