@@ -336,3 +336,21 @@ def test_a_data_row_is_stale_after_a_code_edit_and_fresh_after_a_docstring_edit(
     edit_source(monkeypatch, "bound_env/sim/stride_map.py", "EVAL_RTOL = 1e-10", "EVAL_RTOL = 1e-6")
     assert provenance.row_staleness(row) == "its sources changed"
     assert text == (ROOT / "bound_env/sim/stride_map.py").read_text()  # the file itself untouched
+
+
+def test_the_adaptive_hold_regenerate_command_measures_only_the_rows_that_are_there():
+    """One run per seed and set of policies, with the specs that set has: not every policy on
+    every spec (which would measure rows that nobody quotes)."""
+    rows = [
+        {"policy": p, "spec_name": s, "seed": 12345}
+        for p, s in [("lqr", "pm10"), ("mpc", "pm10"), ("lqr", "pm15"), ("mpc", "pm15")]
+    ] + [{"policy": "mpc-adaptive", "spec_name": "all10", "seed": 12345}]
+    rows.append({"policy": "lqr", "spec_name": "pm10", "seed": 777})
+    cmd = provenance._adaptive_hold_command(rows, "x.json").split("; ")
+    assert cmd == [
+        "python scripts/adaptive_hold.py --policy lqr mpc --mismatch pm10 pm15 --seed 12345 "
+        "--out x.json",
+        "python scripts/adaptive_hold.py --policy mpc-adaptive --mismatch all10 --seed 12345 "
+        "--out x.json",
+        "python scripts/adaptive_hold.py --policy lqr --mismatch pm10 --seed 777 --out x.json",
+    ]
