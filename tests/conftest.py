@@ -76,3 +76,21 @@ def cli(capsys):
         return code, out.out, out.err
 
     return run
+
+
+@pytest.fixture
+def load_script():
+    """``load_script(name)``: ``scripts/<name>.py`` (or ``benchmarks/<name>.py`` given as
+    ``"benchmarks/<name>"``) as a fresh module, so its ``main(argv)`` runs in-process and a
+    test may monkeypatch what it imports."""
+    import importlib.util
+
+    def load(name: str):
+        path = ROOT / (name if "/" in name else f"scripts/{name}")
+        path = path.with_suffix(".py")
+        spec = importlib.util.spec_from_file_location(f"loaded_{path.stem}", path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+
+    return load

@@ -4,19 +4,11 @@ about speed is asserted."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_the_benchmark_writes_a_fingerprinted_row_and_replaces_its_own(tmp_path, capsys):
-    spec = importlib.util.spec_from_file_location(
-        "adaptive_budget", ROOT / "benchmarks" / "adaptive_budget.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+def test_the_benchmark_writes_a_fingerprinted_row_and_replaces_its_own(tmp_path, load_script):
+    mod = load_script("benchmarks/adaptive_budget")
     out = tmp_path / "budget.json"
     out.write_text(json.dumps({"note": "kept", "rows": [{"policy": "other", "budget": 0}]}))
     argv = [

@@ -4,10 +4,8 @@ row's outcomes are `task_mm_hold`'s."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,18 +16,9 @@ from bound_env.analysis.margins.mismatch_tasks import plants_of
 from bound_env.model.mismatch import as_spec
 from bound_env.model.params import load_gait
 
-ROOT = Path(__file__).resolve().parent.parent
 
-
-def _script():
-    spec = importlib.util.spec_from_file_location("hold_eval", ROOT / "scripts" / "hold_eval.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def test_seed_777_names_the_plants_of_the_margins_seed_777():
-    hold_eval = _script()
+def test_seed_777_names_the_plants_of_the_margins_seed_777(load_script):
+    hold_eval = load_script("hold_eval")
     z_star = np.zeros(6)
     for delta, preset in ((0.05, "pm5"), (0.1, "pm10")):
         spec = hold_eval.spec_of(delta)
@@ -43,7 +32,7 @@ def test_seed_777_names_the_plants_of_the_margins_seed_777():
         )
 
 
-def test_a_row_is_the_margins_hold(tmp_path, capsys):
+def test_a_row_is_the_margins_hold(tmp_path, capsys, load_script):
     """A row of ``--delta 0.1 --seed 777 --robots 8 --strides 20`` is the hold of ``bound-env
     margins --policy lqr --budget test --mismatch pm10 --seed 777`` (its task, run here)."""
     from agents.policy import load_controller
@@ -51,7 +40,7 @@ def test_a_row_is_the_margins_hold(tmp_path, capsys):
     from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
     from bound_env.analysis.margins.run import run_task
 
-    hold_eval = _script()
+    hold_eval = load_script("hold_eval")
     out = tmp_path / "rows.jsonl"
     # the test budget's plants and strides, the effort over the quick and full budgets' tail
     mb = replace(MISMATCH_BUDGETS["test"], effort_strides=MISMATCH_BUDGETS["quick"].effort_strides)
@@ -74,11 +63,11 @@ def test_a_row_is_the_margins_hold(tmp_path, capsys):
     assert bad.value.code == 2 and "--seed" in capsys.readouterr().err
 
 
-def test_set_tags_and_changes_only_the_offset_free_rows(tmp_path, capsys):
+def test_set_tags_and_changes_only_the_offset_free_rows(tmp_path, capsys, load_script):
     """``--set gain=0.5`` reaches the '+of' policy (its row is tagged, and its torques are not
     those of the default gain) and not ``lqr``, which has no gain to take: lqr's row is
     untagged and is the row of a run without ``--set``. ``estimator=`` is a setting too."""
-    hold_eval = _script()
+    hold_eval = load_script("hold_eval")
     argv = ["--policy", "lqr", "lqr-of", "--delta", "0.1", "--seed", "777", "--robots", "3"]
     argv += ["--strides", "12"]
     plain, tuned = tmp_path / "plain.jsonl", tmp_path / "tuned.jsonl"

@@ -4,24 +4,13 @@ parameters a spec varies to each delta and keeps its noise and delay; `scripts/h
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
 from bound_env.analysis.margins.hold_delta import family, hold_delta_table, hold_row, spec_at
 from bound_env.control import load_controller
 from bound_env.model.mismatch import as_spec
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def _script():
-    spec = importlib.util.spec_from_file_location("families_hvd", ROOT / "scripts/hold_vs_delta.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @pytest.mark.parametrize(
@@ -69,8 +58,10 @@ def test_hold_row_of_a_family_measures_that_family():
     assert again["strides_reached"] == pm["strides_reached"]
 
 
-def test_the_script_runs_one_family_per_spec_and_refuses_bad_ones(tmp_path, monkeypatch, capsys):
-    mod = _script()
+def test_the_script_runs_one_family_per_spec_and_refuses_bad_ones(
+    tmp_path, monkeypatch, capsys, load_script
+):
+    mod = load_script("hold_vs_delta")
     calls = []
 
     def fake(ctrl, delta, seed, gait="default", budget="quick", spec="pm10"):

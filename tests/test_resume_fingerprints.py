@@ -10,21 +10,11 @@ rows are measured again.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
 from pathlib import Path
 
 from bound_env.files.resources import controllers_dir
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def _script(name):
-    spec = importlib.util.spec_from_file_location(f"resume_{name}", ROOT / "scripts" / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _lqr_copy(tmp_path) -> Path:
@@ -39,8 +29,10 @@ def _edit_gain(spec: Path) -> None:
     spec.write_text(text.replace("- [9.33", "- [9.34", 1))
 
 
-def test_hold_vs_delta_reuses_a_row_only_under_its_fingerprint(tmp_path, monkeypatch, capsys):
-    mod = _script("hold_vs_delta")
+def test_hold_vs_delta_reuses_a_row_only_under_its_fingerprint(
+    tmp_path, monkeypatch, capsys, load_script
+):
+    mod = load_script("hold_vs_delta")
     calls = []
 
     def hold_row(ctrl, delta, seed, gait="default", budget="quick", spec="pm10"):
@@ -69,8 +61,10 @@ def test_hold_vs_delta_reuses_a_row_only_under_its_fingerprint(tmp_path, monkeyp
     )
 
 
-def test_hold_eval_reuses_a_row_only_under_its_fingerprint(tmp_path, monkeypatch, capsys):
-    mod = _script("hold_eval")
+def test_hold_eval_reuses_a_row_only_under_its_fingerprint(
+    tmp_path, monkeypatch, capsys, load_script
+):
+    mod = load_script("hold_eval")
     calls = []
 
     def hold(setup):
@@ -96,8 +90,10 @@ def test_hold_eval_reuses_a_row_only_under_its_fingerprint(tmp_path, monkeypatch
     assert [r["delta"] for r in rows] == [0.05, 0.1]  # 0.05 kept, 0.1 added
 
 
-def test_adaptive_hold_reuses_an_entry_only_under_its_fingerprint(tmp_path, monkeypatch, capsys):
-    mod = _script("adaptive_hold")
+def test_adaptive_hold_reuses_an_entry_only_under_its_fingerprint(
+    tmp_path, monkeypatch, capsys, load_script
+):
+    mod = load_script("adaptive_hold")
     calls = []
 
     def hold_entry(policy, spec_text, seed, ctrl=None):
