@@ -18,18 +18,25 @@ CEILING_ES = {"mutate": 0.3, "step": 0.5, "grow": 1.5, "shrink": 0.85, "min": 0.
 
 
 def _profile_search(
-    loop: ClosedLoop, z, n_strides: int, n_pieces: int, b: Budget, rng: np.random.Generator
+    loop: ClosedLoop,
+    z,
+    n_strides: int,
+    n_pieces: int,
+    period: float,
+    b: Budget,
+    rng: np.random.Generator,
 ) -> tuple[bool, dict]:
     """Is there an admissible torque profile that completes ``n_strides`` strides from z?
     Candidates in order: zero, +-max, bang-bang with one switch, random piecewise-constant
-    (half bang-bang valued, half uniform), then a (1+1)-ES shooting optimizer from the best.
+    (half bang-bang valued, half uniform), then a (1+1)-ES shooting optimizer from the best;
+    ``period`` [s] scores a failure by the share of a stride survived (`ClosedLoop.profile`).
     Returns (found, best: {score, failure, phase, stride})."""
     best = {"score": -1.0}
     best_a = None
 
     def trial(a):
         nonlocal best, best_a
-        ok, score, failure, phase, strides = loop.profile(z, a, n_strides)
+        ok, score, failure, phase, strides = loop.profile(z, a, n_strides, period)
         if score > best["score"]:
             best = {"score": score, "failure": failure, "phase": phase, "stride": strides}
             best_a = np.array(a, dtype=float)
@@ -80,7 +87,7 @@ def task_ceiling(setup: Setup, i: int, sign: int) -> dict:
 
     def ok(s):
         rng = np.random.default_rng([i, 1 if sign > 0 else 0, int(round(s * 1e9)) % 2**32])
-        found, best = _profile_search(loop, start(s), n, n_pieces, b, rng)
+        found, best = _profile_search(loop, start(s), n, n_pieces, period, b, rng)
         found_at[s] = best
         return found
 

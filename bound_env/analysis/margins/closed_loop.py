@@ -230,11 +230,14 @@ class ClosedLoop:
                     z1, t_seen = np.array(info["apex_z"]), float(obs[self.i_since_apex])
                     timed_on_apex(self.on_apex, z1, t_seen)
 
-    def profile(self, z0, actions, max_strides: int, seg: int = PROFILE_SEG) -> tuple:
+    def profile(
+        self, z0, actions, max_strides: int, period: float, seg: int = PROFILE_SEG
+    ) -> tuple:
         """Open loop: the normalized torques ``actions[j]`` held over control intervals
         [j seg, (j + 1) seg) from the apex state z0, zero after the last piece. Returns
         (strides completed >= max_strides, progress score, failure, phase, strides) with
-        score = strides completed + the fraction of a nominal stride survived since."""
+        score = strides completed + the fraction of a nominal stride (``period`` [s], an
+        argument: the score depends on nothing a worker kept from earlier tasks) survived since."""
         code, n, t_step, t_apex, t, status, phase = self.plant.open_loop(
             z0, actions, seg, max_strides
         )
@@ -246,11 +249,9 @@ class ClosedLoop:
         if code == 0:
             # the apex time as the env's loop read it: the observation's float32 time since it
             t_seen = t_step - float(np.float32(t_step - t_apex)) if t_step > 0.0 else 0.0
-            frac = min(0.99, (t - t_seen) / max(self.period_hint, 1e-3))
+            frac = min(0.99, (t - t_seen) / max(period, 1e-3))
             return False, n + frac, FAILURE_NAMES[status], PHASES[phase], n
         return False, float(n), "no_apex", PHASES[phase], n
-
-    period_hint = 0.39  # s, nominal stride duration for the profile score (set by the tasks)
 
 
 def apply_kick(env, index: int, delta: float) -> None:
@@ -333,6 +334,4 @@ def loop_for(
         if len(_LOOPS) > 64:
             _LOOPS.clear()
         _LOOPS[k] = ClosedLoop(setup.controller, setup.gait, overrides, env_extra)
-        if math.isfinite(setup.period):
-            _LOOPS[k].period_hint = setup.period
     return _LOOPS[k]
