@@ -54,3 +54,40 @@ def test_the_ceiling_does_not_depend_on_the_task_that_built_the_loop(setup):
     alone = TASKS["ceiling"](known, i, -1)
     _LOOPS.clear()
     assert after_cycle == alone
+
+
+@pytest.mark.slow
+def test_decision_counts_do_not_depend_on_the_decisions_counted_before():
+    """A controller run as one copy per robot (step-ppo: a residual over the distilled
+    student) records its copies' decisions into its own record at the end of a loop. A copy
+    starts with an empty record (the MPC pickles without it), so counting each copy from the
+    length of the controller's record before the loop dropped a copy's first decisions: the
+    more a worker had counted before, the fewer it counted (step-ppo's decision shares were 0
+    in one run of the page and hundreds in another)."""
+    from agents.runtime.policy import load_controller as load_policy
+
+    ctrl = load_policy("agents/policies/step-ppo/s0")
+    budget = as_budget("test")
+    gait = "default"
+    setup = Setup(
+        controller=ctrl,
+        gait=gait,
+        budget=budget,
+        z_star=np.asarray(load_gait(gait).z0, float),
+        key=setup_key(ctrl, gait, budget, 12345, ()),
+        seed=12345,
+    )
+    _LOOPS.clear()
+    cyc = TASKS["cycle"](setup)
+    setup = replace(
+        setup,
+        z_cl=np.array(cyc["z_cl"]),
+        cycle_steps=int(cyc["cycle_steps"]),
+        period=float(cyc["period"]),
+    )
+    size = budget.curve_sizes[-1]
+    first = TASKS["curve"](setup, size)["decision_kinds"]
+    again = TASKS["curve"](setup, size)["decision_kinds"]
+    _LOOPS.clear()
+    assert sum(first.values()) > 0  # the copies decided
+    assert again == first

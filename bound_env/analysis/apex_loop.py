@@ -257,7 +257,6 @@ class _Controllers:
                 self.plans = StridePlans(controller, n)
         self.copies = None
         self.kinds = getattr(controller, "decision_kinds", None)
-        self.n0 = len(self.kinds) if self.kinds is not None else 0
         self.rows = None
         if not self.batched and self.plans is None:
             self.copies = [copy.deepcopy(controller) for _ in range(n)]
@@ -265,6 +264,9 @@ class _Controllers:
                 reset_controller(c)
                 if privileged:
                     c.set_plant(plants[i])
+            # where each copy's own record starts: a copy may start with the controller's whole
+            # record or (a controller that pickles without it, `MPCController.__getstate__`) none
+            self.k0 = [len(getattr(c, "decision_kinds", None) or ()) for c in self.copies]
             # the copies' actions in one call (``act_rows(copies, obs)``: as each copy's
             # ``__call__`` on its row, to rounding), where the controller offers it
             rows = getattr(controller, "act_rows", None)
@@ -298,8 +300,8 @@ class _Controllers:
 
     def close(self) -> None:
         if self.copies is not None and self.kinds is not None:
-            for c in self.copies:
-                self.kinds.extend(c.decision_kinds[self.n0 :])
+            for c, k0 in zip(self.copies, self.k0, strict=True):
+                self.kinds.extend(c.decision_kinds[k0:])
 
 
 def interval_loop(
