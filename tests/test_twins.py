@@ -65,3 +65,36 @@ def test_the_cycle_teacher_holds_the_cycle_mpc_privileged_designs():
         z1 = true_map(mpc, p).map(z_c, mpc.profile_actions(u_c)[0])
         np.testing.assert_allclose(z1, z_c, rtol=0, atol=1e-8)
     assert kinds & {"passive", "forced"}
+
+
+def _recipe(name: str, seed: int = 0):
+    from agents.common.config import load_hyperparams
+    from agents.experts.adaptive_recipe import config_from_section
+
+    env_id = "PassiveBoundStride-v1"
+    return config_from_section(load_hyperparams(name, env_id), env_id, seed)
+
+
+def test_the_recipe_yaml_holds_no_copy_of_the_code_defaults():
+    """The learned adaptive recipe's defaults are written once (AdaptiveConfig): a key of the
+    YAML's ``adaptive`` block is there because it differs from its default, and the recipe
+    makes the settings the shipped policies were trained with (their config.json)."""
+    import dataclasses
+
+    import yaml
+
+    from agents.common.config import resolve_config_path
+    from agents.experts.adaptive import AdaptiveConfig
+
+    section = yaml.safe_load(resolve_config_path("adaptive").read_text())
+    block = section["PassiveBoundStride-v1"].get("adaptive") or {}
+    defaults = dataclasses.asdict(AdaptiveConfig())
+    copies = [k for k, v in block.items() if defaults.get(k) == (tuple(v) if k == "hidden" else v)]
+    assert not copies, f"configs/adaptive.yaml repeats defaults: {copies}"
+    from agents.runtime.policy_table import SHIPPED_DIR
+
+    shipped = json.loads(
+        (SHIPPED_DIR / "adaptive" / "s0" / "config.json").read_text()
+    )["adaptive"]  # fmt: skip
+    made = json.loads(json.dumps(dataclasses.asdict(_recipe("adaptive", 0))))
+    assert made == shipped
