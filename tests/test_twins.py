@@ -86,15 +86,54 @@ def test_the_recipe_yaml_holds_no_copy_of_the_code_defaults():
     from agents.common.config import resolve_config_path
     from agents.experts.adaptive import AdaptiveConfig
 
-    section = yaml.safe_load(resolve_config_path("adaptive").read_text())
+    section = yaml.safe_load(resolve_config_path("student-mpc-adaptive").read_text())
     block = section["PassiveBoundStride-v1"].get("adaptive") or {}
     defaults = dataclasses.asdict(AdaptiveConfig())
     copies = [k for k, v in block.items() if defaults.get(k) == (tuple(v) if k == "hidden" else v)]
-    assert not copies, f"configs/adaptive.yaml repeats defaults: {copies}"
+    assert not copies, f"configs/student-mpc-adaptive.yaml repeats defaults: {copies}"
     from agents.runtime.policy_table import SHIPPED_DIR
 
     shipped = json.loads(
         (SHIPPED_DIR / "adaptive" / "s0" / "config.json").read_text()
     )["adaptive"]  # fmt: skip
-    made = json.loads(json.dumps(dataclasses.asdict(_recipe("adaptive", 0))))
+    made = json.loads(json.dumps(dataclasses.asdict(_recipe("student-mpc-adaptive", 0))))
     assert made == shipped
+
+
+def test_the_old_config_name_is_the_new_one():
+    """``--config adaptive`` (configs/adaptive.yaml, the old name) reads the same sections as
+    ``--config student-mpc-adaptive``."""
+    import yaml
+
+    from agents.common.config import config_names, resolve_config_path
+
+    assert {"adaptive", "student-mpc-adaptive"} <= set(config_names())
+    old, new = (yaml.safe_load(resolve_config_path(n).read_text())
+                for n in ("adaptive", "student-mpc-adaptive"))  # fmt: skip
+    assert old == new
+    assert _recipe("adaptive", 2) == _recipe("student-mpc-adaptive", 2)
+
+
+def test_the_learned_adaptive_controller_has_a_name_that_says_what_it_learned_from():
+    """``student-mpc-adaptive/sK`` (and its ablations') is the folder ``adaptive/sK``, whose
+    old name stays a name; both in ``--policy``'s help."""
+    from agents.runtime.names import policy_names, resolve_policy
+    from agents.runtime.policy_table import SHIPPED_DIR, names_text
+
+    for k in range(3):
+        for new, old in (
+            ("student-mpc-adaptive", "adaptive"),
+            ("student-mpc-adaptive-nohist", "adaptive-nohist"),
+            ("student-mpc-adaptive-nominal", "adaptive-nominal"),
+        ):
+            assert resolve_policy(f"{new}/s{k}") == resolve_policy(f"{old}/s{k}")
+            assert resolve_policy(f"{old}/s{k}") == SHIPPED_DIR / old / f"s{k}"
+    assert {"student-mpc-adaptive/s0", "adaptive/s0"} <= set(policy_names())
+    assert "`student-mpc-adaptive/s0`..`s2` (= `adaptive/s0`..`s2`)" in names_text()
+
+
+def test_the_new_name_loads_the_same_controller():
+    from agents.runtime.policy import load_controller
+
+    a, b = load_controller("student-mpc-adaptive/s0"), load_controller("adaptive/s0")
+    assert type(a) is type(b) and a.fingerprint() == b.fingerprint()
