@@ -40,33 +40,6 @@ def test_mpc_expert_refuses_a_controller_that_is_not_an_mpc():
         mpc_expert("lqr", "--expert")
 
 
-def test_the_cycle_teacher_holds_the_cycle_mpc_privileged_designs():
-    """The learned adaptive controller's teacher and the privileged reference aim at one
-    cycle per plant (bound_env.control.plant_design): equal to round-off, and a cycle."""
-    import numpy as np
-
-    from agents.experts.adaptive import CycleTeacher, true_map, validation_plants
-    from bound_env.control import load_controller
-    from bound_env.control.privileged import PrivilegedMPC
-
-    mpc = load_controller("mpc")
-    ref = PrivilegedMPC()
-    kinds = set()
-    for p in validation_plants(mpc, "pm10", 4):
-        d = ref.set_plant(p)
-        teacher = CycleTeacher(mpc, p)
-        kinds.add(d.cycle)
-        if d.cycle == "nominal":
-            assert teacher.cycle is None and teacher.mpc is not None
-            continue
-        z_c, u_c = teacher.cycle
-        np.testing.assert_allclose(z_c, d.z_ref, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(u_c, d.u_ref, rtol=0, atol=1e-12)
-        z1 = true_map(mpc, p).map(z_c, mpc.profile_actions(u_c)[0])
-        np.testing.assert_allclose(z1, z_c, rtol=0, atol=1e-8)
-    assert kinds & {"passive", "forced"}
-
-
 def _recipe(name: str, seed: int = 0):
     from agents.common.config import load_hyperparams
     from agents.experts.adaptive_recipe import config_from_section

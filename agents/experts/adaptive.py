@@ -23,10 +23,9 @@ window resets exactly, trains without backpropagation through time and runs in
 microseconds.
 
 **The teacher** is privileged (`CycleTeacher`): the expert's LQR gain G about the true plant's
-cycle, (z_c, u_c) with z_c = P(z_c, u_c) (`plant_cycle`: the cycle the re-designed classical
-controllers hold, `bound_env.control.plant_design`: the passive cycle where the plant has one
-near z*, else the forced one of least steady torque), u = clip(u_c - G (z - z_c), -1, 1) at
-the true state; where no such cycle is found, the shipped MPC planning
+cycle nearest the nominal one, (z_c, u_c) with z_c = P(z_c, u_c) (`forced_cycle`: the passive
+cycle where the plant has one near z*, else the least-change forced one), u = clip(u_c - G
+(z - z_c), -1, 1) at the true state; where no such cycle is found, the shipped MPC planning
 on the true plant (`privileged_teacher`: its planning map built on the true plant).
 Unclipped, its plan differs from the nominal LQR's by a constant per plant,
 u_c + G (z_c - z*): what the student has to infer.
@@ -67,7 +66,6 @@ from pathlib import Path
 import numpy as np
 
 from bound_env.control.mpc import MPCController
-from bound_env.control.plant_design import PlantDesigner
 from bound_env.files.cache import atomic_write
 from bound_env.model.mismatch import as_spec, plant_params, plant_values, sample_factors
 from bound_env.model.params import Z_NAMES
@@ -135,27 +133,60 @@ def privileged_teacher(expert: MPCController, params) -> MPCController:
     return t
 
 
-def plant_cycle(expert: MPCController, params):
-    """The cycle (z_c, u_c) of the plant ``params`` that the re-designed controllers hold
-    (`bound_env.control.plant_design.PlantDesigner.design`: the plant's passive cycle within
-    ``MAX_SHIFT`` of z*, else the forced cycle of least steady torque); None where it finds
-    neither (its ``nominal`` design)."""
-    K = expert.basis.K
-    # the design's own gain is not used (the teacher feeds back with the expert's), so its
-    # weights do not matter: the cycle depends on the plant and the basis only
-    d = PlantDesigner(expert.lqr, np.eye(6), np.eye(K)).design(params)
-    return None if d.cycle == "nominal" else (d.z_ref, d.u_ref)
+def forced_cycle(expert: MPCController, plant: StrideMap, iters: int = 15, tol: float = 1e-9):
+    """The plant's cycle nearest the nominal one: (z_c, u_c) with z_c = P(z_c, W u_c) on
+    ``plant``, by Gauss-Newton from (z*, 0) on the unknowns ((z_c - z*) / s, u_c) with
+    minimum-norm steps (so the least change of state and torque: the passive cycle where the
+    plant has one near z*, else a forced one), central differences, halved steps; None when
+    it does not converge to ``tol`` (normalized) with |u_c| <= 1."""
+    K, S, z_ref = expert.basis.K, expert.scales, expert.z_ref
+
+    def res(x):
+        z = z_ref + x[:6] * S
+        fz = plant.map(z, expert.profile_actions(x[6:])[0])
+        return None if fz is None else (fz - z) / S
+
+    x = np.zeros(6 + K)
+    r = res(x)
+    if r is None:
+        return None
+    h = 1e-5
+    for _ in range(iters):
+        if np.max(np.abs(r)) < tol:
+            break
+        J = np.zeros((6, 6 + K))
+        for j in range(6 + K):
+            e = np.zeros(6 + K)
+            e[j] = h
+            a, b = res(x + e), res(x - e)
+            if a is None or b is None:
+                return None
+            J[:, j] = (a - b) / (2 * h)
+        step = np.linalg.lstsq(J, -r, rcond=1e-10)[0]
+        lam = 1.0
+        while lam > 1e-3:
+            xn = x + lam * step
+            rn = res(xn) if np.max(np.abs(xn[6:])) <= 1.0 else None
+            if rn is not None and np.max(np.abs(rn)) < np.max(np.abs(r)):
+                break
+            lam /= 2
+        else:
+            break
+        x, r = xn, rn
+    if np.max(np.abs(r)) >= tol:
+        return None
+    return z_ref + x[:6] * S, x[6:].copy()
 
 
 class CycleTeacher:
-    """The privileged teacher: the expert's LQR gain about the true plant's cycle
-    (`plant_cycle`), u = clip(u_c - G (z - z_c), -1, 1), reading the true
+    """The privileged teacher: the expert's LQR gain about the true plant's cycle nearest the
+    nominal one (`forced_cycle`), u = clip(u_c - G (z - z_c), -1, 1), reading the true
     state; where that cycle is not found, the expert's MPC planning on the true plant
     (`privileged_teacher`). Privileged: a teacher and a reference, never deployable."""
 
     def __init__(self, expert: MPCController, params):
         self.expert = expert
-        self.cycle = plant_cycle(expert, params)
+        self.cycle = forced_cycle(expert, true_map(expert, params))
         self.mpc = privileged_teacher(expert, params) if self.cycle is None else None
 
     def plan(self, z) -> np.ndarray:
