@@ -32,6 +32,13 @@ CURATED = {"default", "literal-cycle"} | {
     )
     for k in range(3)
 }
+# the learned adaptive controller's names that say what it learned from (issue 47): a name
+# for each seed folder of its group, not a copy
+CURATED |= {
+    f"student-mpc-adaptive{ablation}/s{k}"
+    for ablation in ("", "-nohist", "-nominal")
+    for k in range(3)
+}
 
 
 def test_the_shipped_set_is_the_curated_one():

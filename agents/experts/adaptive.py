@@ -59,7 +59,6 @@ from __future__ import annotations
 
 import copy
 import json
-import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -85,7 +84,7 @@ from ..runtime.adaptive_policy import (  # noqa: F401
     n_features,
     save_policy,
 )
-from ..runtime.choice_policy import npz_bytes
+from .dagger import claim_run, dagger_rounds, mpc_expert, progress_log, tanh_mlp, train_minibatches
 
 
 @dataclass
@@ -323,33 +322,20 @@ def fit(F, T, W, Y, cfg: AdaptiveConfig, log=print):
     w = torch.as_tensor(W, dtype=torch.float32)
     y = torch.as_tensor(Y, dtype=torch.float32)
     K = T.shape[1]
-    sizes = (F.shape[1], *cfg.hidden, K + Y.shape[1])
-    mods = []
-    for j in range(len(sizes) - 1):
-        mods.append(torch.nn.Linear(sizes[j], sizes[j + 1]))
-        if j < len(sizes) - 2:
-            mods.append(torch.nn.Tanh())
-    net = torch.nn.Sequential(*mods)
+    net, mods = tanh_mlp((F.shape[1], *cfg.hidden, K + Y.shape[1]))
     with torch.no_grad():  # start at the LQR: no correction
         mods[-1].weight.mul_(0.1)
         mods[-1].bias.zero_()
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.epochs)
-    gen = torch.Generator().manual_seed(cfg.seed)
     n = len(x)
-    for _ in range(cfg.epochs):
-        perm = torch.randperm(n, generator=gen)
-        for i in range(0, n, cfg.batch):
-            idx = perm[i : i + cfg.batch]
-            out = net(x[idx])
-            wi = w[idx]
-            se = ((out[:, :K] - t[idx]) ** 2).mean(dim=1)
-            loss = (se * wi).sum() / wi.sum().clamp(min=1.0)
-            loss = loss + cfg.aux_weight * ((out[:, K:] - y[idx]) ** 2).mean()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-        sched.step()
+
+    def batch_loss(idx):
+        out = net(x[idx])
+        wi = w[idx]
+        se = ((out[:, :K] - t[idx]) ** 2).mean(dim=1)
+        loss = (se * wi).sum() / wi.sum().clamp(min=1.0)
+        return loss + cfg.aux_weight * ((out[:, K:] - y[idx]) ** 2).mean()
+
+    train_minibatches(net, n, cfg, batch_loss)
     with torch.no_grad():
         out = net(x)
         lab = w > 0
@@ -367,17 +353,9 @@ def fit(F, T, W, Y, cfg: AdaptiveConfig, log=print):
 def train_adaptive(cfg: AdaptiveConfig, out_dir, progress: bool = True) -> dict:
     """Run (or resume) DAgger into ``out_dir`` (module docstring); returns the summary (also
     ``summary.json``) and writes the policy to ``out_dir/policy``."""
-    from bound_env.control import load_controller as load_classical
-
     out_dir = Path(out_dir)
-
-    def log(msg):
-        if progress:
-            print(msg, file=sys.stderr, flush=True)
-
-    expert = load_classical(cfg.expert)
-    if not isinstance(expert, MPCController):
-        raise ValueError(f"expert {cfg.expert!r} is not an mpc controller spec")
+    log = progress_log(progress)
+    expert = mpc_expert(cfg.expert, "expert")
     for key in ("rounds", "episodes_first", "episodes_round", "strides", "epochs", "batch"):
         if int(getattr(cfg, key)) < 1:
             raise ValueError(f"adaptive: {key} must be at least 1, got {getattr(cfg, key)!r}")
@@ -386,81 +364,68 @@ def train_adaptive(cfg: AdaptiveConfig, out_dir, progress: bool = True) -> dict:
     if cfg.k < 0:
         raise ValueError(f"adaptive: k must be >= 0, got {cfg.k!r}")
     as_spec(cfg.mismatch), as_spec(cfg.val_mismatch)  # a bad spec fails before the run
-    settings = json.dumps(asdict(cfg), sort_keys=True, default=str)
-    cfg_path = out_dir / "adaptive.json"
-    old = json.loads(cfg_path.read_text()) if cfg_path.is_file() else None
-    if old is not None and old != json.loads(settings):
-        new = json.loads(settings)
-        changed = "; ".join(
-            f"{k}: {old.get(k)!r} -> {new.get(k)!r}"
-            for k in sorted(set(old) | set(new))
-            if old.get(k) != new.get(k)
-        )
-        raise ValueError(
-            f"{out_dir}: holds a run with other settings ({changed}); use another --name "
-            "or --out, or the run's settings to resume it"
-        )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write(cfg_path, settings + "\n")
+    claim_run(
+        out_dir,
+        "adaptive.json",
+        cfg,
+        "use another --name or --out, or the run's settings to resume it",
+    )
     K = expert.basis.K
     sigma = as_spec(cfg.mismatch).obs_sigma(Z_NAMES)
     fr = factor_range(cfg.mismatch)
     D = n_features(cfg.k, K, cfg.summary)
-    student = make_controller(
-        expert, [], np.zeros(D), np.ones(D), cfg.k, "student", cfg.gate_surprise, cfg.summary
-    )
+    state = {
+        "student": make_controller(
+            expert, [], np.zeros(D), np.ones(D), cfg.k, "student", cfg.gate_surprise, cfg.summary
+        )
+    }
     t0 = time.perf_counter()
-    parts, history = [], []
-    for r in range(cfg.rounds):
-        path = out_dir / f"round_{r}.npz"
-        if path.is_file():
-            with np.load(path) as d:
-                part = {key: d[key] for key in d.files}
-            log(f"[adaptive] round {r}: {len(part['F'])} states (saved)")
-        else:
-            rng = np.random.default_rng([cfg.seed, r, 3838])
-            n = cfg.episodes_first if r == 0 else cfg.episodes_round
-            data: list = []
-            lengths = []
-            for i, (params, factors, z0) in enumerate(draw_episodes(cfg, expert, n, rng)):
-                lengths.append(
-                    episode(
-                        expert,
-                        student,
-                        params,
-                        factors,
-                        z0,
-                        cfg.strides,
-                        sigma,
-                        rng,
-                        data,
-                        fr,
-                        cfg.teacher,
-                        cfg.beta**r if r > 0 else 0.0,
-                    )
+    history = []
+
+    def collect(r: int) -> dict:
+        rng = np.random.default_rng([cfg.seed, r, 3838])
+        n = cfg.episodes_first if r == 0 else cfg.episodes_round
+        data: list = []
+        lengths = []
+        for i, (params, factors, z0) in enumerate(draw_episodes(cfg, expert, n, rng)):
+            lengths.append(
+                episode(
+                    expert,
+                    state["student"],
+                    params,
+                    factors,
+                    z0,
+                    cfg.strides,
+                    sigma,
+                    rng,
+                    data,
+                    fr,
+                    cfg.teacher,
+                    cfg.beta**r if r > 0 else 0.0,
                 )
-                if progress and (i + 1) % 20 == 0:
-                    log(
-                        f"[adaptive] round {r}: {i + 1}/{n} episodes, {len(data)} states "
-                        f"({time.perf_counter() - t0:.0f} s)"
-                    )
-            part = {
-                "F": np.array([d[0] for d in data]).reshape(-1, D),
-                "T": np.array([d[1] if d[1] is not None else np.zeros(K) for d in data]).reshape(
-                    -1, K
-                ),
-                "W": np.array([float(d[1] is not None) for d in data]),
-                "Y": np.array([d[2] for d in data]).reshape(-1, len(FACTOR_KEYS)),
-                "lengths": np.array(lengths),
-            }
-            atomic_write(path, npz_bytes(**part))
-        parts.append(part)
+            )
+            if progress and (i + 1) % 20 == 0:
+                log(
+                    f"[adaptive] round {r}: {i + 1}/{n} episodes, {len(data)} states "
+                    f"({time.perf_counter() - t0:.0f} s)"
+                )
+        return {
+            "F": np.array([d[0] for d in data]).reshape(-1, D),
+            "T": np.array([d[1] if d[1] is not None else np.zeros(K) for d in data]).reshape(-1, K),
+            "W": np.array([float(d[1] is not None) for d in data]),
+            "Y": np.array([d[2] for d in data]).reshape(-1, len(FACTOR_KEYS)),
+            "lengths": np.array(lengths),
+        }
+
+    def refit(r: int, parts: list) -> None:
+        part = parts[-1]
         cat = {key: np.concatenate([p[key] for p in parts]) for key in ("F", "T", "W", "Y")}
         layers, mu, sd, stats = fit(cat["F"], cat["T"], cat["W"], cat["Y"], cfg, log)
         student = make_controller(
             expert, layers, mu, sd, cfg.k, "student", cfg.gate_surprise, cfg.summary
         )
         student.factor_range = fr
+        state["student"] = student
         val = validation_hold(student, expert, cfg)
         log(f"[adaptive] round {r}: validation hold {val['held']}/{val['n']} (seed 777)")
         history.append(
@@ -477,6 +442,12 @@ def train_adaptive(cfg: AdaptiveConfig, out_dir, progress: bool = True) -> dict:
             }
         )
         atomic_write(out_dir / "curve.json", json.dumps(history, indent=2) + "\n")
+
+    def saved(r: int, part: dict) -> str:
+        return f"[adaptive] round {r}: {len(part['F'])} states (saved)"
+
+    dagger_rounds(cfg.rounds, out_dir, collect, refit, saved, log)
+    student = state["student"]
     save_policy(
         out_dir / "policy",
         expert,

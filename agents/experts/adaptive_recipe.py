@@ -1,7 +1,9 @@
-"""The recipe of the learned adaptive controller: ``bound-env train --config adaptive``.
+"""The recipe of the learned adaptive controller: ``bound-env train --config
+student-mpc-adaptive`` (its old name, ``--config adaptive``, reads the same sections).
 
-A config section with ``algo: adaptive-dagger`` (``configs/adaptive.yaml``) is read into an
-`agents.experts.adaptive.AdaptiveConfig` (`config_from_section`), trained by DAgger
+A config section with ``algo: adaptive-dagger`` (``configs/student-mpc-adaptive.yaml``) is read
+into an `agents.experts.adaptive.AdaptiveConfig` (`config_from_section`; the section's
+``adaptive`` block holds only what differs from its defaults), trained by DAgger
 (`agents.experts.adaptive.train_adaptive`) into ``runs/<name>/`` (`train_from_config`, what
 ``bound-env train`` runs for such a section: `train_recipe`), and every policy folder gets a
 ``MODEL_CARD.md`` (`model_card`).

@@ -37,7 +37,6 @@ from pathlib import Path
 
 import numpy as np
 
-from bound_env.control import load_controller as load_classical
 from bound_env.control.mpc import RETURNED, SURVIVED, MPCController, library
 from bound_env.envs.rescue_env import sample_starts  # noqa: F401  (moved there; re-exported)
 from bound_env.files.cache import atomic_write
@@ -59,6 +58,7 @@ from ..runtime.choice_policy import (  # noqa: F401
     save_policy,
     write_choice_fingerprint,
 )
+from .dagger import claim_run, dagger_rounds, mpc_expert, progress_log, tanh_mlp, train_minibatches
 
 # --------------------------------------------------------------------------------------------
 # Labels and rollouts on the planning model
@@ -141,29 +141,14 @@ def fit(X, G, cfg: DistillConfig, scales, z_ref, log=print):
     torch.set_num_threads(1)
     x = torch.as_tensor((X - z_ref) / scales, dtype=torch.float32)
     g = torch.as_tensor(G, dtype=torch.bool)
-    sizes = (6, *cfg.hidden, G.shape[1])
-    mods = []
-    for k in range(len(sizes) - 1):
-        mods.append(torch.nn.Linear(sizes[k], sizes[k + 1]))
-        if k < len(sizes) - 2:
-            mods.append(torch.nn.Tanh())
-    net = torch.nn.Sequential(*mods)
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.epochs)
-    gen = torch.Generator().manual_seed(cfg.seed)
+    net, _ = tanh_mlp((6, *cfg.hidden, G.shape[1]))
     n = len(x)
-    for _ in range(cfg.epochs):
-        perm = torch.randperm(n, generator=gen)
-        total = 0.0
-        for i in range(0, n, cfg.batch):
-            idx = perm[i : i + cfg.batch]
-            lp = torch.log_softmax(net(x[idx]), dim=1)
-            loss = -torch.logsumexp(lp.masked_fill(~g[idx], -1e9), dim=1).mean()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            total += float(loss.detach()) * len(idx)
-        sched.step()
+
+    def batch_loss(idx):
+        lp = torch.log_softmax(net(x[idx]), dim=1)
+        return -torch.logsumexp(lp.masked_fill(~g[idx], -1e9), dim=1).mean()
+
+    total = train_minibatches(net, n, cfg, batch_loss)
     with torch.no_grad():
         pick = net(x).argmax(dim=1)
         acc = float(g[torch.arange(n), pick].float().mean())
@@ -172,78 +157,68 @@ def fit(X, G, cfg: DistillConfig, scales, z_ref, log=print):
 
 
 def distill(cfg: DistillConfig, out_dir: Path, progress: bool = True) -> dict:
-    """Run (or resume) DAgger into ``out_dir``; returns the summary (also summary.json)."""
+    """Run (or resume) DAgger into ``out_dir`` (`agents.experts.dagger`); returns the summary
+    (also summary.json)."""
     out_dir = Path(out_dir)
-
-    def log(msg):
-        if progress:
-            print(msg, file=sys.stderr, flush=True)
-
+    log = progress_log(progress)
     # everything that can refuse the run does so before the run folder is written to
-    expert = load_classical(cfg.expert)
-    if not isinstance(expert, MPCController):
-        raise ValueError(f"--expert {cfg.expert!r} is not an mpc controller spec")
-    settings = json.dumps(asdict(cfg), sort_keys=True, default=str)
-    cfg_path = out_dir / "distill.json"
-    if cfg_path.is_file() and json.loads(cfg_path.read_text()) != json.loads(settings):
-        raise ValueError(f"{out_dir}: holds a run with other settings; use another --out")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write(cfg_path, settings + "\n")
+    expert = mpc_expert(cfg.expert, "--expert")
+    claim_run(out_dir, "distill.json", cfg, "use another --out")
     K = expert.basis.K
     rows = library(K, np.zeros(K), np.random.default_rng(cfg.library_seed), cfg.n_random, 0, 0.0)
     lab = Labeller(expert, rows)
     t0 = time.perf_counter()
-    layers = None
-    X, G = np.empty((0, 6)), np.empty((0, len(rows)), dtype=bool)
+    state = {"layers": None}
     history = []
-    for k in range(cfg.rounds):
-        path = out_dir / f"round_{k}.npz"
-        if path.is_file():
-            with np.load(path) as d:
-                Xk, Gk = d["X"], d["G"]
-            log(f"[distill] round {k}: {len(Xk)} labelled states (saved)")
+
+    def collect(k: int) -> dict:
+        rng = np.random.default_rng([cfg.seed, k, 4242])
+        data: list = []
+        n = cfg.starts_first if k == 0 else cfg.starts_round
+        starts = sample_starts(rng, n, expert.z_ref, cfg.r_max, cfg.axis_prob)
+        if k == 0:  # round 0: the expert's own choices, 4 strides
+
+            def choose(z, good, best, U):
+                return U[best]
+
+            strides = 4
         else:
-            rng = np.random.default_rng([cfg.seed, k, 4242])
-            data: list = []
-            n = cfg.starts_first if k == 0 else cfg.starts_round
-            starts = sample_starts(rng, n, expert.z_ref, cfg.r_max, cfg.axis_prob)
-            student = None
-            if k > 0:
-                student = ChoicePolicyController(
-                    name="student",
-                    lqr=expert.lqr,
-                    params=expert.params,
-                    safe=expert.safe,
-                    horizon=expert.horizon,
-                    rtol=expert.rtol,
-                    layers=layers,
-                    rows=rows,
+            student = ChoicePolicyController(
+                name="student",
+                lqr=expert.lqr,
+                params=expert.params,
+                safe=expert.safe,
+                horizon=expert.horizon,
+                rtol=expert.rtol,
+                layers=state["layers"],
+                rows=rows,
+            )
+            choose, strides = (lambda z, g, b, U, s=student: s.plan(z)), cfg.rollout_strides
+        for i, z0 in enumerate(starts):
+            lab.rollout(z0, choose, strides, data)
+            if progress and (i + 1) % 250 == 0:
+                log(
+                    f"[distill] round {k}: {i + 1}/{n} starts, {len(data)} states "
+                    f"({time.perf_counter() - t0:.0f} s)"
                 )
-            if student is None:  # round 0: the expert's own choices, 4 strides
+        X = np.array([d[0] for d in data]).reshape(-1, 6)
+        G = np.array([d[1] for d in data], dtype=bool).reshape(-1, len(rows))
+        return {"X": X, "G": G}
 
-                def choose(z, good, best, U):
-                    return U[best]
+    def refit(k: int, parts: list) -> None:
+        X = np.concatenate([np.empty((0, 6))] + [p["X"] for p in parts])
+        G = np.concatenate([np.empty((0, len(rows)), dtype=bool)] + [p["G"] for p in parts])
+        state["layers"] = fit(X, G, cfg, expert.scales, expert.z_ref, log=log)
+        history.append({"round": k, "states": int(len(parts[-1]["X"])), "total": int(len(X))})
 
-                strides = 4
-            else:
-                choose, strides = (lambda z, g, b, U, s=student: s.plan(z)), cfg.rollout_strides
-            for i, z0 in enumerate(starts):
-                lab.rollout(z0, choose, strides, data)
-                if progress and (i + 1) % 250 == 0:
-                    log(
-                        f"[distill] round {k}: {i + 1}/{n} starts, {len(data)} states "
-                        f"({time.perf_counter() - t0:.0f} s)"
-                    )
-            Xk = np.array([d[0] for d in data]).reshape(-1, 6)
-            Gk = np.array([d[1] for d in data], dtype=bool).reshape(-1, len(rows))
-            atomic_write(path, npz_bytes(X=Xk, G=Gk))
-        X, G = np.vstack([X, Xk]), np.vstack([G, Gk])
-        layers = fit(X, G, cfg, expert.scales, expert.z_ref, log=log)
-        history.append({"round": k, "states": int(len(Xk)), "total": int(len(X))})
+    def saved(k: int, part: dict) -> str:
+        return f"[distill] round {k}: {len(part['X'])} labelled states (saved)"
+
+    dagger_rounds(cfg.rounds, out_dir, collect, refit, saved, log)
     save_policy(
         out_dir / "policy",
         expert,
-        layers,
+        state["layers"],
         rows,
         {"distill": asdict(cfg)},
     )

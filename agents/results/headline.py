@@ -104,6 +104,26 @@ def headline_measure(runs, fn, single_interval, single_method) -> dict:
     return {"value": vals[0], "low": lo, "high": hi, "interval": single_method}
 
 
+def headline_measures(runs) -> dict:
+    """A column's two headline measures over its runs (one per seed), each with its 95 %
+    interval (`headline_measure`): r50 and the sigma at which the MFPT falls to 100 strides.
+    The measures of a headline row (`headline_numbers`) and of a column (`columns_json`)."""
+    return {
+        "r50": headline_measure(
+            runs,
+            lambda r: r["basin_curve"]["r50"],
+            lambda r: r["basin_curve"].get("r50_ci", [None, None]),
+            "Wilson-based (the directions' sampling error)",
+        ),
+        "mfpt_sigma_100_deg": headline_measure(
+            runs,
+            lambda r: r.get("mfpt_sigma_100_deg"),
+            mfpt_sigma_100_interval,
+            "Poisson-based (the robots' sampling error)",
+        ),
+    }
+
+
 def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
     """The headline (`HEADLINE`): per row present among the default-gait columns, r50 and the
     sigma at which the MFPT falls to 100 strides, each with its 95 % interval (Student-t over
@@ -137,18 +157,7 @@ def headline_numbers(groups, budget: str, seed: int, yours=()) -> dict:
                 "policies": [rel(p) for p in g["policies"]],
                 # it reads the robot's true plant (bound_env.control.privileged): marked
                 "privileged": any(r.get("privileged") is True for r in runs),
-                "r50": headline_measure(
-                    runs,
-                    lambda r: r["basin_curve"]["r50"],
-                    lambda r: r["basin_curve"].get("r50_ci", [None, None]),
-                    "Wilson-based (the directions' sampling error)",
-                ),
-                "mfpt_sigma_100_deg": headline_measure(
-                    runs,
-                    lambda r: r.get("mfpt_sigma_100_deg"),
-                    mfpt_sigma_100_interval,
-                    "Poisson-based (the robots' sampling error)",
-                ),
+                **headline_measures(runs),
             }
         )
     return {"budget": budget, "seed": seed, "rows": rows}
@@ -274,18 +283,7 @@ def columns_json(groups, budget: str, seed: int, run: dict) -> dict:
                 "wall_seconds": sum(float(r.get("seconds") or 0.0) for r in runs),
                 "cpu_seconds": sum(float(r.get("cpu_seconds") or 0.0) for r in runs),
                 "tasks": tasks,
-                "r50": headline_measure(
-                    runs,
-                    lambda r: r["basin_curve"]["r50"],
-                    lambda r: r["basin_curve"].get("r50_ci", [None, None]),
-                    "Wilson-based (the directions' sampling error)",
-                ),
-                "mfpt_sigma_100_deg": headline_measure(
-                    runs,
-                    lambda r: r.get("mfpt_sigma_100_deg"),
-                    mfpt_sigma_100_interval,
-                    "Poisson-based (the robots' sampling error)",
-                ),
+                **headline_measures(runs),
                 "terrain_sigma50_deg": headline_measure(
                     runs,
                     lambda r: r.get("terrain_sigma50_deg"),

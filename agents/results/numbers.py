@@ -539,59 +539,59 @@ def table(name: str, sources: Sources) -> str:
     return text
 
 
+# The two kinds of block a page holds, each read the same way: kind -> (its pattern, its value
+# from the sources, its markers around the value, what `stale_blocks` says where its text is
+# not its value)
+BLOCKS = {
+    "inline": (
+        INLINE,
+        lambda m, sources: value(m.group("key"), sources, m.group("text")),
+        lambda m: (f"<!-- n:{m.group('key')} -->", "<!-- /n -->"),
+        lambda m, v: f"n:{m.group('key')}: {m.group('text')!r}, its source says {v!r}",
+    ),
+    "table": (
+        TABLE,
+        lambda m, sources: table(m.group("name"), sources),
+        lambda m: (f"<!-- table:{m.group('name')} -->", f"<!-- /table:{m.group('name')} -->"),
+        lambda m, v: f"table:{m.group('name')}: not the table its source gives",
+    ),
+}
+
+
 def update_text(text: str, sources: Sources, where: str = "", errors: list | None = None) -> str:
     """``text`` with every inline block and every table block rewritten from ``sources``. A
     block without a value is a ValueError naming it, or, with ``errors`` (a list), is left as
     it is and its error appended there."""
 
-    def fill(m: re.Match, make, head: str, tail: str) -> str:
+    def fill(m: re.Match, kind: str) -> str:
+        _, make, ends, _ = BLOCKS[kind]
         try:
-            v = make()
+            v = make(m, sources)
         except ValueError as e:
             if errors is None:
                 raise ValueError(f"{where}: {e}") from None
             errors.append(f"{where}: {e}")
             return m.group(0)
+        head, tail = ends(m)
         return f"{head}{v}{tail}"
 
-    text = INLINE.sub(
-        lambda m: fill(
-            m,
-            lambda: value(m.group("key"), sources, m.group("text")),
-            f"<!-- n:{m.group('key')} -->",
-            "<!-- /n -->",
-        ),
-        text,
-    )
-    return TABLE.sub(
-        lambda m: fill(
-            m,
-            lambda: table(m.group("name"), sources),
-            f"<!-- table:{m.group('name')} -->",
-            f"<!-- /table:{m.group('name')} -->",
-        ),
-        text,
-    )
+    for kind in ("inline", "table"):
+        text = BLOCKS[kind][0].sub(lambda m, k=kind: fill(m, k), text)
+    return text
 
 
 def stale_blocks(text: str, sources: Sources) -> list[str]:
     """Each block whose text is not its value: ``KEY: 'TEXT', the JSON says 'VALUE'`` (or
-    why it has no value)."""
+    why it has no value); the tables first."""
     out = []
-    for m in TABLE.finditer(text):
-        try:
-            v = table(m.group("name"), sources)
-        except ValueError as e:
-            out.append(str(e))
-            continue
-        if v != m.group("text"):
-            out.append(f"table:{m.group('name')}: not the table its source gives")
-    for m in INLINE.finditer(text):
-        try:
-            v = value(m.group("key"), sources, m.group("text"))
-        except ValueError as e:
-            out.append(str(e))
-            continue
-        if v != m.group("text"):
-            out.append(f"n:{m.group('key')}: {m.group('text')!r}, its source says {v!r}")
+    for kind in ("table", "inline"):
+        pattern, make, _, differs = BLOCKS[kind]
+        for m in pattern.finditer(text):
+            try:
+                v = make(m, sources)
+            except ValueError as e:
+                out.append(str(e))
+                continue
+            if v != m.group("text"):
+                out.append(differs(m, v))
     return out

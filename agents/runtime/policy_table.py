@@ -5,6 +5,10 @@ training seed, ``<group>/s<k>/`` (named ``group/sk``). On top of the folders:
 
 - `ALIASES`: a name that points at a seed folder (``default`` is ``finetuned/s0``: the learned
   controller chosen on validation), never a copy of it;
+- `GROUP_ALIASES`: a name for a group of seed folders, ``NAME/sK`` being ``GROUP/sK``
+  (``student-mpc-adaptive/s0`` is ``adaptive/s0``: the learned adaptive controller, a student of
+  the mpc expert, not the classical ``mpc-adaptive``); the folders keep their old names, which
+  stay names too;
 - `ARCHIVED`: superseded policies, moved to ``agents/policies/archive/<name>/`` with their
   files unchanged: they are no longer names (`archived_message` says where each went, in one
   line) but load by their path; docs/learned.md ("History") keeps their last measured numbers.
@@ -28,6 +32,19 @@ ALIASES = {
         "the learned controller: the fine-tuned variant, chosen over the distilled one on the "
         "validation seed 777 (96 random directions, r = 0.15-0.35); seed 0 by convention, no "
         "choice among seeds",
+    ),
+}
+# name -> (the group of seed folders it names, why): ``NAME/sK`` is ``GROUP/sK``
+GROUP_ALIASES = {
+    "student-mpc-adaptive": (
+        "adaptive",
+        "the learned adaptive controller, distilled from the mpc expert (DAgger, a privileged "
+        "teacher); the classical controller that adapts is mpc-adaptive",
+    ),
+    "student-mpc-adaptive-nohist": ("adaptive-nohist", "its ablation without history"),
+    "student-mpc-adaptive-nominal": (
+        "adaptive-nominal",
+        "its ablation trained on the nominal plant",
     ),
 }
 # name -> why it left the shipped set (its folder is agents/policies/archive/<name>)
@@ -66,10 +83,22 @@ def shipped_folders(root: Path = SHIPPED_DIR) -> dict[str, Path]:
 
 
 def shipped_names() -> dict[str, Path]:
-    """{name: folder} of every shipped name: the aliases (`ALIASES`) first, then the folders."""
+    """{name: folder} of every shipped name: the aliases (`ALIASES`, then `GROUP_ALIASES`)
+    first, then the folders."""
     folders = shipped_folders()
     aliases = {a: folders[t] for a, (t, _) in ALIASES.items() if t in folders}
-    return {**aliases, **folders}
+    return {**aliases, **group_aliased(folders), **folders}
+
+
+def group_aliased(folders: dict[str, Path]) -> dict[str, Path]:
+    """{``NAME/sK``: folder} of every `GROUP_ALIASES` name over the folders of its group."""
+    out = {}
+    for alias, (group, _) in GROUP_ALIASES.items():
+        for name, folder in folders.items():
+            head, _, seed = name.rpartition("/")
+            if head == group:
+                out[f"{alias}/{seed}"] = folder
+    return out
 
 
 def archived_message(name: str) -> str | None:
@@ -103,6 +132,15 @@ def names_text(quote: str = "`") -> str:
     for name in folders:
         group, _, seed = name.rpartition("/")
         groups.setdefault(group or name, []).append(seed)
+    for alias, (group, _) in GROUP_ALIASES.items():
+        seeds = groups.get(group, [])
+        if len(seeds) == 1 and seeds != [group]:
+            items.append(f"{q(f'{alias}/{seeds[0]}')} (= {q(f'{group}/{seeds[0]}')})")
+        elif len(seeds) > 1:
+            items.append(
+                f"{q(f'{alias}/{seeds[0]}')}..{q(seeds[-1])} "
+                f"(= {q(f'{group}/{seeds[0]}')}..{q(seeds[-1])})"
+            )
     for group, seeds in groups.items():
         if seeds == [group]:
             items.append(q(group))
