@@ -27,7 +27,7 @@ DELTAS = (0.025, 0.05, 0.075, 0.10, 0.15)
 
 def spec_name(delta: float) -> str:
     """The preset of ``delta`` (`bound_env.model.mismatch.PRESETS`: pm2.5, pm5, ..., pm15)."""
-    from ...model.mismatch import PRESETS
+    from ....model.mismatch import PRESETS
 
     name = f"pm{100.0 * float(delta):g}"
     if name not in PRESETS:
@@ -41,7 +41,7 @@ def family(spec) -> str:
     as ``pm`` (the eight factors), ``all`` (every key of `PLANT_KEYS`) or ``params(k1,k2,..)``,
     then its noise and delay as they are named (``pm10+noise`` → ``pm+noise``). A spec that
     varies no parameter is a one-line ValueError: there is no delta to sweep."""
-    from ...model.mismatch import EIGHT, PLANT_KEYS, as_spec
+    from ....model.mismatch import EIGHT, PLANT_KEYS, as_spec
 
     spec = as_spec(spec)
     keys = tuple(k for k, d in spec.ranges if d > 0)
@@ -65,7 +65,7 @@ def spec_at(spec, delta: float):
     the plants and outcomes, are the preset's."""
     from dataclasses import replace
 
-    from ...model.mismatch import as_spec
+    from ....model.mismatch import as_spec
 
     spec = as_spec(spec)
     fam = family(spec)
@@ -86,13 +86,13 @@ def hold_row(
 ) -> dict:
     """The hold of ``controller`` at ``delta`` of ``spec``'s family (`spec_at`; default: the
     eight factors alone) on ``seed``'s plants (module docstring)."""
-    from ...model.params import load_gait
-    from ..apex_loop import CLOCK
-    from .budget import as_budget
-    from .closed_loop import Setup
-    from .decision_times import histogram, summary
+    from ....model.params import load_gait
+    from ...apex_loop import CLOCK
+    from ..budget import as_budget
+    from ..closed_loop import Setup
+    from ..decision_times import histogram, summary
+    from ..stats import wilson_interval
     from .mismatch_tasks import MISMATCH_BUDGETS, median_interval, task_mm_hold
-    from .stats import wilson_interval
 
     spec = spec_at(spec, delta)
     mb = MISMATCH_BUDGETS[budget]
@@ -153,7 +153,7 @@ def hold_delta_figure(data: dict, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ...files.cache import atomic_path
+    from ....files.cache import atomic_path
 
     fams = families_of(data)
     fig, axes = plt.subplots(
