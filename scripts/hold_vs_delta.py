@@ -37,6 +37,7 @@ from bound_env.analysis.margins.model_error.hold_delta import (
     hold_delta_figure,
     hold_delta_table,
     hold_row,
+    row_family,
     spec_at,
 )
 from bound_env.files.cache import append_line, atomic_write, read_lines
@@ -94,7 +95,7 @@ def main(argv=None) -> int:
     for i, line in enumerate(read_lines(log) if log.exists() else [], 1):
         try:
             r = json.loads(line)
-            key = (r["policy"], r.get("family", "pm"), r["delta"], r["seed"])
+            key = (r["policy"], row_family(r), r["delta"], r["seed"])
         except (json.JSONDecodeError, KeyError, TypeError):
             print(f"error: {log}:{i}: not a row of this script ({line[:40]!r})", file=sys.stderr)
             return 2
