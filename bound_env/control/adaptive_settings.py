@@ -77,8 +77,7 @@ def check_adaptive(value, path) -> dict | None:
 def _adaptive_value(key: str, v, where: str):
     lo, hi = ADAPTIVE_LIMITS[key]
     if key in ADAPTIVE_BOOLS:
-        if not isinstance(v, bool):
-            raise ValueError(f"{where} must be true or false, got {v!r}")
+        schema.boolean(v, where, numpy=False)
         return v
     if key in ADAPTIVE_INTS:
         return schema.integer(v, where, lo, hi)

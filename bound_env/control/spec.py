@@ -155,8 +155,8 @@ def check_mpc_settings(values: dict, where, yaml_numbers: bool = True) -> dict:
     string that spells a real is read as it (see `_positive`)."""
     out = dict(values)
     for key in MPC_BOOLS:
-        if key in values and not isinstance(values[key], (bool, np.bool_)):
-            raise ValueError(f"{where}: {key} must be true or false, got {values[key]!r}")
+        if key in values:
+            schema.boolean(values[key], f"{where}: {key}")
     for key, (lo, hi) in MPC_LIMITS.items():
         name = "rtol" if key == "plan_rtol" and "rtol" in values else key
         if name not in values:
@@ -218,8 +218,7 @@ def load_spec(spec: str | Path) -> ControllerSpec:
         out.extra = check_mpc_settings({k: data.get(k, v) for k, v in MPC_DEFAULTS.items()}, path)
     if out.offset_free is not None:
         out.offset_free = check_offset_free(out.offset_free, path)
-    if not isinstance(out.privileged, bool):
-        raise ValueError(f"{path}: privileged must be true or false, got {out.privileged!r}")
+    schema.boolean(out.privileged, f"{path}: privileged", numpy=False)
     if out.adaptive is not None:
         from .adaptive_settings import check_adaptive
 

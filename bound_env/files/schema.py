@@ -36,6 +36,13 @@ def integer(value, where: str, lo: int | None = None, hi: int | None = None) -> 
     return v
 
 
+def boolean(value, where: str, numpy: bool = True) -> bool:
+    """True or false: a bool (or, with ``numpy``, NumPy's), never 0, 1 or a string."""
+    if not isinstance(value, (bool, np.bool_) if numpy else bool):
+        raise ValueError(f"{where} must be true or false, got {value!r}")
+    return bool(value)
+
+
 def real(
     value,
     where: str,
