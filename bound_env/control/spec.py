@@ -152,7 +152,7 @@ def _positive(path, key, value, hi: float | None = None) -> float:
 def check_mpc_settings(values: dict, where, yaml_numbers: bool = True) -> dict:
     """The search settings of an mpc controller (`MPC_LIMITS`; ``rtol`` as ``plan_rtol``),
     checked: integers are integers, reals finite, each in its range. ``yaml_numbers``: a
-    string that spells a real is read as it (see `_positive`)."""
+    string that spells a real is read as it (see `_positive`; `schema.limited` checks each)."""
     out = dict(values)
     for key in MPC_BOOLS:
         if key in values:
@@ -162,12 +162,7 @@ def check_mpc_settings(values: dict, where, yaml_numbers: bool = True) -> dict:
         if name not in values:
             continue
         v = values[name]
-        if isinstance(lo, int):
-            out[name] = schema.integer(v, f"{where}: {name}", lo, hi)
-        elif yaml_numbers:
-            out[name] = _positive(where, name, v, hi)
-        else:
-            out[name] = schema.real(v, f"{where}: {name}", lo, hi, lo_open=True)
+        out[name] = schema.limited(v, f"{where}: {name}", lo, hi, lo_open=True, text=yaml_numbers)
     return out
 
 
