@@ -41,7 +41,7 @@ def main(argv=None) -> int:
     ap.add_argument("--policy", default="mpc-adaptive-bounded", help="an mpc-adaptive spec")
     ap.add_argument("--out", default=None, help="a JSON file to write the row into")
     args = ap.parse_args(argv)
-    from bound_env.analysis.margins.mismatch_tasks import mismatch_seeds
+    from bound_env.analysis.margins.model_error.mismatch_tasks import mismatch_seeds
     from bound_env.control import load_controller
     from bound_env.control.adaptive import AdaptiveMPC
     from bound_env.model.dynamics import make_aux

@@ -53,7 +53,10 @@ The modules' old flat names (``bound_env.task``, ``bound_env.stride_map``, ...) 
 as aliases of the same module objects (`MOVED`): run configs naming
 ``bound_env.wrappers.RandomizedPlant``, Gymnasium entry points such as
 ``bound_env.env:PassiveBoundEnv``, the ``bound_env.cli:main`` console script of an older
-install, pickles and users' scripts keep working. New code imports the room's path.
+install, pickles and users' scripts keep working. So do the old names of the modules that moved
+into rooms of ``analysis/margins`` (``provenance``, ``model_error``) and
+``analysis/reproduce`` (``document``), such as ``bound_env.analysis.margins.keys``. New code
+imports the room's path.
 """
 
 import importlib
@@ -82,6 +85,20 @@ MOVED = {
 MOVED["bound_env.analysis.cli"] = "bound_env.commands.analysis_cli"
 MOVED["bound_env.analysis.numerics"] = "bound_env.model.numerics"
 MOVED["bound_env.analysis.variational"] = "bound_env.model.variational"
+# the crowded folders of the analysis, in rooms by job: folder -> {room: its modules}
+_SUBROOMS = {
+    "analysis.margins": {
+        "provenance": "code_closure fingerprint keys",
+        "model_error": "hold_delta mismatch_report mismatch_tasks",
+    },
+    "analysis.reproduce": {"document": "report report_format report_numbers report_table"},
+}
+MOVED |= {
+    f"bound_env.{folder}.{m}": f"bound_env.{folder}.{room}.{m}"
+    for folder, rooms in _SUBROOMS.items()
+    for room, ms in rooms.items()
+    for m in ms.split()
+}
 
 
 class ModuleAliases(importlib.abc.MetaPathFinder, importlib.abc.Loader):

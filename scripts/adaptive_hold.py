@@ -4,16 +4,16 @@
         --mismatch pm10 pm15 --seed 12345 --out results.json
 
 Each (policy, spec) runs the margins' own model-error task ``mm_hold``
-(`bound_env.analysis.margins.mismatch_tasks.task_mm_hold`: the step env, robot i on plant i of
-the seed's plants, 32 plants, 100 strides from the nominal z*, the quick budget's), so the
-plants, the noise streams and the outcomes are exactly those of ``margins --mismatch SPEC
---seed SEED``'s ``hold`` block, without its other measures. Each finished entry is written to
-``--out`` (atomically) with its ``fingerprint`` (`agents.results.provenance.row_fingerprint`:
-the code, the controller's data and files, the spec's contents and the seed) and skipped when
-already there under the same fingerprint, so a killed run resumes; an entry made under another
-(an edited spec or policy, other code) is recomputed in its place, and the run says so. Besides the
-held count: the outcomes per plant (for paired tests), the strides reached, the median
-effort of the held plants, and the controller's decision times (p50, p99) where it keeps them.
+(`bound_env.analysis.margins.model_error.mismatch_tasks.task_mm_hold`: the step env, robot i on
+plant i of the seed's plants, 32 plants, 100 strides from the nominal z*, the quick budget's), so
+the plants, the noise streams and the outcomes are exactly those of ``margins --mismatch SPEC --seed
+SEED``'s ``hold`` block, without its other measures. Each finished entry is written to ``--out``
+(atomically) with its ``fingerprint`` (`agents.results.provenance.row_fingerprint`: the code, the
+controller's data and files, the spec's contents and the seed) and skipped when already there under
+the same fingerprint, so a killed run resumes; an entry made under another (an edited spec or
+policy, other code) is recomputed in its place, and the run says so. Besides the held count: the
+outcomes per plant (for paired tests), the strides reached, the median effort of the held plants,
+and the controller's decision times (p50, p99) where it keeps them.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def hold_entry(policy: str, spec_text: str, seed: int, ctrl=None) -> dict:
     from agents.runtime.policy import load_controller
     from bound_env.analysis.margins import as_budget
     from bound_env.analysis.margins.closed_loop import Setup
-    from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS, task_mm_hold
+    from bound_env.analysis.margins.model_error.mismatch_tasks import MISMATCH_BUDGETS, task_mm_hold
     from bound_env.model.mismatch import as_spec
     from bound_env.model.params import load_gait
 
@@ -99,7 +99,10 @@ def privileged_entry(name: str, spec_text: str, seed: int) -> dict:
     after N strides of the nominal LQR (what knowing the plant is worth once N strides were
     played without knowing it). Privileged: never deployable."""
     from agents.experts.adaptive import CycleTeacher, hold_on, privileged_teacher
-    from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS, mismatch_seeds
+    from bound_env.analysis.margins.model_error.mismatch_tasks import (
+        MISMATCH_BUDGETS,
+        mismatch_seeds,
+    )
     from bound_env.control import load_controller as classical
     from bound_env.model.mismatch import as_spec, sample_plant_params
 

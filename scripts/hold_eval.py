@@ -7,7 +7,7 @@ The hold measure of ``bound-env margins --mismatch pmD`` (``mismatch.hold``), al
 controllers, error sizes and seeds. Each robot runs on its own plant: m1, m2, I1, I2, kb, kf,
 kc and zeta of the controller's gait each scaled by U(1 - delta, 1 + delta), drawn by the
 library's plant sampling (`bound_env.model.mismatch.sample_plant_params`) from the library's plant
-seed of ``--seed`` (`bound_env.analysis.margins.mismatch_tasks.mismatch_seeds`), so that
+seed of ``--seed`` (`bound_env.analysis.margins.model_error.mismatch_tasks.mismatch_seeds`), so that
 ``--seed 777 --delta 0.05`` names the same plants, in the same order, as
 ``bound-env margins --mismatch pm5 --seed 777`` (the same plants for every controller).
 Every robot starts on the nominal z* and runs ``--strides`` strides through the library's
@@ -35,7 +35,7 @@ import numpy as np
 
 from bound_env.analysis.margins.budget import BUDGETS, check_seed
 from bound_env.analysis.margins.closed_loop import Setup
-from bound_env.analysis.margins.mismatch_tasks import (
+from bound_env.analysis.margins.model_error.mismatch_tasks import (
     MISMATCH_BUDGETS,
     mismatch_seeds,
     plants_of,

@@ -5,22 +5,21 @@
         --figure docs/figures/hold_vs_delta.png [--delta 2.5 5 7.5 10 15 20] [--table] \
         [--mismatch pm10 pm10+noise pm10+delay1 all10]
 
-Each (policy, family, delta) is `bound_env.analysis.margins.hold_delta.hold_row`: the hold of
-``bound-env margins --mismatch SPEC --budget quick --seed SEED`` (32 plants, 100 strides from
-the nominal z*), with the median effort of the held plants and every apex decision's wall
-time. ``--mismatch`` gives the families (default ``pm10``: the eight factors alone): each
-spec's parameters are set to each delta, its sensor noise and delay kept
-(`hold_delta.spec_at`: ``pm10+noise`` → pmD+noise, ``all10`` → allD), so the parameter-only,
-noise, delay and ``all`` families are drawn side by side, one panel each. Finished rows are
-appended to ``OUT.jsonl`` (beside ``--out``), each with its ``fingerprint``
-(`agents.results.provenance.row_fingerprint`: the code, the controller's data and files, the
-gait, the spec and the seed), and reused when already there under the same fingerprint, so a
-killed run resumes; a row made under another fingerprint (an edited spec or policy, another
-gait, other code) is recomputed, and the run says so. The JSON (every row of
-the requested policies, deltas and seed) and the figure are written atomically at the end.
-A privileged controller (it reads the robot's true plant, `bound_env.control.privileged`) is
-marked so in the JSON, the figure and the table. Design and tuning read the validation seed
-777; the test seed 12345 is run once, for the report.
+Each (policy, family, delta) is `bound_env.analysis.margins.model_error.hold_delta.hold_row`: the
+hold of ``bound-env margins --mismatch SPEC --budget quick --seed SEED`` (32 plants, 100 strides
+from the nominal z*), with the median effort of the held plants and every apex decision's wall time.
+``--mismatch`` gives the families (default ``pm10``: the eight factors alone): each spec's
+parameters are set to each delta, its sensor noise and delay kept (`hold_delta.spec_at`:
+``pm10+noise`` → pmD+noise, ``all10`` → allD), so the parameter-only, noise, delay and ``all``
+families are drawn side by side, one panel each. Finished rows are appended to ``OUT.jsonl`` (beside
+``--out``), each with its ``fingerprint`` (`agents.results.provenance.row_fingerprint`: the code,
+the controller's data and files, the gait, the spec and the seed), and reused when already there
+under the same fingerprint, so a killed run resumes; a row made under another fingerprint (an edited
+spec or policy, another gait, other code) is recomputed, and the run says so. The JSON (every row of
+the requested policies, deltas and seed) and the figure are written atomically at the end. A
+privileged controller (it reads the robot's true plant, `bound_env.control.privileged`) is marked so
+in the JSON, the figure and the table. Design and tuning read the validation seed 777; the test seed
+12345 is run once, for the report.
 """
 
 from __future__ import annotations
@@ -32,12 +31,13 @@ import time
 from pathlib import Path
 
 from agents.results.provenance import reusable, row_fingerprint
-from bound_env.analysis.margins.hold_delta import (
+from bound_env.analysis.margins.model_error.hold_delta import (
     DELTAS,
     family,
     hold_delta_figure,
     hold_delta_table,
     hold_row,
+    row_family,
     spec_at,
 )
 from bound_env.files.cache import append_line, atomic_write, read_lines
@@ -95,7 +95,7 @@ def main(argv=None) -> int:
     for i, line in enumerate(read_lines(log) if log.exists() else [], 1):
         try:
             r = json.loads(line)
-            key = (r["policy"], r.get("family", "pm"), r["delta"], r["seed"])
+            key = (r["policy"], row_family(r), r["delta"], r["seed"])
         except (json.JSONDecodeError, KeyError, TypeError):
             print(f"error: {log}:{i}: not a row of this script ({line[:40]!r})", file=sys.stderr)
             return 2
@@ -133,7 +133,7 @@ def main(argv=None) -> int:
                 rows.append(r)
         columns[name] = {"privileged": privileged, "rows": rows}
     data = {
-        "what": "hold against model error (bound_env.analysis.margins.hold_delta)",
+        "what": "hold against model error (bound_env.analysis.margins.model_error.hold_delta)",
         "made_with": "python scripts/hold_vs_delta.py " + " ".join(argv or sys.argv[1:]),
         "seed": args.seed,
         "seed_role": "test" if args.seed == 12345 else "validation",

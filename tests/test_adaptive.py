@@ -92,7 +92,7 @@ def test_the_privileged_reference_aims_at_the_plants_own_cycle(privileged):
 
 def test_a_plant_without_a_passive_cycle_gets_the_least_torque_cycle(privileged):
     # pm5's plant 0 of the validation seed: its passive cycle ends in a fold near z*
-    from bound_env.analysis.margins.mismatch_tasks import mismatch_seeds
+    from bound_env.analysis.margins.model_error.mismatch_tasks import mismatch_seeds
 
     p = sample_plant_params("pm5", 1, mismatch_seeds(777)["plants"], NOMINAL)[0]
     d = privileged.set_plant(p)
@@ -123,7 +123,7 @@ def test_plant_overrides_refuse_bad_plants():
 
 def test_the_model_error_loop_hands_the_plant_to_privileged_controllers_only():
     from bound_env.analysis.margins import Setup, as_budget
-    from bound_env.analysis.margins.mismatch_tasks import MismatchBudget, task_mm_hold
+    from bound_env.analysis.margins.model_error.mismatch_tasks import MismatchBudget, task_mm_hold
     from bound_env.model.mismatch import as_spec
 
     seen = []
@@ -282,7 +282,7 @@ def test_plain_policy_hands_the_plant_to_a_privileged_controller_only():
 
 
 def test_model_error_tables_mark_privileged_columns_and_censored_r50():
-    from bound_env.analysis.margins.mismatch_report import mismatch_markdown, r50_text
+    from bound_env.analysis.margins.model_error.mismatch_report import mismatch_markdown, r50_text
 
     def block(privileged, success):
         sizes = [0.01, 0.1, 0.4]

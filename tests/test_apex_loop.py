@@ -112,7 +112,7 @@ def test_every_robot_starts_with_a_fresh_controller_state():
 
     from bound_env.analysis.margins.budget import BUDGETS
     from bound_env.analysis.margins.closed_loop import _LOOPS, Setup
-    from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
+    from bound_env.analysis.margins.model_error.mismatch_tasks import MISMATCH_BUDGETS
     from bound_env.analysis.margins.run import run_task
     from bound_env.model.mismatch import as_spec
 

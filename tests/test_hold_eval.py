@@ -12,7 +12,7 @@ import pytest
 
 from bound_env.analysis.margins.budget import BUDGETS
 from bound_env.analysis.margins.closed_loop import Setup
-from bound_env.analysis.margins.mismatch_tasks import plants_of
+from bound_env.analysis.margins.model_error.mismatch_tasks import plants_of
 from bound_env.model.mismatch import as_spec
 from bound_env.model.params import load_gait
 
@@ -37,7 +37,7 @@ def test_a_row_is_the_margins_hold(tmp_path, capsys, load_script):
     margins --policy lqr --budget test --mismatch pm10 --seed 777`` (its task, run here)."""
     from agents.policy import load_controller
 
-    from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
+    from bound_env.analysis.margins.model_error.mismatch_tasks import MISMATCH_BUDGETS
     from bound_env.analysis.margins.run import run_task
 
     hold_eval = load_script("hold_eval")

@@ -8,7 +8,12 @@ import json
 
 import pytest
 
-from bound_env.analysis.margins.hold_delta import family, hold_delta_table, hold_row, spec_at
+from bound_env.analysis.margins.model_error.hold_delta import (
+    family,
+    hold_delta_table,
+    hold_row,
+    spec_at,
+)
 from bound_env.control import load_controller
 from bound_env.model.mismatch import as_spec
 

@@ -173,9 +173,14 @@ def _all_private_imports() -> dict[str, list[str]]:
 
 
 def _graph(*packages: str):
+    """Modules, their imported names and their edges (an old name of `MOVED` or
+    `bound_env.MOVED`, imported through its alias, is an edge to the module it names)."""
     mods = _modules(*packages)
     imports = {m: _imported_names(m, *mods[m]) for m in mods}
-    edges = {m: sorted(n for n in names if n in mods and n != m) for m, names in imports.items()}
+    old = {**MOVED, **bound_env.MOVED}
+    edges = {
+        m: sorted({old.get(n, n) for n in names} & set(mods) - {m}) for m, names in imports.items()
+    }
     return mods, imports, edges
 
 
@@ -540,7 +545,25 @@ CORE_ROOMS = {
     "bound_env.commands": 6,
 }
 # the rooms issue 47 made: each says its job in one sentence
-NEW_CORE_ROOMS = ("files", "model", "sim", "envs", "commands")
+NEW_CORE_ROOMS = (
+    "files",
+    "model",
+    "sim",
+    "envs",
+    "commands",
+    "analysis/margins/provenance",
+    "analysis/margins/model_error",
+    "analysis/reproduce/document",
+)
+# The crowded folders of the analysis in rooms of their own, lowest first: the folder's own
+# modules (rank 0: the margins' measures and their closed loop; the reproduction's stages),
+# its subpackages, then its front, the module that runs them all (and above it the package's
+# ``__init__``, which re-exports it). The margins' cache key reads every measure's settings,
+# the model error's included: provenance sits on model_error.
+FOLDER_ROOMS = {
+    "bound_env.analysis.margins": {"model_error": 1, "provenance": 2, "run": 3},
+    "bound_env.analysis.reproduce": {"document": 1, "pipeline": 2},
+}
 # every module name that moved (the flat core's 33, the analysis commands and the numerics that
 # analysis and control share): configs,
 # fingerprints, pickles, Gymnasium entry points and older console scripts name them
@@ -550,6 +573,64 @@ OLD_CORE_NAMES = (
     "resources schema stride stride_env stride_map stride_protocol stride_task task "
     "task_kernels terrain vector wrappers"
 ).split()
+# the modules that moved into rooms of analysis/margins and analysis/reproduce
+OLD_MARGINS_NAMES = (
+    "code_closure fingerprint keys hold_delta mismatch_report mismatch_tasks".split()
+)
+OLD_REPRODUCE_NAMES = "report report_format report_numbers report_table".split()
+
+
+def _in(module: str, folder: str) -> bool:
+    return module == folder or module.startswith(folder + ".")
+
+
+def _folder_room(module: str, folder: str, rooms: dict[str, int]) -> str:
+    """The room of ``module`` inside ``folder``: its subpackage or front module of ``rooms``,
+    ``__init__`` for the package itself, else ``folder`` (the folder's own modules)."""
+    if module == folder:
+        return "__init__"
+    part = module[len(folder) + 1 :].split(".")[0]
+    return part if part in rooms else folder
+
+
+def _folder_arrows_up(edges: dict[str, list[str]], folder: str, rooms: dict[str, int]):
+    """Every import between two rooms of ``folder`` (`FOLDER_ROOMS`) that does not point down."""
+    ranks = {folder: 0, **rooms, "__init__": max(rooms.values()) + 1}
+    bad = []
+    for m, targets in edges.items():
+        for n in (t for t in targets if _in(m, folder) and _in(t, folder)):
+            a, b = _folder_room(m, folder, rooms), _folder_room(n, folder, rooms)
+            if a != b and ranks[b] >= ranks[a]:
+                bad.append(f"{m} -> {n}")
+    return bad
+
+
+def test_the_folder_room_check_sees_an_arrow_up():
+    f = "bound_env.analysis.margins"
+    edges = {
+        f"{f}.basin": [f"{f}.provenance.keys", f"{f}.budget", "bound_env.model.params"],
+        f"{f}.provenance.keys": [f"{f}.model_error.mismatch_tasks", f"{f}.basin", f"{f}.run"],
+        f"{f}.model_error.mismatch_tasks": [f"{f}.provenance.fingerprint", f"{f}"],
+        f"{f}.run": [f"{f}.provenance.keys", f"{f}.model_error.hold_delta"],
+        f"{f}": [f"{f}.run"],
+    }
+    assert _folder_arrows_up(edges, f, FOLDER_ROOMS[f]) == [
+        f"{f}.basin -> {f}.provenance.keys",
+        f"{f}.provenance.keys -> {f}.run",
+        f"{f}.model_error.mismatch_tasks -> {f}.provenance.fingerprint",
+        f"{f}.model_error.mismatch_tasks -> {f}",
+    ]
+
+
+@pytest.mark.parametrize("folder", sorted(FOLDER_ROOMS))
+def test_analysis_folder_rooms_point_down(folder):
+    """margins: the measures -> model_error -> provenance -> run; reproduce: the stages ->
+    document -> pipeline: no module of a folder imports a room of it above its own."""
+    mods, _, edges = _graph("bound_env")
+    rooms = FOLDER_ROOMS[folder]
+    for room in rooms:  # every room of the table exists: a subpackage or a module
+        assert f"{folder}.{room}" in mods, room
+    assert _folder_arrows_up(edges, folder, rooms) == []
 
 
 def test_the_room_check_sees_an_arrow_up_in_the_core():
@@ -578,10 +659,13 @@ def test_core_rooms_point_down():
 
 
 def test_core_rooms_are_small_and_say_their_job():
-    """No room of bound_env/ with more than `MAX_MODULES` modules (bound_env/ itself holds
-    only the package); each new room's ``__init__`` says its job in one sentence."""
+    """No folder of bound_env/, at any depth, with more than `MAX_MODULES` modules (bound_env/
+    itself holds only the package); each new room's ``__init__`` says its job in one
+    sentence."""
     assert sorted(f.name for f in (ROOT / "bound_env").glob("*.py")) == ["__init__.py"]
-    for folder in sorted(p.parent for p in (ROOT / "bound_env").glob("*/__init__.py")):
+    folders = sorted(p.parent for p in (ROOT / "bound_env").rglob("*/__init__.py"))
+    assert ROOT / "bound_env" / "analysis" / "margins" / "provenance" in folders
+    for folder in folders:
         modules = [f for f in folder.glob("*.py") if f.name != "__init__.py"]
         assert len(modules) <= MAX_MODULES, folder
     for room in NEW_CORE_ROOMS:
@@ -601,6 +685,8 @@ def test_old_core_names_are_aliases_of_the_moved_modules():
     old = {f"bound_env.{m}" for m in OLD_CORE_NAMES} | {
         f"bound_env.analysis.{m}" for m in ("cli", "numerics", "variational")
     }
+    old |= {f"bound_env.analysis.margins.{m}" for m in OLD_MARGINS_NAMES}
+    old |= {f"bound_env.analysis.reproduce.{m}" for m in OLD_REPRODUCE_NAMES}
     assert set(bound_env.MOVED) == old
     mods = _modules("bound_env")
     assert set(bound_env.MOVED.values()) <= set(mods)
@@ -624,6 +710,20 @@ def test_old_core_names_are_aliases_of_the_moved_modules():
     )
     assert b"bound_env.task" in old_pickle
     assert pickle.loads(old_pickle) is bound_env.sim.task.TaskConfig
+    # a nested old name: ``from`` its package, and as a code closure's root (fingerprints)
+    from bound_env.analysis.margins import keys
+    from bound_env.analysis.margins.provenance.code_closure import closure_hashes
+
+    assert keys is bound_env.analysis.margins.provenance.keys
+    assert keys.setup_key is importlib.import_module("bound_env.analysis.margins.keys").setup_key
+    for old_root, root in [
+        ("bound_env.task:PassiveBoundTask", "bound_env.sim.task:PassiveBoundTask"),
+        (
+            "bound_env.analysis.margins.mismatch_tasks:task_mm_hold",
+            "bound_env.analysis.margins.model_error.mismatch_tasks:task_mm_hold",
+        ),
+    ]:
+        assert closure_hashes([old_root]) == closure_hashes([root]) != closure_hashes([])
 
 
 def test_old_core_names_import_first_in_a_fresh_interpreter():
@@ -634,6 +734,9 @@ def test_old_core_names_import_first_in_a_fresh_interpreter():
         "assert old is now and old.main is now.main, (old, now)\n"
         "from bound_env.stride_map import StrideMap\n"
         "assert sys.modules['bound_env.stride_map'] is sys.modules['bound_env.sim.stride_map']\n"
+        "from bound_env.analysis.margins.keys import setup_key\n"
+        "from bound_env.analysis.margins.provenance import keys\n"
+        "assert setup_key is keys.setup_key\n"
         "print('ok')\n"
     )
     res = subprocess.run(

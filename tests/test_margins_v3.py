@@ -375,7 +375,7 @@ def test_cache_key_follows_the_source(tmp_path, monkeypatch):
     # object (`code_closure`), not as whole files: the front names none
     assert policy_sources(c) == []
     assert {"runtime/policy.py", "runtime/controllers.py", "common/mlp.py"} <= set(POLICY_SOURCES)
-    from bound_env.analysis.margins import code_closure
+    from bound_env.analysis.margins.provenance import code_closure
 
     mlp = (Path(code_closure.ROOT) / "agents" / "common" / "mlp.py").resolve()
     real = code_closure.read_source

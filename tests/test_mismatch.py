@@ -178,7 +178,7 @@ def test_plant_changes_the_dynamics():
 
 def _setup(policy, spec="pm5", seed=12345):
     from bound_env.analysis.margins import Setup, as_budget
-    from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
+    from bound_env.analysis.margins.model_error.mismatch_tasks import MISMATCH_BUDGETS
     from bound_env.control import load_controller
 
     ctrl = load_controller(policy) if policy != "passive" else None
@@ -200,7 +200,7 @@ def _setup(policy, spec="pm5", seed=12345):
 
 
 def test_hold_without_error_needs_no_torque():
-    from bound_env.analysis.margins.mismatch_tasks import task_mm_hold
+    from bound_env.analysis.margins.model_error.mismatch_tasks import task_mm_hold
 
     r = task_mm_hold(_setup("lqr", "none"))
     assert r["outcomes"] == [1] * 8
@@ -209,7 +209,7 @@ def test_hold_without_error_needs_no_torque():
 
 
 def test_hold_and_curve_under_error_are_seeded():
-    from bound_env.analysis.margins.mismatch_tasks import plants_of, task_mm_curve
+    from bound_env.analysis.margins.model_error.mismatch_tasks import plants_of, task_mm_curve
 
     s1, s2 = _setup("lqr", "pm10"), _setup("lqr", "pm10", seed=777)
     assert [p.m1 for p in plants_of(s1, 4)] != [p.m1 for p in plants_of(s2, 4)]
@@ -218,7 +218,7 @@ def test_hold_and_curve_under_error_are_seeded():
 
 
 def test_median_interval():
-    from bound_env.analysis.margins.mismatch_tasks import median_interval
+    from bound_env.analysis.margins.model_error.mismatch_tasks import median_interval
 
     lo, hi = median_interval(list(range(32)))
     assert lo < 15.5 < hi and (lo, hi) == (9.0, 22.0)
@@ -251,7 +251,7 @@ def _block(name, hold, curve):
 
 
 def test_markdown_pairs_shared_plants():
-    from bound_env.analysis.margins.mismatch_report import mismatch_markdown
+    from bound_env.analysis.margins.model_error.mismatch_report import mismatch_markdown
 
     a = _block("pm5", [1, 1, 1, 1], [[1, 1, 1, 1], [1, 1, 0, 0]])
     b = _block("pm5", [1, 0, 0, 0], [[1, 1, 0, 0], [0, 0, 0, 0]])
@@ -296,7 +296,7 @@ def test_noise_and_delay_reach_the_controller():
     """The runner's noise and delay change what an LQR does; without them the same runs
     repeat exactly."""
     from bound_env.analysis.margins.closed_loop import loop_for
-    from bound_env.analysis.margins.mismatch_tasks import plant_runs
+    from bound_env.analysis.margins.model_error.mismatch_tasks import plant_runs
 
     setup = _setup("lqr", "none")
     loop = loop_for(setup)

@@ -23,7 +23,7 @@ from agents.results.headline import add_held, headline_table, held_at, load_head
 from agents.results.margins import compute_margins
 from agents.results.page import model_error_section
 from agents.results.page_inputs import load_model_error
-from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
+from bound_env.analysis.margins.model_error.mismatch_tasks import MISMATCH_BUDGETS
 from bound_env.model.mismatch import parse_specs
 
 

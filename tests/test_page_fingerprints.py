@@ -1,8 +1,9 @@
 """The committed results page knows which code and data made it.
 
 Every column of ``docs/columns.json`` (and of ``docs/model_error.json``) records, per policy,
-the fingerprint of what decided its numbers (`bound_env.analysis.margins.fingerprint`: the
-margins cache key's parts, the controller's code closure and its data). The check
+the fingerprint of what decided its numbers
+(`bound_env.analysis.margins.provenance.fingerprint`: the margins cache key's parts, the
+controller's code closure and its data). The check
 (`agents.results.provenance.stale_columns`) compares hashes and reruns nothing; a column whose
 code or data is no longer what made it fails it, with a line naming the file, the column, the
 stale part and the command that regenerates the file. The PPO columns are checked in the fast
@@ -24,8 +25,8 @@ import pytest
 
 from agents.results import provenance
 from agents.results.margins import fingerprint_now
-from bound_env.analysis.margins import code_closure
-from bound_env.analysis.margins.fingerprint import (
+from bound_env.analysis.margins.provenance import code_closure
+from bound_env.analysis.margins.provenance.fingerprint import (
     CHECKED,
     VERSION,
     code_parts,

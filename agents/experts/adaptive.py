@@ -267,7 +267,7 @@ def draw_episodes(cfg: AdaptiveConfig, expert, n: int, rng):
 
 def validation_plants(expert, spec, n: int) -> list:
     """The first n plants the margins draw for validation seed 777 (`mismatch_tasks`)."""
-    from bound_env.analysis.margins.mismatch_tasks import mismatch_seeds
+    from bound_env.analysis.margins.model_error.mismatch_tasks import mismatch_seeds
     from bound_env.model.mismatch import sample_plant_params
 
     seed = mismatch_seeds(VALIDATION_SEED)["plants"]

@@ -235,7 +235,8 @@ def compare(
 
     ``mismatch`` (specs of `bound_env.model.mismatch`, e.g. ``["pm5", "pm10"]``) measures every
     column under model error too, and the page gets a "Model error" section
-    (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`, paired against lqr).
+    (`bound_env.analysis.margins.model_error.mismatch_report.mismatch_markdown`, paired against
+    lqr).
 
     ``model_error`` (what ``bound-env compare`` asks for the page's own columns, unless
     ``--no-mismatch``; ignored with ``mismatch``): the page's "Model error" section, its own
@@ -390,8 +391,9 @@ ADAPTIVE = SHIPPED_DIR / "adaptive" / "s0"  # the learned adaptive controller's 
 
 
 def model_error_budget(budget: str) -> str:
-    """The model-error budget (`bound_env.analysis.margins.mismatch_tasks.MISMATCH_BUDGETS`)
-    of the page's ``budget``: ``test`` for the test budget, else ``page``."""
+    """The model-error budget
+    (`bound_env.analysis.margins.model_error.mismatch_tasks.MISMATCH_BUDGETS`) of the page's
+    ``budget``: ``test`` for the test budget, else ``page``."""
     return "test" if budget == "test" else "page"
 
 
@@ -488,7 +490,7 @@ def model_error_text(groups) -> str:
     measured = {g["label"]: g["runs"][0] for g in groups if g["runs"][0].get("mismatch")}
     if not measured:
         return ""
-    from bound_env.analysis.margins.mismatch_report import mismatch_markdown
+    from bound_env.analysis.margins.model_error.mismatch_report import mismatch_markdown
 
     specs = list(dict.fromkeys(k for r in measured.values() for k in r["mismatch"]))
     ref = "lqr" if "lqr" in measured else None

@@ -14,14 +14,14 @@ The page's other JSON beside it, so that every number the docs quote of the page
 of a committed file (`agents.results.numbers`):
 
 - ``columns.json`` (`columns_json`): every column, with each policy's **fingerprint** (what
-  decided its numbers: `bound_env.analysis.margins.fingerprint`, recorded in its
+  decided its numbers: `bound_env.analysis.margins.provenance.fingerprint`, recorded in its
   ``margins.json`` when it was computed), its r50, the sigma where the MFPT falls to 100
   strides and sigma50 with their 95 % intervals, its wall time in the run and the tasks it
   took from the cache; and ``run``: the page run's wall time, workers, load and commit
   (`run_record`);
 - ``model_error.json`` (`model_error_json`), when the columns were measured under model error
   (``compare --mismatch``): the page's "Model error" section as numbers
-  (`bound_env.analysis.margins.mismatch_report.mismatch_summary`), each column's
+  (`bound_env.analysis.margins.model_error.mismatch_report.mismatch_summary`), each column's
   fingerprints and the run.
 
 tests/test_page_fingerprints.py checks that every committed column's fingerprint is what its
@@ -39,7 +39,7 @@ import sys
 import time
 from pathlib import Path
 
-from bound_env.analysis.margins.fingerprint import git_commit
+from bound_env.analysis.margins.provenance.fingerprint import git_commit
 from bound_env.analysis.margins.stats import t_interval
 from bound_env.files.cache import atomic_write
 from bound_env.files.schema import check_keys, load_json_strict
@@ -304,7 +304,7 @@ def model_error_json(groups, budget: str, seed: int, run: dict) -> dict | None:
     """``model_error.json``: the "Model error" section's numbers (paired against lqr where it
     is a column), the columns' fingerprints and the run; None when no column was measured
     under model error."""
-    from bound_env.analysis.margins.mismatch_report import mismatch_summary
+    from bound_env.analysis.margins.model_error.mismatch_report import mismatch_summary
 
     measured = measured_under_error(groups)
     if not measured:
@@ -484,7 +484,7 @@ def render_block(head: dict) -> str:
     held = [r["held"] for r in head["rows"] if r.get("held")]
     budgets = f"r50 and σ: the **{head['budget']}** budget"
     if held:
-        from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
+        from bound_env.analysis.margins.model_error.mismatch_tasks import MISMATCH_BUDGETS
 
         mb = MISMATCH_BUDGETS.get(held[0]["budget"])
         budgets += f"; held at ±10 % / ±15 %: the model-error budget `{held[0]['budget']}`"

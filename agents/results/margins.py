@@ -8,8 +8,8 @@ name or a trained policy's path (`agents.runtime.policy.load_controller`, torch 
 loads), or a controller object as it is; and it names the files that define it
 (`policy_files_sha`: a spec, a policy's weights and settings), which the core records in the
 column's fingerprint. The agents code a controller runs is in the core's cache key and
-fingerprint through its code closure (`bound_env.analysis.margins.code_closure`), object by
-object, rather than as whole files (`policy_sources`, now empty).
+fingerprint through its code closure (`bound_env.analysis.margins.provenance.code_closure`),
+object by object, rather than as whole files (`policy_sources`, now empty).
 
 The names this module used to define (``ClosedLoop``, ``random_directions``, ``BUDGETS``,
 ``summary_text``, ...) stay importable from here for users' scripts; the project's own code
@@ -100,9 +100,9 @@ def policy_files_sha(policy) -> str | None:
 
 def fingerprint_now(policy, gait="default", budget=None, seed=None, controller=None) -> dict:
     """``policy``'s fingerprint as `compute_margins` would record it now
-    (`bound_env.analysis.margins.fingerprint.column_fingerprint`; ``controller``: the policy
-    already loaded), without the commit."""
-    from bound_env.analysis.margins.fingerprint import column_fingerprint
+    (`bound_env.analysis.margins.provenance.fingerprint.column_fingerprint`; ``controller``: the
+    policy already loaded), without the commit."""
+    from bound_env.analysis.margins.provenance.fingerprint import column_fingerprint
 
     ctrl = controller if controller is not None else as_controller(policy, gait)
     return column_fingerprint(

@@ -47,7 +47,7 @@ def run_margins(args) -> int:
     else:
         print(summary_text(r))
         if "mismatch" in r:
-            from bound_env.analysis.margins.mismatch_report import mismatch_text
+            from bound_env.analysis.margins.model_error.mismatch_report import mismatch_text
 
             print(mismatch_text(r["mismatch"]))
         print(f"outputs in {out}")

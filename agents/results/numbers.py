@@ -453,7 +453,7 @@ def _model_error_run(s: Sources) -> str:
 
 
 def _model_error_tables(s: Sources) -> str:
-    from bound_env.analysis.margins.mismatch_report import mismatch_tables
+    from bound_env.analysis.margins.model_error.mismatch_report import mismatch_tables
 
     me = s._load("model_error")
     try:

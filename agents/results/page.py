@@ -435,10 +435,10 @@ def model_error_section(groups) -> str:
     """The page's "Model error" section of the columns
     `agents.results.compare.run_model_error` made: how they were measured (the model-error
     budget their blocks record), then one table per spec, paired against lqr
-    (`bound_env.analysis.margins.mismatch_report.mismatch_markdown`)."""
+    (`bound_env.analysis.margins.model_error.mismatch_report.mismatch_markdown`)."""
     from types import SimpleNamespace
 
-    from bound_env.analysis.margins.mismatch_report import mismatch_markdown
+    from bound_env.analysis.margins.model_error.mismatch_report import mismatch_markdown
 
     measured = {g["label"]: g["runs"][0] for g in groups if g["runs"][0].get("mismatch")}
     if not measured:

@@ -299,7 +299,7 @@ def load_model_error(path: Path, budget: str, seed: int, specs, mb: str) -> dict
     a one-line ValueError naming the file otherwise."""
     from dataclasses import asdict
 
-    from bound_env.analysis.margins.mismatch_tasks import MISMATCH_BUDGETS
+    from bound_env.analysis.margins.model_error.mismatch_tasks import MISMATCH_BUDGETS
 
     again = "run compare without --render-only first (or give --no-mismatch)"
     r = _read_result(path, f"no model-error result to render; {again}")

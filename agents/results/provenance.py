@@ -161,7 +161,7 @@ def column_staleness(row: dict, load: bool = True) -> list[str]:
     fingerprint against what the code and data make now. ``load``: load the controller
     (its data, ``config``, is then checked too); else only the hashes that need no
     controller (the margins key's parts, the closure of the recorded roots, the files)."""
-    from bound_env.analysis.margins.fingerprint import (
+    from bound_env.analysis.margins.provenance.fingerprint import (
         CHECKED,
         VERSION,
         recorded_parts,
@@ -183,7 +183,7 @@ def column_staleness(row: dict, load: bool = True) -> list[str]:
 
 def staleness_message(row: dict, parts: list[str]) -> str:
     """One line: the file, the column, the stale parts (what each is) and the command."""
-    from bound_env.analysis.margins.fingerprint import PARTS, VERSION
+    from bound_env.analysis.margins.provenance.fingerprint import PARTS, VERSION
 
     fp = row["fingerprint"]
     if not isinstance(fp, dict):
@@ -280,7 +280,7 @@ def row_staleness(row: dict) -> str | None:
     """Why a data file's row is not what the code makes now (its code: bound_env's sources
     and its recorded closure; its policy's files), or None. Its inputs (spec, gait, strides)
     are the run's: a resumed run compares them (`reusable`)."""
-    from bound_env.analysis.margins.fingerprint import VERSION, code_parts, margins_parts
+    from bound_env.analysis.margins.provenance.fingerprint import VERSION, code_parts, margins_parts
 
     from .margins import policy_files_sha
 
@@ -350,11 +350,11 @@ if __name__ == "__main__":
 
 
 def row_fingerprint(policy, controller, gait="default", roots=(), **inputs) -> dict:
-    """The fingerprint a script's row records (`bound_env.analysis.margins.fingerprint.
+    """The fingerprint a script's row records (`bound_env.analysis.margins.provenance.fingerprint.
     run_fingerprint`): bound_env's sources, ``controller``'s code closure (and that of
     ``roots``), its data and files (``policy``'s: `margins.policy_files_sha`), the gait file
     and the row's ``inputs`` (a spec's contents, strides, robots, seed)."""
-    from bound_env.analysis.margins.fingerprint import run_fingerprint
+    from bound_env.analysis.margins.provenance.fingerprint import run_fingerprint
 
     from .margins import policy_files_sha
 
@@ -369,7 +369,7 @@ def reusable(rows, now: dict, what: str, log=None):
     differ."""
     import sys
 
-    from bound_env.analysis.margins.fingerprint import differing
+    from bound_env.analysis.margins.provenance.fingerprint import differing
 
     rows = list(rows)
     for row in reversed(rows):

@@ -1,10 +1,10 @@
 """Old home of the reproduction's figures and report: `bound_env.analysis.reproduce.figures`
-and `bound_env.analysis.reproduce.report` (kept importable, with ``PAPER`` made from
+and `bound_env.analysis.reproduce.document.report` (kept importable, with ``PAPER`` made from
 `reproduce.claims`)."""
 
 from .reproduce.claims import CLAIMS, published
+from .reproduce.document.report import write_report
 from .reproduce.figures import write_figures
-from .reproduce.report import write_report
 
 PAPER = {
     "z": list(published().z),

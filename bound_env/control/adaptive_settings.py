@@ -75,16 +75,6 @@ def check_adaptive(value, path) -> dict | None:
 
 
 def _adaptive_value(key: str, v, where: str):
-    lo, hi = ADAPTIVE_LIMITS[key]
-    if key in ADAPTIVE_BOOLS:
-        if not isinstance(v, bool):
-            raise ValueError(f"{where} must be true or false, got {v!r}")
-        return v
-    if key in ADAPTIVE_INTS:
-        return schema.integer(v, where, lo, hi)
-    if isinstance(v, str):
-        try:
-            v = float(v)
-        except ValueError:
-            raise ValueError(f"{where} must be a number, got {v!r}") from None
-    return schema.real(v, where, lo, hi)
+    """One setting within its `ADAPTIVE_LIMITS` (true or false for `ADAPTIVE_BOOLS`, an integer
+    for `ADAPTIVE_INTS`, whose limits are integers; a real in [lo, hi] else)."""
+    return schema.limited(v, where, *ADAPTIVE_LIMITS[key])

@@ -21,12 +21,12 @@ search settings, weights and basis) on the plant (`bound_env.control.plant_desig
 On the nominal plant (and before any ``set_plant``) it is the shipped ``mpc``, bit for bit.
 The plant stays until the next ``set_plant``: an episode's reset (`reset_controller`) keeps it.
 
-Who hands it the plant: the model-error loop (`bound_env.analysis.margins.mismatch_tasks.
-plant_runs`) calls ``set_plant`` with each robot's plant, for a controller whose
-``privileged`` is true only; `bound_env.control.plain.PlainPolicy` passes ``info["plant"]`` at
-each reset of an env that reports one (`bound_env.envs.wrappers.RandomizedPlant`). A DAgger teacher
-(issue 38) calls ``set_plant`` itself. The tools that ship or deploy a policy refuse it
-(`is_privileged`).
+Who hands it the plant: the model-error loop
+(`bound_env.analysis.margins.model_error.mismatch_tasks.plant_runs`) calls ``set_plant`` with each
+robot's plant, for a controller whose ``privileged`` is true only;
+`bound_env.control.plain.PlainPolicy` passes ``info["plant"]`` at each reset of an env that reports
+one (`bound_env.envs.wrappers.RandomizedPlant`). A DAgger teacher (issue 38) calls ``set_plant``
+itself. The tools that ship or deploy a policy refuse it (`is_privileged`).
 """
 
 from __future__ import annotations

@@ -152,22 +152,17 @@ def _positive(path, key, value, hi: float | None = None) -> float:
 def check_mpc_settings(values: dict, where, yaml_numbers: bool = True) -> dict:
     """The search settings of an mpc controller (`MPC_LIMITS`; ``rtol`` as ``plan_rtol``),
     checked: integers are integers, reals finite, each in its range. ``yaml_numbers``: a
-    string that spells a real is read as it (see `_positive`)."""
+    string that spells a real is read as it (see `_positive`; `schema.limited` checks each)."""
     out = dict(values)
     for key in MPC_BOOLS:
-        if key in values and not isinstance(values[key], (bool, np.bool_)):
-            raise ValueError(f"{where}: {key} must be true or false, got {values[key]!r}")
+        if key in values:
+            schema.boolean(values[key], f"{where}: {key}")
     for key, (lo, hi) in MPC_LIMITS.items():
         name = "rtol" if key == "plan_rtol" and "rtol" in values else key
         if name not in values:
             continue
         v = values[name]
-        if isinstance(lo, int):
-            out[name] = schema.integer(v, f"{where}: {name}", lo, hi)
-        elif yaml_numbers:
-            out[name] = _positive(where, name, v, hi)
-        else:
-            out[name] = schema.real(v, f"{where}: {name}", lo, hi, lo_open=True)
+        out[name] = schema.limited(v, f"{where}: {name}", lo, hi, lo_open=True, text=yaml_numbers)
     return out
 
 
@@ -218,8 +213,7 @@ def load_spec(spec: str | Path) -> ControllerSpec:
         out.extra = check_mpc_settings({k: data.get(k, v) for k, v in MPC_DEFAULTS.items()}, path)
     if out.offset_free is not None:
         out.offset_free = check_offset_free(out.offset_free, path)
-    if not isinstance(out.privileged, bool):
-        raise ValueError(f"{path}: privileged must be true or false, got {out.privileged!r}")
+    schema.boolean(out.privileged, f"{path}: privileged", numpy=False)
     if out.adaptive is not None:
         from .adaptive_settings import check_adaptive
 

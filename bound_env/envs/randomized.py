@@ -90,6 +90,7 @@ from collections import deque
 import gymnasium as gym
 import numpy as np
 
+from ..files.schema import boolean
 from ..model.mismatch import (
     MismatchSpec,
     as_spec,
@@ -146,8 +147,7 @@ class RandomizedPlant(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(
             self, mismatch=mismatch, privileged_obs=privileged_obs
         )
-        if not isinstance(privileged_obs, (bool, np.bool_)):
-            raise ValueError(f"privileged_obs must be true or false, got {privileged_obs!r}")
+        boolean(privileged_obs, "privileged_obs")
         if _inner_randomized(env):
             raise ValueError(
                 "RandomizedPlant: env is already a RandomizedPlant (the robot would run the "

@@ -10,6 +10,7 @@ import math
 import numpy as np
 from gymnasium import spaces, utils
 
+from ..files.schema import boolean
 from .rescue_common import (
     ACTION_MODES,
     DEFAULT_AXIS_PROB,
@@ -219,11 +220,7 @@ class PassiveBoundRescueV1Env(RescueBase, utils.EzPickle):
             axis_prob, horizon, shaping, gamma, action_mode, residual_scale,
             terminate_at_horizon,
         )  # fmt: skip
-        if not isinstance(terminate_at_horizon, (bool, np.bool_)):
-            raise ValueError(
-                f"terminate_at_horizon must be true or false, got {terminate_at_horizon!r}"
-            )
-        self.terminate_at_horizon = bool(terminate_at_horizon)
+        self.terminate_at_horizon = boolean(terminate_at_horizon, "terminate_at_horizon")
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode must be one of {', '.join(ACTION_MODES)}, "
                              f"got {action_mode!r}")  # fmt: skip

@@ -36,6 +36,30 @@ def integer(value, where: str, lo: int | None = None, hi: int | None = None) -> 
     return v
 
 
+def boolean(value, where: str, numpy: bool = True) -> bool:
+    """True or false: a bool (or, with ``numpy``, NumPy's), never 0, 1 or a string."""
+    if not isinstance(value, (bool, np.bool_) if numpy else bool):
+        raise ValueError(f"{where} must be true or false, got {value!r}")
+    return bool(value)
+
+
+def limited(value, where: str, lo, hi, lo_open: bool = False, text: bool = True):
+    """A setting within its limits ``(lo, hi)`` (a settings table's entry): true or false for
+    ``(False, True)``; an `integer` in [lo, hi] for an integer ``lo``; else a finite `real` in
+    [lo, hi] (``lo_open``: in (lo, hi]), where with ``text`` a string that spells a number is
+    read as it (PyYAML reads ``1e-8``, without a dot, as a string)."""
+    if isinstance(lo, bool):
+        return boolean(value, where, numpy=False)
+    if isinstance(lo, (int, np.integer)):
+        return integer(value, where, lo, hi)
+    if text and isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise ValueError(f"{where} must be a number, got {value!r}") from None
+    return real(value, where, lo, hi, lo_open)
+
+
 def real(
     value,
     where: str,

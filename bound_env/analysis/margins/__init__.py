@@ -148,16 +148,24 @@ Modules
 - the measures, one task each (run in worker processes): `cycle` (fixed point, multipliers,
   effort), `basin` (per axis), `ceiling`, `curve` (basin stability), `terrain` (survival and
   MFPT), `windows` (slope and k_c), `push`;
-- `run`: `TASKS`, `run_task` and `compute_margins`; `keys`: the cache key (`SETTINGS`,
-  `source_hash`, `setup_key`, `mismatch_key`);
+- `run`: `TASKS`, `run_task` and `compute_margins`;
 - `assemble`: the JSON result from the tasks' results;
 - `report`: margins.json, the CSV tables, the plots and `summary_text`;
-- `stats`: Wilson and Student-t intervals, crossings on a grid, the MFPT estimate.
-- `fingerprint`: what decided a column's numbers (`column_fingerprint`, `stale_parts`), and a
-  script's row (`run_fingerprint`); `code_closure`: a controller's code closure and the code
-  text every code hash reads (`read_source`, `code_text`).
-- `mismatch_tasks`: the model-error measures (``mm_hold``, ``mm_curve``, ``mm_mfpt``) and
-  `mismatch_tasks.plant_runs`; `mismatch_report`: `mismatch_text`, `mismatch_markdown`.
+- `stats`: Wilson and Student-t intervals, crossings on a grid, the MFPT estimate;
+- `decision_times`: the controller's decision times, summarized.
+
+Rooms (subpackages, above the measures and below `run`; old flat names such as
+``bound_env.analysis.margins.provenance.keys`` stay importable, `bound_env.MOVED`):
+
+- `provenance`: `provenance.keys`, the cache key (`SETTINGS`, `source_hash`, `setup_key`,
+  `mismatch_key`); `provenance.fingerprint`, what decided a column's numbers
+  (`column_fingerprint`, `stale_parts`) and a script's row (`run_fingerprint`);
+  `provenance.code_closure`, a controller's code closure and the code text every code hash
+  reads (`read_source`, `code_text`);
+- `model_error`: `model_error.mismatch_tasks`, the model-error measures (``mm_hold``,
+  ``mm_curve``, ``mm_mfpt``) and `mismatch_tasks.plant_runs`; `model_error.mismatch_report`:
+  `mismatch_text`, `mismatch_markdown`; `model_error.hold_delta`: hold against the size of the
+  model error, by family.
 """
 
 from .assemble import assemble, controller_name, mfpt_curve

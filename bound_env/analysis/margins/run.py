@@ -32,8 +32,16 @@ from .closed_loop import EVAL_RTOL, Setup
 from .curve import task_curve
 from .cycle import task_cycle
 from .decision_times import histogram
-from .fingerprint import column_fingerprint
-from .keys import (  # noqa: F401 - the cache key's parts, importable from here as before
+from .model_error.mismatch_tasks import (
+    MISMATCH_BUDGETS,
+    assemble_mismatch,
+    mismatch_jobs,
+    task_mm_curve,
+    task_mm_hold,
+    task_mm_mfpt,
+)
+from .provenance.fingerprint import column_fingerprint
+from .provenance.keys import (  # noqa: F401 - the cache key's parts, importable from here as before
     CYCLE_RECORD_DT,
     MISMATCH_SETTINGS,
     SETTINGS,
@@ -42,14 +50,6 @@ from .keys import (  # noqa: F401 - the cache key's parts, importable from here 
     setup_key,
     source_files,
     source_hash,
-)
-from .mismatch_tasks import (
-    MISMATCH_BUDGETS,
-    assemble_mismatch,
-    mismatch_jobs,
-    task_mm_curve,
-    task_mm_hold,
-    task_mm_mfpt,
 )
 from .push import task_push
 from .report import Z_LABELS, Z_UNITS, write_outputs

@@ -9,9 +9,10 @@ touchdown height.
 Modules: `settings` (budgets, tolerances), `claims` (the published numbers: gait files and the
 paper's claims), `store` (cache), `points`, `paths` (continuation on the one engine), one
 module per stage (`reproducing`, `closest`, `windows`, `stiff`, `literal`), `figures`, the
-report (`report_numbers`: the numbers it derives from the stages; `report_format`: values as
-text; `report_table`: the table of every published number; `report`: the other sections and
-the page), `gaits`, `pipeline` (`run`).
+report in its room `document` (`document.report_numbers`: the numbers it derives from the
+stages; `document.report_format`: values as text; `document.report_table`: the table of every
+published number; `document.report`: the other sections and the page; their old names
+``bound_env.analysis.reproduce.report`` & co. stay importable), `gaits`, `pipeline` (`run`).
 
 Stages (each cached as JSON in ``DIR/cache/<stage>-<hash>.json``, the hash of the stage's
 configuration: budget, gait files, inputs from earlier stages and `CACHE_VERSION`):

@@ -13,10 +13,10 @@ import numpy as np
 from ...files.cache import atomic_write
 from .claims import gait_config, literal_gait, reproducing_gait
 from .closest import stage_closest
+from .document.report import write_report
 from .figures import write_figures
 from .gaits import write_gait_files
 from .literal import stage_literal
-from .report import write_report
 from .reproducing import stage_reproducing
 from .settings import CACHE_VERSION, FULL, QUICK
 from .stiff import stage_stiff

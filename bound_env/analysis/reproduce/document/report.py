@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ...files.cache import atomic_write
-from .claims import CLAIMS, published
-from .figures import PATH_STYLE, Z_LABELS, Z_LABELS_UNITS
+from ....files.cache import atomic_write
+from ..claims import CLAIMS, published
+from ..figures import PATH_STYLE, Z_LABELS, Z_LABELS_UNITS
 from .report_format import eig_text, millis_text, num_text, pair_text, vec_text, window_text, z_text
 from .report_numbers import Derived, derive
 from .report_table import table_section

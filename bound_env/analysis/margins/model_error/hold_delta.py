@@ -25,23 +25,12 @@ import numpy as np
 DELTAS = (0.025, 0.05, 0.075, 0.10, 0.15)
 
 
-def spec_name(delta: float) -> str:
-    """The preset of ``delta`` (`bound_env.model.mismatch.PRESETS`: pm2.5, pm5, ..., pm15)."""
-    from ...model.mismatch import PRESETS
-
-    name = f"pm{100.0 * float(delta):g}"
-    if name not in PRESETS:
-        known = sorted(k for k in PRESETS if k.startswith("pm"))
-        raise ValueError(f"delta {delta!r}: no preset {name!r} (known: {known})")
-    return name
-
-
 def family(spec) -> str:
     """The family name of ``spec`` (a `MismatchSpec`, a preset or a file): its parameter part
     as ``pm`` (the eight factors), ``all`` (every key of `PLANT_KEYS`) or ``params(k1,k2,..)``,
     then its noise and delay as they are named (``pm10+noise`` → ``pm+noise``). A spec that
     varies no parameter is a one-line ValueError: there is no delta to sweep."""
-    from ...model.mismatch import EIGHT, PLANT_KEYS, as_spec
+    from ....model.mismatch import EIGHT, PLANT_KEYS, as_spec
 
     spec = as_spec(spec)
     keys = tuple(k for k, d in spec.ranges if d > 0)
@@ -63,12 +52,16 @@ def spec_at(spec, delta: float):
     docstring). Named as the presets would name it (``pm10+noise``, ``all5``) when its
     parameter part is ``pm`` or ``all``, so that at a delta with a preset the spec, and so
     the plants and outcomes, are the preset's."""
-    from dataclasses import replace
-
-    from ...model.mismatch import as_spec
+    from ....model.mismatch import as_spec
 
     spec = as_spec(spec)
-    fam = family(spec)
+    return _at(spec, family(spec), delta)
+
+
+def _at(spec, fam: str, delta: float):
+    """`spec_at` of a `MismatchSpec` whose `family` is ``fam``."""
+    from dataclasses import replace
+
     delta = float(delta)
     if not 0.0 < delta < 1.0:
         raise ValueError(f"delta {delta!r}: must lie in (0, 1)")
@@ -86,15 +79,18 @@ def hold_row(
 ) -> dict:
     """The hold of ``controller`` at ``delta`` of ``spec``'s family (`spec_at`; default: the
     eight factors alone) on ``seed``'s plants (module docstring)."""
-    from ...model.params import load_gait
-    from ..apex_loop import CLOCK
-    from .budget import as_budget
-    from .closed_loop import Setup
-    from .decision_times import histogram, summary
+    from ....model.mismatch import as_spec
+    from ....model.params import load_gait
+    from ...apex_loop import CLOCK
+    from ..budget import as_budget
+    from ..closed_loop import Setup
+    from ..decision_times import histogram, summary
+    from ..stats import wilson_interval
     from .mismatch_tasks import MISMATCH_BUDGETS, median_interval, task_mm_hold
-    from .stats import wilson_interval
 
-    spec = spec_at(spec, delta)
+    spec = as_spec(spec)
+    fam = family(spec)
+    spec = _at(spec, fam, delta)
     mb = MISMATCH_BUDGETS[budget]
     setup = Setup(
         controller=controller,
@@ -122,7 +118,7 @@ def hold_row(
             failures[f] = failures.get(f, 0) + 1
     return {
         "delta": float(delta),
-        "family": family(spec),
+        "family": fam,
         "spec": spec.name,
         "seed": int(seed),
         "k": k,
@@ -137,10 +133,20 @@ def hold_row(
     }
 
 
+def row_family(row: dict) -> str:
+    """The family of a row of `hold_row` (a row from before the families has none: ``pm``)."""
+    return row.get("family", "pm")
+
+
+def family_rows(rows, fam: str) -> list[dict]:
+    """The rows of family ``fam`` (`row_family`)."""
+    return [r for r in rows if row_family(r) == fam]
+
+
 def families_of(data: dict) -> list[str]:
     """The families of ``data``'s rows, in order of appearance (a row without one: ``pm``)."""
     rows = [r for c in data["columns"].values() for r in c["rows"]]
-    return list(dict.fromkeys(r.get("family", "pm") for r in rows)) or ["pm"]
+    return list(dict.fromkeys(row_family(r) for r in rows)) or ["pm"]
 
 
 def hold_delta_figure(data: dict, path) -> None:
@@ -153,7 +159,7 @@ def hold_delta_figure(data: dict, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ...files.cache import atomic_path
+    from ....files.cache import atomic_path
 
     fams = families_of(data)
     fig, axes = plt.subplots(
@@ -163,9 +169,7 @@ def hold_delta_figure(data: dict, path) -> None:
     for ax, fam in zip(axes[0], fams, strict=True):
         xs = set()
         for label, col in data["columns"].items():
-            rows = sorted(
-                (r for r in col["rows"] if r.get("family", "pm") == fam), key=lambda r: r["delta"]
-            )
+            rows = sorted(family_rows(col["rows"], fam), key=lambda r: r["delta"])
             if not rows:
                 continue
             x = np.array([100.0 * r["delta"] for r in rows])
@@ -204,10 +208,7 @@ def hold_delta_table(data: dict) -> str:
     out = []
     fams = families_of(data)
     for fam in fams:
-        rows_of = {
-            label: [r for r in col["rows"] if r.get("family", "pm") == fam]
-            for label, col in data["columns"].items()
-        }
+        rows_of = {label: family_rows(col["rows"], fam) for label, col in data["columns"].items()}
         deltas = sorted({r["delta"] for rows in rows_of.values() for r in rows})
         if len(fams) > 1:
             out.append(f"{fam}:\n")

@@ -5,8 +5,8 @@ cause of a miss; its rows grouped by topic (z*, stability, windows, gait, the st
 
 from __future__ import annotations
 
-from .claims import CLAIMS, published
-from .figures import Z_FMT, Z_LABELS
+from ..claims import CLAIMS, published
+from ..figures import Z_FMT, Z_LABELS
 from .report_format import eig_text, millis_text, num_text, pair_text, vec_text, window_text, z_text
 from .report_numbers import Derived, window_edges
 

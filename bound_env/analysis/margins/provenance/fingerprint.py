@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .code_closure import code_parts
+from .code_closure import ROOT, code_parts
 
 VERSION = 2  # the fingerprint's format (the first had no version)
 # the parts `stale_parts` compares, and what each is (the check's message names it)
@@ -123,7 +123,7 @@ def _sha(obj) -> str:
 def git_commit(root: Path | None = None) -> tuple[str | None, bool | None]:
     """(commit, dirty) of the checkout that holds bound_env/ (dirty: a tracked ``.py`` file
     differs from the commit); (None, None) outside a git checkout or without git."""
-    root = Path(root) if root is not None else Path(__file__).resolve().parents[3]
+    root = Path(root) if root is not None else ROOT
     if not (root / ".git").exists():
         return None, None
     try:
@@ -151,8 +151,8 @@ def margins_parts(gait="default", budget=None, seed=None, extra_sources=()) -> d
     ``sources``, ``margins_settings``, ``budget`` (None without a budget) and ``gait``."""
     from dataclasses import asdict
 
-    from ...files.cache import settings_hash
-    from .budget import DEFAULT_SEED, as_budget, check_seed, sample_seeds
+    from ....files.cache import settings_hash
+    from ..budget import DEFAULT_SEED, as_budget, check_seed, sample_seeds
     from .keys import SETTINGS, gait_key, source_files, source_hash
 
     seed = DEFAULT_SEED if seed is None else check_seed(seed)
@@ -207,7 +207,7 @@ def column_fingerprint(
     fp.update(margins_parts(gait, budget, seed, extra_sources))
     fp["margins_key"] = None
     if budget is not None and not _is_passive(controller):
-        from .budget import DEFAULT_SEED, as_budget
+        from ..budget import DEFAULT_SEED, as_budget
         from .keys import setup_key
 
         seed = DEFAULT_SEED if seed is None else seed
@@ -272,7 +272,7 @@ def run_fingerprint(
     code the script runs besides the controller) and data (``config``, ``files``), the
     ``gait`` file and the row's ``inputs`` (a spec's contents, the strides, the robots: one
     hash, ``inputs``). A resumed row is reused only under the same one (`differing`)."""
-    from ...files.cache import settings_hash
+    from ....files.cache import settings_hash
     from .code_closure import object_roots
 
     fp = column_fingerprint(controller, commit=False, gait=gait, files=files)

@@ -26,7 +26,9 @@ import hashlib
 import types
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[3]  # the project: bound_env/ and its sibling packages
+from .... import MOVED
+
+ROOT = Path(__file__).resolve().parents[4]  # the project: bound_env/ and its sibling packages
 DEPTH = 3  # levels of held objects `object_roots` follows
 MODULE_BODY = "<module>"  # a module's top-level statements that bind no name (run at import)
 
@@ -91,12 +93,19 @@ def file_code_hash(path) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
+def canonical(name: str) -> str:
+    """The name of module ``name`` now: an old name of a module that moved into a room
+    (`bound_env.MOVED`, as older code and recorded roots spell it) is its module's, so that a
+    closure is the same whichever name reaches it."""
+    return MOVED.get(name, name)
+
+
 def module_file(name: str) -> Path | None:
     """The project file of module ``name`` (``a.b`` -> ``ROOT/a/b.py`` or its package's
-    ``__init__.py``), None for a module outside the project."""
+    ``__init__.py``; an old name, `canonical`), None for a module outside the project."""
     if not name or name.startswith("."):
         return None
-    base = ROOT.joinpath(*name.split("."))
+    base = ROOT.joinpath(*canonical(name).split("."))
     for p in (base.with_name(base.name + ".py"), base / "__init__.py"):
         if p.is_file():
             return p
@@ -155,13 +164,13 @@ def imports_of(stmt, package: str, stars: list | None = None) -> dict:
         for a in stmt.names:
             if a.asname:
                 if module_file(a.name):
-                    out[a.asname] = (a.name, None)
+                    out[a.asname] = (canonical(a.name), None)
             else:
                 top = a.name.split(".")[0]
                 if module_file(top):
                     out[top] = (top, None)
         return out
-    mod = _absolute(stmt.module, stmt.level, package)
+    mod = canonical(_absolute(stmt.module, stmt.level, package))
     if not module_file(mod):
         return out
     for a in stmt.names:
@@ -196,7 +205,7 @@ class Closure:
 
     def run(self, roots) -> Closure:
         for module, name in roots:
-            self.in_module(module, [name])
+            self.in_module(canonical(module), [name])
         while self._todo:
             module, name = self._todo.pop()
             self._follow(self.module(module), name)
@@ -249,7 +258,7 @@ class Closure:
             self.add(module, MODULE_BODY)
             self.in_module(m2, ([attr] if attr else []) + rest[1:], depth + 1)
         elif module_file(f"{module}.{x}"):
-            self.in_module(f"{module}.{x}", rest[1:], depth + 1)
+            self.in_module(canonical(f"{module}.{x}"), rest[1:], depth + 1)
         else:
             for star in m.stars:
                 self.in_module(star, rest, depth + 1)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from .figures import Z_FMT
+from ..figures import Z_FMT
 
 REAL_TOL = 1e-9  # |Im| below this prints an eigenvalue as real
 

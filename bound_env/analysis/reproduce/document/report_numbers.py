@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..stability import RECOVERY_REL, RECOVERY_TOL
-from .claims import CLAIMS, published
+from ...stability import RECOVERY_REL, RECOVERY_TOL
+from ..claims import CLAIMS, published
 
 VISUAL_FRACTION = 0.01  # "by eye": every component within 1 % of its own peak deviation
 KC_MATCH = 1e-6  # a path's last point is at the published kc within this [N m/rad]

@@ -10,8 +10,8 @@ from pathlib import Path
 
 from bound_env.files.cache import settings_hash
 
-from .basin import BASIN_CAP, BASIN_HI, BASIN_LO
-from .budget import (
+from ..basin import BASIN_CAP, BASIN_HI, BASIN_LO
+from ..budget import (
     CURVE_SEED,
     DEFAULT_SEED,
     MFPT_CHUNK,
@@ -23,11 +23,11 @@ from .budget import (
     check_seed,
     sample_seeds,
 )
-from .ceiling import CEILING_ES
-from .closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TOL
-from .code_closure import code_parts, file_code_hash, object_roots
-from .cycle import FD_FLOOR, FD_REL
-from .mismatch_tasks import MISMATCH_BUDGETS, MISMATCH_SEED, SETTLE_NOISE
+from ..ceiling import CEILING_ES
+from ..closed_loop import ENV_ID, EVAL_RTOL, PROFILE_SEG, PROFILE_SPAN, RETURN_TOL
+from ..cycle import FD_FLOOR, FD_REL
+from ..model_error.mismatch_tasks import MISMATCH_BUDGETS, MISMATCH_SEED, SETTLE_NOISE
+from .code_closure import ROOT, code_parts, file_code_hash, object_roots
 
 CYCLE_RECORD_DT = 1e-3  # sampling of the passive stride for the cycle scale [s]
 
@@ -63,7 +63,7 @@ def source_files(extra=()) -> list[Path]:
     """Every .py file under bound_env/ (the simulator, the task, the classical controllers and
     this package), then the ``extra`` files: the code of a controller that lives outside
     bound_env/, named by the caller (`compute_margins`' ``extra_sources``)."""
-    pkg = Path(__file__).resolve().parents[2]  # bound_env/
+    pkg = ROOT / "bound_env"
     return sorted(pkg.rglob("*.py")) + [Path(f) for f in extra]
 
 

@@ -43,14 +43,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...model.dynamics import make_aux
-from ...model.mismatch import MismatchSpec, sample_plant_params
-from ...model.params import Z_NAMES
-from ...sim.stride_map import RETURN_TOL
-from ...sim.task import FAILURE_NAMES
-from ..apex_loop import SensorNoise, interval_loop
-from .budget import DEFAULT_SEED, random_directions, sample_seeds
-from .closed_loop import STRIDES, Setup, loop_for
+from ....model.dynamics import make_aux
+from ....model.mismatch import MismatchSpec, sample_plant_params
+from ....model.params import Z_NAMES
+from ....sim.stride_map import RETURN_TOL
+from ....sim.task import FAILURE_NAMES
+from ...apex_loop import SensorNoise, interval_loop
+from ..budget import DEFAULT_SEED, random_directions, sample_seeds
+from ..closed_loop import STRIDES, Setup, loop_for
 
 MISMATCH_SEED = 40_000  # the plants of the default (test) seed; any other seed derives its own
 SETTLE_NOISE = 4.0  # settle tolerance: RETURN_TOL + this many noise sigmas per component
@@ -117,7 +117,7 @@ def mismatch_seeds(seed: int = DEFAULT_SEED) -> dict:
 
 def plants_of(setup: Setup, n: int) -> list:
     """The first ``n`` plants (`bound_env.model.params.Params`) of ``setup``'s spec and seed."""
-    from ...model.params import load_gait
+    from ....model.params import load_gait
 
     nominal = load_gait(setup.gait).params
     return sample_plant_params(setup.mismatch, n, mismatch_seeds(setup.seed)["plants"], nominal)
@@ -308,13 +308,13 @@ def median_interval(values, level: float = 0.95) -> list:
 
 def assemble_mismatch(setup: Setup, res: dict) -> dict:
     """The JSON ``mismatch`` block from the tasks' results (module docstring)."""
-    from .decision_times import summary as decision_summary
-    from .stats import crossing_on_grid, mfpt_crossing, mfpt_estimate, wilson_interval
+    from ..decision_times import summary as decision_summary
+    from ..stats import crossing_on_grid, mfpt_crossing, mfpt_estimate, wilson_interval
 
     mb, spec = setup.mismatch_budget, setup.mismatch
     from dataclasses import asdict
 
-    from ...model.mismatch import plant_values
+    from ....model.mismatch import plant_values
 
     hold = res[("mm_hold", ())]
     k = int(sum(hold["outcomes"]))

@@ -18,8 +18,8 @@ import math
 
 import numpy as np
 
-from ..paired import bootstrap_delta_x50, delta_text, mcnemar_exact
-from .stats import crossing_censored, x50_text
+from ...paired import bootstrap_delta_x50, delta_text, mcnemar_exact
+from ..stats import crossing_censored, x50_text
 
 DEFAULT_SPECS = ("pm5", "pm10")
 
