@@ -519,3 +519,29 @@ def test_fallback_decides_what_acts_after_a_mispredicted_stride(mpc, nominal_map
         assert not np.array_equal(u, mpc.plan(pushed))
     with pytest.raises(ValueError, match="adaptive.fallback must be true or false"):
         check_adaptive({"fallback": 1}, "f.yaml")
+
+
+def test_the_adaptive_keys_have_spellings_that_say_which(tmp_path):
+    """``descents_per_fit`` is ``search`` and ``fits_per_episode`` is ``searches``: the same
+    setting under the same limits, in a spec file as in a block; both spellings of one setting
+    are refused, and an error names the spelling the user wrote."""
+    from bound_env.control.spec import CONTROLLERS_DIR, load_spec
+
+    assert check_adaptive({"descents_per_fit": 2, "fits_per_episode": 5}, "f.yaml") == (
+        check_adaptive({"search": 2, "searches": 5}, "f.yaml")
+    )
+    assert check_adaptive({"descents_per_fit": 2}, "f.yaml")["search"] == 2
+    with pytest.raises(ValueError, match=r"^f.yaml: adaptive.descents_per_fit must be an"):
+        check_adaptive({"descents_per_fit": 1.5}, "f.yaml")
+    with pytest.raises(ValueError, match="adaptive.fits_per_episode and adaptive.searches are one"):
+        check_adaptive({"fits_per_episode": 1, "searches": 2}, "f.yaml")
+    with pytest.raises(ValueError, match=r"allowed: .*descents_per_fit \(= search\)"):
+        check_adaptive({"descent": 1}, "f.yaml")
+    base = (CONTROLLERS_DIR / "mpc-adaptive.yaml").read_text()
+    new = tmp_path / "new.yaml"
+    new.write_text(base.replace("adaptive: true", "adaptive: {descents_per_fit: 2}"))
+    old = tmp_path / "old.yaml"
+    old.write_text(base.replace("adaptive: true", "adaptive: {search: 2}"))
+    assert "adaptive: {descents_per_fit: 2}" in new.read_text()
+    a, b = load_spec(new), load_spec(old)
+    assert a.path != b.path and a.adaptive == b.adaptive and a.adaptive["search"] == 2

@@ -60,11 +60,18 @@ ADAPTIVE_LIMITS = {
 }
 
 
+# spellings that say which: ``search`` is the descents of one fit, ``searches`` the fits of an
+# episode (the keys stay the short ones: they are in the fingerprints)
+ADAPTIVE_ALIASES = {"descents_per_fit": "search", "fits_per_episode": "searches"}
+
+
 def check_adaptive(value, path) -> dict | None:
     """The ``adaptive`` block of an mpc spec: ``true`` (the defaults), ``false`` (none) or a
     mapping of some of `ADAPTIVE_DEFAULTS`, each checked (a one-line ValueError naming the file
     and the key)."""
-    out = schema.settings_block(value, path, "adaptive", ADAPTIVE_DEFAULTS, _adaptive_value)
+    out = schema.settings_block(
+        value, path, "adaptive", ADAPTIVE_DEFAULTS, _adaptive_value, ADAPTIVE_ALIASES
+    )
     if out is not None and out["trust_strides"] > out["window"]:
         raise ValueError(
             f"{path}: adaptive.trust_strides {out['trust_strides']} is longer than "

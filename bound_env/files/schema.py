@@ -108,11 +108,14 @@ def mapping(value, where: str, required=(), allowed=None) -> dict:
     return value
 
 
-def settings_block(value, path, block: str, defaults: dict, check_one) -> dict | None:
+def settings_block(
+    value, path, block: str, defaults: dict, check_one, aliases: dict | None = None
+) -> dict | None:
     """A spec's settings block ``block``: ``true`` (the defaults), ``false`` (None) or a mapping
     of some of ``defaults``' keys, each value checked by ``check_one(key, value, where)``
-    (``where`` = ``"{path}: {block}.{key}"``), over the defaults. A one-line ValueError names
-    ``path``, the block and the key."""
+    (``where`` = ``"{path}: {block}.{key}"``, with the key as the user spelled it), over the
+    defaults. ``aliases`` maps another spelling to its key (both in one block are refused).
+    A one-line ValueError names ``path``, the block and the key."""
     if value is True:
         return dict(defaults)
     if value is False:
@@ -121,13 +124,16 @@ def settings_block(value, path, block: str, defaults: dict, check_one) -> dict |
         raise ValueError(
             f"{path}: {block} must be true or a mapping of {', '.join(defaults)}, got {value!r}"
         )
+    aliases = aliases or {}
     out = dict(defaults)
     for key, v in value.items():
-        if key not in defaults:
-            raise ValueError(
-                f"{path}: unknown key {key!r} in {block} (allowed: {', '.join(defaults)})"
-            )
-        out[key] = check_one(key, v, f"{path}: {block}.{key}")
+        real = aliases.get(key, key)
+        if real not in defaults:
+            allowed = ", ".join([*defaults, *(f"{a} (= {k})" for a, k in aliases.items())])
+            raise ValueError(f"{path}: unknown key {key!r} in {block} (allowed: {allowed})")
+        if real != key and real in value:
+            raise ValueError(f"{path}: {block}.{key} and {block}.{real} are one setting; give one")
+        out[real] = check_one(real, v, f"{path}: {block}.{key}")
     return out
 
 
