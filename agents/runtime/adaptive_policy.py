@@ -33,8 +33,8 @@ from bound_env.files.cache import atomic_write
 from bound_env.model.mismatch import EIGHT
 
 from ..common.mlp import mlp_forward
-from ..common.policy_files import FINGERPRINT_FILE, file_sha256, source_name
-from .choice_policy import expert_of, npz_bytes
+from ..common.policy_files import FINGERPRINT_FILE, file_sha256
+from .choice_policy import expert_of, frozen_expert, npz_bytes
 from .controllers import same_gait
 
 POLICY_FILE = "adaptive.npz"  # the network and its input statistics
@@ -244,19 +244,9 @@ def save_policy(folder: Path, expert: MPCController, ctrl: AdaptiveController, c
     for j, (W, b) in enumerate(ctrl.layers):
         arrays[f"W{j}"], arrays[f"b{j}"] = W, b
     atomic_write(folder / POLICY_FILE, npz_bytes(**arrays))
-    lqr = expert.lqr
     spec = {
         "kind": "adaptive",
-        "expert": {
-            "name": source_name(expert.name),
-            "gait": lqr.gait,
-            "basis": lqr.basis.name,
-            "K": lqr.basis.K,
-            "max_torque": lqr.max_torque,
-            "dt": lqr.dt,
-            "gain": lqr.gain.tolist(),
-            "settings": expert.settings(),
-        },
+        "expert": frozen_expert(expert),
         "factor_keys": list(FACTOR_KEYS),
         "factor_range": ctrl.factor_range,
         "gate_surprise": ctrl.gate_surprise,
