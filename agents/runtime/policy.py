@@ -56,7 +56,6 @@ from .kinds.folder import (  # noqa: F401 - the names API, importable from here 
     wrapped_policy,
 )
 from .kinds.step import (  # noqa: F401 - the step kind's parts, importable from here as before
-    _INFERENCE_ONLY,
     check_env_id,
     check_spaces,
     controller_wrapper,

@@ -8,7 +8,8 @@ pinned by its fingerprint (`agents.common.policy_files.check_base_pin`).
 
 from __future__ import annotations
 
-from . import step
+import agents.runtime.kinds.step as step
+
 from .folder import PolicyFolder
 
 NAME = "residual"
