@@ -33,8 +33,11 @@ from bound_env.files.cache import atomic_write
 from bound_env.model.mismatch import EIGHT
 
 from ..common.mlp import mlp_forward
-from ..common.policy_files import FINGERPRINT_FILE, file_sha256
-from .choice_policy import expert_of, frozen_expert, npz_bytes
+
+# source_name: kept importable from here (and this import block unchanged: it is part of the
+# adaptive columns' code closure, bound_env.analysis.margins.code_closure)
+from ..common.policy_files import FINGERPRINT_FILE, file_sha256, source_name  # noqa: F401
+from .choice_policy import expert_of, npz_bytes
 from .controllers import same_gait
 
 POLICY_FILE = "adaptive.npz"  # the network and its input statistics
@@ -236,6 +239,8 @@ def save_policy(folder: Path, expert: MPCController, ctrl: AdaptiveController, c
     """``adaptive.npz`` (layers, k, input statistics), ``config.json`` (kind, the frozen
     expert: its LQR and settings, the factor keys, the run's settings) and
     ``fingerprint.json`` (their sha256), each written atomically."""
+    from .choice_policy import frozen_expert  # the record a choice student saves too
+
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     arrays = {"n_layers": np.array(len(ctrl.layers)), "k": np.array(ctrl.k)}

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from . import residual, step
-from .apex import APEX_KINDS, kind_of
+from .apex import APEX_KINDS
 from .folder import read_folder, resolve_policy, unwrapped_name, wrapped_policy
 from .step import check_env_id
 
@@ -52,7 +52,7 @@ def load_controller(
         if Path(str(path)).suffix in (".yaml", ".yml") or isinstance(resolve_policy(path), str):
             raise ValueError(f"--env-id is for a trained policy's model.zip, not {str(path)!r}")
     folder = read_folder(path)
-    kind = kind_of(folder, KINDS, wrapped=residual.wrapped)
+    kind = folder.kind_in(KINDS, residual.wrapped)
     if kind in APEX_KINDS:
         ctrl = kind.load(folder, gait, force)
         if env_id is not None:

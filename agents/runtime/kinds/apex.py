@@ -22,11 +22,7 @@ APEX_KINDS = (builtin, adaptive, choice, stride)
 def kind_of(folder: PolicyFolder, kinds=APEX_KINDS, wrapped=None):
     """The first kind of ``kinds`` whose ``RECOGNISED_BY`` rule ``folder`` meets
     (`PolicyFolder.meets`), or None; ``wrapped(section)`` decides the rule ``("wrapper",)``."""
-    for kind in kinds:
-        rule = kind.RECOGNISED_BY
-        if wrapped(folder.section) if rule == ("wrapper",) else folder.meets(rule):
-            return kind
-    return None
+    return folder.kind_in(kinds, wrapped)
 
 
 def load_apex_controller(path: str | Path, gait: str | Path | None = None, force: bool = False):
@@ -34,5 +30,5 @@ def load_apex_controller(path: str | Path, gait: str | Path | None = None, force
     PPO policy; None for a step-level PPO policy (`agents.runtime.policy.load_controller` loads
     those). FileNotFoundError for a name or path that is neither; the loaders' ValueErrors."""
     folder = path if isinstance(path, PolicyFolder) else read_folder(path)
-    kind = kind_of(folder)
+    kind = folder.kind_in(APEX_KINDS)
     return None if kind is None else kind.load(folder, gait, force)

@@ -183,6 +183,16 @@ class PolicyFolder:
         both a ``choice.npz`` and a ``model.zip``."""
         return policy_kind(self.path) if self.is_dir else None
 
+    def kind_in(self, kinds, wrapped=None):
+        """The first of ``kinds`` (modules of `agents.runtime.kinds`) whose ``RECOGNISED_BY``
+        rule the folder meets (`meets`), or None; ``wrapped(section)`` decides the rule
+        ``("wrapper",)`` (`agents.runtime.kinds.residual.wrapped`)."""
+        for kind in kinds:
+            rule = kind.RECOGNISED_BY
+            if wrapped(self.section) if rule == ("wrapper",) else self.meets(rule):
+                return kind
+        return None
+
     def meets(self, rule: tuple) -> bool:
         """Whether the folder meets a kind's ``RECOGNISED_BY`` rule: ``("name",)`` a built-in
         name or spec, ``("file", NAME)`` a folder holding NAME, ``("files", KIND)`` a folder
