@@ -9,8 +9,9 @@ from .apex import APEX_KINDS
 from .folder import read_folder, resolve_policy, unwrapped_name, wrapped_policy
 from .step import check_env_id
 
-# every kind, in the order they are tried: each module says how it recognises a folder
-# (``recognise``, a cheap look at its files), and checks and loads it (``load``)
+# every kind, in the order they are tried: each module says how a folder is recognised as its
+# kind (``RECOGNISED_BY``, a cheap look at its files, `PolicyFolder.meets`), and checks and
+# loads it (``load``)
 KINDS = (*APEX_KINDS, residual, step)
 
 
