@@ -6,7 +6,7 @@ from pathlib import Path
 
 from . import residual, step
 from .apex import APEX_KINDS
-from .folder import read_folder, resolve_policy, unwrapped_name, wrapped_policy
+from .folder import read_folder, unwrapped_name, wrapped_policy
 from .step import check_env_id
 
 # every kind, in the order they are tried: each module says how a folder is recognised as its
@@ -50,9 +50,9 @@ def load_controller(
         return OffsetFree(ctrl, name=text)
     if env_id is not None:
         check_env_id(env_id)
-        if Path(str(path)).suffix in (".yaml", ".yml") or isinstance(resolve_policy(path), str):
-            raise ValueError(f"--env-id is for a trained policy's model.zip, not {str(path)!r}")
-    folder = read_folder(path)
+    folder = read_folder(path)  # a spec .yaml as given, else resolve_policy: once
+    if env_id is not None and isinstance(folder.path, str):  # a built-in name or a spec
+        raise ValueError(f"--env-id is for a trained policy's model.zip, not {str(path)!r}")
     kind = folder.kind_in(KINDS, residual.wrapped)
     if kind in APEX_KINDS:
         ctrl = kind.load(folder, gait, force)
