@@ -204,7 +204,7 @@ def shipped_copy(tmp_path, monkeypatch):
     """The shipped step-ppo/s0, its base `default` (the name of finetuned/s0) and another policy
     (an archived student), in a copy of the policies folder that the name lookup reads."""
     import agents.common.policy_files as pf
-    import agents.runtime.names as names
+    import agents.runtime.kinds.folder as names  # where names resolve
     from agents.runtime.policy_table import ARCHIVE_DIR, SHIPPED_DIR
 
     root = tmp_path / "policies"

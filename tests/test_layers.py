@@ -225,15 +225,15 @@ def test_the_walker_sees_deferred_and_string_imports():
     assert _cycles({"a": ["b"], "b": []}) == []
     # agents: deferred imports, script blocks and imports by name
     _, _, edges = _graph("agents")
-    # inside load_apex_controller
-    assert "agents.runtime.stride_policy" in edges["agents.runtime.names"]
+    # inside the stride kind's load
+    assert "agents.runtime.stride_policy" in edges["agents.runtime.kinds.stride"]
     assert "agents.common.config" in edges["agents.runtime.stride_policy"]  # inside wrapper_kwargs
     assert "agents.runtime.policy" in edges["agents.experts.stride_validation"]
     learned = {"agents.experts.distill", "agents.experts.finetune"}
     assert learned <= set(edges["agents.experts.learn_cli"])  # f-string
     # the controller wrapper agents.runtime.residual.ResidualOver, named in
     # configs/ppo-residual.yaml: get_class_by_name in controller_wrapper
-    assert "agents.runtime.residual" in edges["agents.runtime.policy"]
+    assert "agents.runtime.residual" in edges["agents.runtime.kinds.step"]
     assert {"agents.runtime.stride", "agents.training.train", "agents.runtime.residual"} <= set(
         edges["agents.training.train"] + ["agents.training.train"]
     )

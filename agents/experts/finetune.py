@@ -38,7 +38,12 @@ from bound_env.files.cache import atomic_write
 from ..common.learn_config import FinetuneConfig
 from ..common.mlp import linear_layers
 from ..common.policy_files import source_name
-from ..runtime.choice_policy import ChoicePolicyController, load_choice_policy, save_policy
+from ..runtime.choice_policy import (
+    ChoicePolicyController,
+    frozen_lqr,
+    load_choice_policy,
+    save_policy,
+)
 
 gym.register_envs(bound_env)
 
@@ -46,14 +51,8 @@ gym.register_envs(bound_env)
 def rescue_env_kwargs(policy: ChoicePolicyController, r_max=0.45, horizon=30) -> dict:
     """`gymnasium.make` arguments of PassiveBoundRescue-v0 for a distilled student: its own
     LQR (gait, basis, saturation, control grid and frozen gain) and safe radius."""
-    lqr = policy.lqr
     return {
-        "gait": lqr.gait,
-        "basis": lqr.basis.name,
-        "K": lqr.basis.K,
-        "max_torque": lqr.max_torque,
-        "dt": lqr.dt,
-        "gain": lqr.gain.tolist(),
+        **frozen_lqr(policy.lqr),
         "safe": policy.safe,
         "r_max": r_max,
         "horizon": horizon,

@@ -33,7 +33,10 @@ from bound_env.files.cache import atomic_write
 from bound_env.model.mismatch import EIGHT
 
 from ..common.mlp import mlp_forward
-from ..common.policy_files import FINGERPRINT_FILE, file_sha256, source_name
+
+# source_name: kept importable from here (and this import block unchanged: it is part of the
+# adaptive columns' code closure, bound_env.analysis.margins.code_closure)
+from ..common.policy_files import FINGERPRINT_FILE, file_sha256, source_name  # noqa: F401
 from .choice_policy import expert_of, npz_bytes
 from .controllers import same_gait
 
@@ -236,6 +239,8 @@ def save_policy(folder: Path, expert: MPCController, ctrl: AdaptiveController, c
     """``adaptive.npz`` (layers, k, input statistics), ``config.json`` (kind, the frozen
     expert: its LQR and settings, the factor keys, the run's settings) and
     ``fingerprint.json`` (their sha256), each written atomically."""
+    from .choice_policy import frozen_expert  # the record a choice student saves too
+
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     arrays = {"n_layers": np.array(len(ctrl.layers)), "k": np.array(ctrl.k)}
@@ -244,19 +249,9 @@ def save_policy(folder: Path, expert: MPCController, ctrl: AdaptiveController, c
     for j, (W, b) in enumerate(ctrl.layers):
         arrays[f"W{j}"], arrays[f"b{j}"] = W, b
     atomic_write(folder / POLICY_FILE, npz_bytes(**arrays))
-    lqr = expert.lqr
     spec = {
         "kind": "adaptive",
-        "expert": {
-            "name": source_name(expert.name),
-            "gait": lqr.gait,
-            "basis": lqr.basis.name,
-            "K": lqr.basis.K,
-            "max_torque": lqr.max_torque,
-            "dt": lqr.dt,
-            "gain": lqr.gain.tolist(),
-            "settings": expert.settings(),
-        },
+        "expert": frozen_expert(expert),
         "factor_keys": list(FACTOR_KEYS),
         "factor_range": ctrl.factor_range,
         "gate_surprise": ctrl.gate_surprise,

@@ -83,27 +83,37 @@ def npz_bytes(**arrays) -> bytes:
     return buf.getvalue()
 
 
+def frozen_lqr(lqr) -> dict:
+    """An expert's LQR as saved with a student and handed to the rescue env: gait, basis, K,
+    max_torque, dt and its gain, explicit (`expert_of` rebuilds it without a re-design)."""
+    return {
+        "gait": lqr.gait,
+        "basis": lqr.basis.name,
+        "K": lqr.basis.K,
+        "max_torque": lqr.max_torque,
+        "dt": lqr.dt,
+        "gain": lqr.gain.tolist(),
+    }
+
+
+def frozen_expert(expert: MPCController) -> dict:
+    """The ``expert`` record of a student's ``config.json`` (choice and adaptive): its name (a
+    shipped one by its name, not a path), its LQR (`frozen_lqr`) and settings, frozen: later
+    spec edits change nothing. `expert_of` reads it back."""
+    return {
+        "name": source_name(expert.name),
+        **frozen_lqr(expert.lqr),
+        "settings": expert.settings(),
+    }
+
+
 def save_policy(folder: Path, expert: MPCController, layers, rows, config: dict) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     arrays = {"rows": rows, "n_layers": np.array(len(layers))}
     for k, (W, b) in enumerate(layers):
         arrays[f"W{k}"], arrays[f"b{k}"] = W, b
     atomic_write(folder / POLICY_FILE, npz_bytes(**arrays))
-    lqr = expert.lqr
-    spec = {
-        "kind": "choice",
-        "expert": {  # the expert's LQR and settings, frozen: later spec edits change nothing
-            "name": source_name(expert.name),  # a shipped student by its name, not a path
-            "gait": lqr.gait,
-            "basis": lqr.basis.name,
-            "K": lqr.basis.K,
-            "max_torque": lqr.max_torque,
-            "dt": lqr.dt,
-            "gain": lqr.gain.tolist(),
-            "settings": expert.settings(),
-        },
-        **config,
-    }
+    spec = {"kind": "choice", "expert": frozen_expert(expert), **config}
     atomic_write(folder / "config.json", json.dumps(spec, indent=2, default=str) + "\n")
     write_choice_fingerprint(folder)
 

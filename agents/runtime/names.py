@@ -1,191 +1,27 @@
-"""What a ``--policy`` name or path is, and the loaders of every controller but step-level PPO.
+"""What a ``--policy`` name or path is: the names API, importable from here as before.
 
-Names come first (`CONTROLLERS`: ``passive`` and the classical controllers of
-`bound_env.control`, one per spec in ``configs/controllers/``), then the shipped policies
-(`shipped_policies`: ``agents/policies/<name>/`` and ``<group>/<name>/``), then paths.
-
-`load_apex_controller` loads everything that decides at the apex or needs no run wrapper: a
-classical controller (a name or a spec ``.yaml``), a distilled or fine-tuned choice policy
-(`agents.experts.distill`) and a stride-level PPO policy (`agents.runtime.stride_policy`); for a
-step-level PPO policy it returns None, and `agents.runtime.policy.load_controller` (above this
-module) loads it, through its run's controller wrapper if it has one
-(`agents.runtime.residual.ResidualOver`). So a controller wrapper can load its base controller from
-here (`agents.runtime.residual.load_base`) without importing `agents.runtime.policy`: no import
-circle, not even at run time.
+The names, their resolution and the folder reader live in `agents.runtime.kinds.folder`;
+`load_apex_controller` (names, specs, choice, adaptive and stride policies) in
+`agents.runtime.kinds.apex`. Names come first (`CONTROLLERS`), then the shipped policies
+(`shipped_policies`), then paths.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from functools import partial
-from pathlib import Path
-
-from bound_env import STRIDE_ENV_IDS
-from bound_env.control.offset_free import SUFFIX as OF_SUFFIX
-from bound_env.files.resources import controllers_dir
-
-from ..common.policy_files import find_policy_files, read_policy_section
-from ..common.schema import policy_kind
-from .controllers import ZeroController
-from .policy_table import ARCHIVE_DIR, SHIPPED_DIR, archived_message, shipped_names  # noqa: F401
-
-# Built-in controllers by name: name -> (factory(gait) -> controller, one-line description).
-# ``--policy NAME`` in ``margins``, ``rollout`` and ``compare`` looks names up here first, then
-# among the shipped policies, and only then reads NAME as a path. Modules that add classical
-# controllers call `register_controller`.
-CONTROLLERS: dict[str, tuple[Callable, str]] = {}
-
-
-def register_controller(name: str, factory: Callable, description: str) -> None:
-    """Make ``--policy name`` build ``factory(gait=...)`` (gait: name or path, or None)."""
-    CONTROLLERS[name] = (factory, description)
-
-
-register_controller("passive", lambda gait=None: ZeroController(), "zero spine torque")
-
-
-def classical_controller(name: str, gait=None):
-    """A classical controller of `bound_env.control` (a name or a spec .yaml), designed for
-    ``gait`` (default: the spec's)."""
-    from bound_env.control import load_controller as load_classical
-
-    return load_classical(name, gait=None if gait is None else str(gait))
-
-
-# the classical stride-level controllers: every spec in configs/controllers/ (the wheel's copy
-# when installed), by its file name
-_CLASSICAL_WHAT = {
-    "lqr": "stride-to-stride LQR on the linearized stride map",
-    "deadbeat": "one-stride deadbeat on the linearized stride map",
-    "damping": "extra spine damping tau = -c theta2dot",
-}
-for _name in list(_CLASSICAL_WHAT) + sorted(
-    p.stem for p in controllers_dir().glob("*.yaml") if p.stem not in _CLASSICAL_WHAT
-):
-    register_controller(
-        _name,
-        partial(classical_controller, _name),
-        _CLASSICAL_WHAT.get(_name, f"controller spec {_name}"),
-    )
-
-
-def shipped_policies() -> dict[str, Path]:
-    """{name: folder} of the policies shipped in ``agents/policies/``: the aliases
-    (``default`` -> ``finetuned/s0``), ``<name>/`` and one level of groups, ``<group>/<name>/``
-    named ``group/name`` (e.g. ``finetuned/s0``, one folder per training seed); the archive
-    is not among them (`agents.runtime.policy_table`)."""
-    return shipped_names()
-
-
-def policy_names() -> list[str]:
-    """Every name ``--policy`` accepts besides a path."""
-    return list(CONTROLLERS) + [n for n in shipped_policies() if n not in CONTROLLERS]
-
-
-def unwrapped_name(spec: str | Path) -> str | Path:
-    """The policy ``NAME+of`` wraps (`bound_env.control.offset_free`), else ``spec``. A folder
-    or file whose own name ends in ``+of`` is itself, unless what it would wrap is a policy's
-    name (``default+of`` is always ``default`` held offset-free)."""
-    text = str(spec)
-    if not text.endswith(OF_SUFFIX) or text == OF_SUFFIX:
-        return spec
-    inner = text[: -len(OF_SUFFIX)]
-    if _on_disk(text) and not _a_name(inner):
-        return spec  # runs/x+of: that folder, not runs/x held offset-free
-    return inner
-
-
-def wrapped_policy(text: str) -> str:
-    """What ``NAME+of`` holds offset-free (`unwrapped_name`); FileNotFoundError (one line)
-    when neither ``text`` nor ``NAME`` is a policy, rather than a word about a ``NAME`` the
-    user never gave alone."""
-    inner = str(unwrapped_name(text))
-    if not (
-        _a_name(inner) or _on_disk(inner) or archived_message(inner) or inner.endswith(OF_SUFFIX)
-    ):
-        raise FileNotFoundError(
-            f"policy {text!r} does not exist, nor {inner!r}, which {text!r} would hold "
-            "offset-free (give a name, e.g. default+of, or a path)"
-        )
-    return inner
-
-
-def _a_name(text: str) -> bool:
-    """Whether ``text`` names a policy (possibly wrapped): a built-in or shipped name, a
-    classical spec file."""
-    inner = unwrapped_name(text)
-    if inner != text:
-        return _a_name(str(inner))
-    return (
-        text in CONTROLLERS or text in shipped_policies() or Path(text).suffix in (".yaml", ".yml")
-    )
-
-
-def _on_disk(text: str) -> bool:
-    try:
-        return Path(text).exists()
-    except (OSError, ValueError):  # a name the OS refuses (too long, a NUL byte)
-        return False
-
-
-def resolve_policy(spec: str | Path) -> str | Path:
-    """A built-in controller's name (returned as is), a shipped policy's folder, or a path.
-    TypeError for what is not a name or path, ValueError for an empty one, FileNotFoundError
-    (an archived name: where it went) for one that does not exist."""
-    if not isinstance(spec, (str, Path)):
-        raise TypeError(
-            f"policy must be a name ({', '.join(policy_names())}) or a run or policy "
-            f"folder's path, got {spec!r} ({type(spec).__name__})"
-        )
-    if not str(spec).strip():
-        raise ValueError(
-            f"policy {str(spec)!r} is empty: give a name ({', '.join(policy_names())}) or a run "
-            "or policy folder's path"
-        )
-    text = str(spec)
-    if text in CONTROLLERS:
-        return text
-    shipped = shipped_policies()
-    if text in shipped:
-        return shipped[text]
-    p = Path(spec)
-    if not _on_disk(text) and archived_message(text):
-        raise FileNotFoundError(archived_message(text))
-    if not _on_disk(text):
-        for near in (SHIPPED_DIR / text, ARCHIVE_DIR / text, ARCHIVE_DIR / Path(text).name):
-            if near.is_dir() and Path(text).name not in ("", ".", ".."):  # the folder's name
-                raise FileNotFoundError(
-                    f"policy {text!r} does not exist here; did you mean {near}? (an archived "
-                    "policy loads by its path)"
-                )
-        raise FileNotFoundError(
-            f"policy {text!r} does not exist (give a name: {', '.join(policy_names())}; or a "
-            "run or policy directory with model.zip, or a model .zip)"
-        )
-    return p
-
-
-def load_apex_controller(path: str | Path, gait: str | Path | None = None, force: bool = False):
-    """The controller of a name, a classical spec ``.yaml``, a choice policy or a stride-level
-    PPO policy; None for a step-level PPO policy (`agents.runtime.policy.load_controller` loads
-    those). FileNotFoundError for a name or path that is neither; the loaders' ValueErrors."""
-    if Path(str(path)).suffix in (".yaml", ".yml"):  # a classical controller's spec file
-        return classical_controller(str(path), gait)
-    path = resolve_policy(path)
-    if isinstance(path, str):
-        return CONTROLLERS[path][0](gait=gait)
-    if Path(path).is_dir() and (Path(path) / "adaptive.npz").is_file():
-        from .adaptive_policy import load_adaptive_policy  # the learned adaptive controller
-
-        return load_adaptive_policy(path, gait=gait, force=force)
-    if Path(path).is_dir() and policy_kind(path) == "choice":  # a PPO + choice.npz: refused
-        from .choice_policy import load_choice_policy  # a distilled student
-
-        return load_choice_policy(path, gait=gait, force=force)
-    files = find_policy_files(path)
-    policy_kind(files.model.parent)  # a choice.npz beside the model: ambiguous, refused
-    if files.config is not None and read_policy_section(files)[1] in STRIDE_ENV_IDS:
-        from .stride_policy import load_stride_policy  # a stride-level policy
-
-        return load_stride_policy(path, gait=gait, force=force)
-    return None
+from .kinds.apex import load_apex_controller  # noqa: F401
+from .kinds.folder import (  # noqa: F401
+    ARCHIVE_DIR,
+    CONTROLLERS,
+    SHIPPED_DIR,
+    PolicyFolder,
+    archived_message,
+    classical_controller,
+    policy_names,
+    read_folder,
+    register_controller,
+    resolve_policy,
+    shipped_names,
+    shipped_policies,
+    unwrapped_name,
+    wrapped_policy,
+)

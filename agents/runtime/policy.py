@@ -10,19 +10,16 @@ arguments it was trained with: ``max_torque``, ``dt``, ...; `agents.common.polic
 ``clip(action_net(policy_net(normalize(obs))), -1, 1)``, exactly what
 ``model.predict(obs, deterministic=True)`` returns after ``VecNormalize.normalize_obs``, but
 evaluated with NumPy in float64 (~10 us instead of ~150 us per call), picklable, and free of
-torch in the worker processes of the margins (`bound_env.analysis.margins`). A distilled
-student (``choice.npz``) is loaded by `agents.experts.distill`, a stride-level policy by
-`agents.runtime.stride_policy` (both through `agents.runtime.names.load_apex_controller`).
+torch in the worker processes of the margins (`bound_env.analysis.margins`). Every kind of
+policy (built-in name or spec, choice and adaptive students, stride policy, residual, plain SB3)
+is recognised, checked and loaded by its module in `agents.runtime.kinds`; this module keeps the
+loader's names importable from here as before.
 """
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
-import numpy as np
-
-from ..common.mlp import extract_actor
 from ..common.policy_files import (  # noqa: F401 - the policy-file API, importable from here as before
     DYNAMICS_KWARGS,
     FINGERPRINT_FILE,
@@ -43,13 +40,14 @@ from ..common.policy_files import (  # noqa: F401 - the policy-file API, importa
     source_name,
     write_fingerprint,
 )
-from ..common.schema import check_env_kwargs, check_layers, check_obs_stats, read_fingerprint
+from ..common.schema import check_env_kwargs, check_layers, check_obs_stats, read_fingerprint  # noqa: F401
 from .controllers import MLPController, ZeroController, check_gait, same_gait  # noqa: F401 - re-exported
-from .names import (  # noqa: F401 - the names API, importable from here as before
+from .kinds import KINDS, load_controller  # noqa: F401 - the loader, importable from here as before
+from .kinds.apex import load_apex_controller  # noqa: F401
+from .kinds.folder import (  # noqa: F401 - the names API, importable from here as before
     CONTROLLERS,
     SHIPPED_DIR,
     classical_controller,
-    load_apex_controller,
     policy_names,
     register_controller,
     resolve_policy,
@@ -57,147 +55,13 @@ from .names import (  # noqa: F401 - the names API, importable from here as befo
     unwrapped_name,
     wrapped_policy,
 )
-
-_INFERENCE_ONLY = {
-    "learning_rate": 0.0,
-    "lr_schedule": lambda _: 0.0,
-    "clip_range": lambda _: 0.0,
-}  # replaces training-only pickled objects
-
-
-def check_env_id(env_id: str) -> str:
-    """``env_id`` when a plain SB3 model can be evaluated on it (a registered control-interval
-    env: ``PassiveBound-v0``/``-v1``, ``PassiveBoundLiteral-v0``/``-v1``), else ValueError."""
-    from bound_env import ENV_KWARGS
-
-    if env_id not in ENV_KWARGS:
-        raise ValueError(
-            f"--env-id {env_id!r}: a plain model.zip is evaluated on one of "
-            f"{', '.join(ENV_KWARGS)} (a stride or rescue policy needs its run's config.yaml)"
-        )
-    return env_id
-
-
-def load_controller(
-    path: str | Path,
-    gait: str | Path | None = None,
-    force: bool = False,
-    env_id: str | None = None,
-):
-    """A controller from a name (`policy_names`) or a saved policy (see the module docstring).
-
-    ``gait`` is passed to built-in controllers that need one; a trained policy takes its own
-    from its config and refuses another one unless ``force`` (`check_gait`). ``env_id`` names
-    the env a plain SB3 ``model.zip`` without ``config.yaml`` was trained on (its registered
-    kwargs are the policy's env kwargs, `check_env_id`); for a policy with a config it must be
-    the config's own id. Raises
-    FileNotFoundError for a missing path and ValueError for a file that is not a PPO MLP
-    policy for PassiveBound's observation space, or would be evaluated wrongly
-    (`check_policy_files`).
-    """
-    text = str(path)
-    if unwrapped_name(text) != text:  # NAME+of: NAME held on the robot's own cycle
-        from bound_env.control.offset_free import OffsetFree
-        from bound_env.control.privileged import is_privileged
-
-        inner = wrapped_policy(text)
-        ctrl = load_controller(inner, gait, force, env_id)
-        if is_privileged(ctrl):  # OffsetFree never hands it the plant: it would run as mpc+of
-            raise ValueError(
-                f"{getattr(ctrl, 'name', inner)!r} is privileged: it is designed on the robot's "
-                f"true plant and aims at that plant's own cycle already, so {text!r} has no "
-                "offset to estimate (give it without +of)"
-            )
-        return OffsetFree(ctrl, name=text)
-    if env_id is not None:
-        check_env_id(env_id)
-        if Path(str(path)).suffix in (".yaml", ".yml") or isinstance(resolve_policy(path), str):
-            raise ValueError(f"--env-id is for a trained policy's model.zip, not {str(path)!r}")
-    ctrl = load_apex_controller(path, gait, force)  # names, specs, choice and stride policies
-    if ctrl is not None:
-        if env_id is not None:
-            raise ValueError(
-                f"--env-id {env_id}: policy {path} is a distilled student or a stride-level "
-                "policy, which carries its own env id (drop --env-id)"
-            )
-        return ctrl
-    path = resolve_policy(path)  # a step-level PPO policy's folder or zip
-    files = find_policy_files(path)
-    if files.config is not None:
-        refuse_privileged(read_policy_section(files)[0], files.config)
-    trained_on = read_policy_section(files)[1] if files.config is not None else None
-    if trained_on is not None and trained_on.startswith("PassiveBoundRescue"):
-        raise ValueError(
-            f"policy {path} was trained on {trained_on} (one profile per stride from the "
-            "rescue task's starts, read from its config.yaml), which margins, rollout, "
-            "compare and load_policy do not evaluate; measure its returns with "
-            f"scripts/rescue_eval.py {path}, or act in gym.make({trained_on!r}) with "
-            "model.predict"
-        )
-    model_path, vecnorm_path = files.model, files.vecnormalize
-    from stable_baselines3 import PPO
-
-    try:
-        # schedules are not needed to act, and rl-zoo3 pickles its own schedule classes
-        model = PPO.load(str(model_path), device="cpu", custom_objects=_INFERENCE_ONLY)
-    except Exception as e:  # noqa: BLE001 - a corrupt or foreign zip is the user's error
-        raise ValueError(f"cannot load {model_path} as an SB3 PPO model: {e}") from None
-    section, trained_on, seed = read_policy_section(files)
-    if env_id is not None and files.config is None:
-        trained_on = env_id  # a plain SB3 model: the env id the user names
-    elif env_id is not None and env_id != trained_on:
-        raise ValueError(
-            f"--env-id {env_id}: policy {path} was trained on {trained_on} ({files.config})"
-        )
-    env_kwargs = check_env_kwargs(section_env_kwargs(section, trained_on), str(files.config))
-    wrappers = section.get("env_wrapper") or []
-    residual = controller_wrapper(wrappers)
-    if residual is None:
-        obs_index = check_spaces(model, env_kwargs, wrappers, model_path)
-    else:
-        obs_index = None
-    base = residual_base(section)
-    pinned = [f"that base {base!r} is the controller it was trained over"] if base else []
-    warnings = check_policy_files(files, section, force, env_given=env_id is not None, also=pinned)
-    want = read_fingerprint(files.model.parent) if files.layout == "bound_env" else None
-    if base is not None and want is not None:  # a residual's base: the one it was trained over
-        sha = policy_content_sha256(resolve_policy(base))
-        warnings += check_base_pin(files, want, base, sha, force)
-    for w in warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    layers, activation = extract_actor(model, model_path)
-    check_layers(layers, str(model_path))
-    ctrl = MLPController(
-        name=str(path),
-        layers=layers,
-        activation=activation,
-        env_kwargs=env_kwargs,
-        obs_shape=tuple(model.observation_space.shape),
-        seed=seed,
-        obs_index=obs_index,
-    )
-    read_vecnormalize(ctrl, vecnorm_path)
-    if residual is not None:  # e.g. agents.runtime.residual.ResidualOver: the actor acts through it
-        cls, kwargs = residual
-        ctrl = cls.policy_controller(ctrl, kwargs, model, model_path)
-    check_gait(ctrl, gait, force)
-    return ctrl
-
-
-def residual_base(section: dict) -> str | None:
-    """The base controller's name of a run whose actor acts through a controller wrapper
-    (`controller_wrapper`: `agents.runtime.residual.ResidualOver`'s ``base``, by default
-    ``"default"``), or None."""
-    import inspect
-
-    found = controller_wrapper(section.get("env_wrapper") or [])
-    if found is None:
-        return None
-    cls, kwargs = found
-    if "base" in kwargs:
-        return kwargs["base"]
-    param = inspect.signature(cls.__init__).parameters.get("base")
-    return None if param is None else param.default
+from .kinds.step import (  # noqa: F401 - the step kind's parts, importable from here as before
+    check_env_id,
+    check_spaces,
+    controller_wrapper,
+    read_vecnormalize,
+    residual_base,
+)
 
 
 def base_pin(base) -> dict:
@@ -217,66 +81,3 @@ def write_policy_fingerprint(folder) -> Path:
         name = residual_base(read_policy_section(files)[0])
         base = None if name is None else base_pin(name)
     return write_fingerprint(folder, base=base)
-
-
-def controller_wrapper(env_wrappers) -> tuple | None:
-    """(class, kwargs) of the run's ``env_wrapper`` through which its actor acts (a wrapper
-    class with ``policy_controller``: `agents.runtime.residual.ResidualOver`), or None."""
-    from ..common.config import class_entries, get_class_by_name
-
-    found = []
-    for name, kwargs in class_entries(env_wrappers):
-        cls = get_class_by_name(name)
-        if callable(getattr(cls, "policy_controller", None)):
-            found.append((cls, dict(kwargs or {})))
-    if len(found) > 1:
-        raise ValueError(f"more than one controller wrapper in env_wrapper: {env_wrappers!r}")
-    return found[0] if found else None
-
-
-def read_vecnormalize(ctrl: MLPController, vecnorm_path: Path | None) -> None:
-    """Set ``ctrl``'s observation normalization from a ``vecnormalize.pkl`` (if any)."""
-    if vecnorm_path is not None:
-        vn = load_vecnormalize(vecnorm_path)
-        if getattr(vn, "norm_obs", False):
-            rms = getattr(vn, "obs_rms", None)
-            if rms is None or tuple(np.shape(rms.mean)) != ctrl.obs_shape:
-                raise ValueError(
-                    f"{vecnorm_path}: statistics for observations of shape "
-                    f"{np.shape(getattr(rms, 'mean', None))}, the model expects "
-                    f"{ctrl.obs_shape}"
-                )
-            stats = check_obs_stats(vn, str(vecnorm_path), ctrl.obs_shape)
-            ctrl.obs_mean, ctrl.obs_var, ctrl.epsilon, ctrl.clip_obs = stats
-
-
-def check_spaces(model, env_kwargs: dict, wrappers, model_path: Path) -> np.ndarray | None:
-    """ValueError unless the model's spaces are those of PassiveBound with ``env_kwargs``
-    (through the run's `agents.common.wrappers.ObservationFilter`, if any); returns its indices."""
-    import gymnasium as gym
-
-    import bound_env
-
-    from ..common.wrappers import observation_index
-
-    gym.register_envs(bound_env)
-    env = gym.make("PassiveBound-v0", **env_kwargs).unwrapped
-    want_obs, want_act = env.observation_space, env.action_space
-    index = observation_index(wrappers, env.task.obs_names)
-    env.close()
-    if index is not None:
-        want_obs = gym.spaces.Box(want_obs.low[index], want_obs.high[index], dtype=want_obs.dtype)
-    obs, act = model.observation_space, model.action_space
-    # shapes decide; bounds are not compared (an MLP policy does not read them, and the
-    # environment may tighten them without changing what an entry means)
-    if not isinstance(obs, gym.spaces.Box) or obs.shape != want_obs.shape:
-        got = obs.shape if isinstance(obs, gym.spaces.Box) else obs
-        raise ValueError(
-            f"policy {model_path} was trained for an observation space of shape {got}, but "
-            f"PassiveBound (with {env_kwargs or 'default arguments'}"
-            f"{', through its ObservationFilter' if index is not None else ''}) gives "
-            f"{want_obs.shape}; is its run's config.yaml beside it?"
-        )
-    if not isinstance(act, gym.spaces.Box) or act.shape != want_act.shape:
-        raise ValueError(f"policy {model_path} acts in {act}, PassiveBound expects {want_act}")
-    return index

@@ -58,26 +58,19 @@ ARCHIVED = {
 }
 
 
-def _is_policy(folder: Path) -> bool:
-    """A PPO model, a distilled student (experts.distill) or a learned adaptive controller
-    (experts.adaptive)."""
-    return folder.is_dir() and any(
-        (folder / f).exists() for f in ("model.zip", "choice.npz", "adaptive.npz")
-    )
-
-
 def shipped_folders(root: Path = SHIPPED_DIR) -> dict[str, Path]:
     """{name: folder} of the policy folders under ``root`` (``<name>/`` and one level of
     groups, ``<group>/<name>/`` named ``group/name``), the archive left out."""
     if not root.is_dir():
         return {}
     out = {}
+    marks = ("model.zip", "choice.npz", "adaptive.npz")  # a PPO model or a student: a policy
     for p in sorted(root.iterdir()):
-        if _is_policy(p):
+        if p.is_dir() and any((p / f).exists() for f in marks):
             out[p.name] = p
         elif p.is_dir() and p.name != ARCHIVE_DIR.name:
             for q in sorted(p.iterdir()):
-                if _is_policy(q):
+                if q.is_dir() and any((q / f).exists() for f in marks):
                     out[f"{p.name}/{q.name}"] = q
     return out
 

@@ -113,7 +113,7 @@ def load_base(base: str):
     """The base controller: a controller that decides at the apex (`agents.runtime.names`: a
     classical controller, a choice policy or a stride-level policy), never a step-level PPO
     policy."""
-    from ..runtime.names import load_apex_controller
+    from .kinds.apex import load_apex_controller
 
     ctrl = load_apex_controller(base)
     if ctrl is None:
