@@ -43,9 +43,7 @@ def _hidden(v, where: str) -> tuple:
 
 
 def _flag(v, where: str) -> bool:
-    if not isinstance(v, bool):
-        raise ValueError(f"{where} must be true or false, got {v!r}")
-    return v
+    return check.boolean(v, where, numpy=False)  # YAML's true or false
 
 
 def _spec(v, where: str, plants_only: bool = False) -> str:

@@ -161,10 +161,10 @@ the same kind of machine: from a cold or a warm Numba cache and on 1 or 2 worker
 (`tests/test_same_numbers.py`), whichever worker runs a task after whichever other tasks
 (`tests/test_worker_history.py`: a worker's cached closed loop once kept the stride period
 that scores the ceiling search from the task that built it, and a controller run as one copy
-per robot lost decisions from its counts). Before, fast-math made a function compiled with its callers
-round otherwise than one loaded from the cache, and `mpc`, which seeds its random candidates
-with the bytes of z, and the chaotic rough-terrain runs turned those last bits into other
-outcomes: a fresh clone of the same commit regenerated another `mpc` r50. Across CPUs or
+per robot lost decisions from its counts). Before, fast-math made a function compiled with
+its callers round otherwise than one loaded from the cache, and `mpc`, which seeds its random
+candidates with the bytes of z, and the chaotic rough-terrain runs turned those last bits into
+other outcomes: a fresh clone of the same commit regenerated another `mpc` r50. Across CPUs or
 math libraries (glibc's FMA variants, BLAS kernels) last bits can still differ, and a start
 near a basin edge can then go either way. Decision times are the CPU time of one process
 over fixed states, the minimum of repeats, so a rerun reproduces them closely but not bit for

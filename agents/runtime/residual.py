@@ -161,8 +161,7 @@ class ResidualOver(gym.Wrapper):
         if r_max is not None:
             r_max = check.real(r_max, f"{w} r_max", 0.0, 10.0, lo_open=True)
         axis_prob = check.real(axis_prob, f"{w} axis_prob", 0.0, 1.0)
-        if not isinstance(end_on_return, (bool, np.bool_)):
-            raise ValueError(f"{w} end_on_return must be true or false, got {end_on_return!r}")
+        end_on_return = check.boolean(end_on_return, f"{w} end_on_return")
         max_steps = check.integer(max_steps, f"{w} max_steps", 1, 10**7)
         alive_reward = check.real(alive_reward, f"{w} alive_reward", -1e6, 1e6)
         residual_cost = check.real(residual_cost, f"{w} residual_cost", 0.0, 1e6)
