@@ -23,19 +23,23 @@ from bound_env.model.params import load_gait
 GAIT = "literal-cycle"
 
 
-@pytest.fixture
-def setup() -> Setup:
-    """lqr on the literal gait at the full budget, before its cycle is known (no period)."""
-    ctrl = load_controller("lqr", gait=GAIT)
-    budget = as_budget("full")
+def setup_of(ctrl, gait: str, budget: str) -> Setup:
+    """A column's setup before its cycle is known (no period), as `compute_margins` makes it."""
+    b = as_budget(budget)
     return Setup(
         controller=ctrl,
-        gait=GAIT,
-        budget=budget,
-        z_star=np.asarray(load_gait(GAIT).z0, float),
-        key=setup_key(ctrl, GAIT, budget, 12345, ()),
+        gait=gait,
+        budget=b,
+        z_star=np.asarray(load_gait(gait).z0, float),
+        key=setup_key(ctrl, gait, b, 12345, ()),
         seed=12345,
     )
+
+
+@pytest.fixture
+def setup() -> Setup:
+    """lqr on the literal gait at the full budget."""
+    return setup_of(load_controller("lqr", gait=GAIT), GAIT, "full")
 
 
 @pytest.mark.slow
@@ -66,17 +70,8 @@ def test_decision_counts_do_not_depend_on_the_decisions_counted_before():
     in one run of the page and hundreds in another)."""
     from agents.runtime.policy import load_controller as load_policy
 
-    ctrl = load_policy("agents/policies/step-ppo/s0")
-    budget = as_budget("test")
-    gait = "default"
-    setup = Setup(
-        controller=ctrl,
-        gait=gait,
-        budget=budget,
-        z_star=np.asarray(load_gait(gait).z0, float),
-        key=setup_key(ctrl, gait, budget, 12345, ()),
-        seed=12345,
-    )
+    setup = setup_of(load_policy("agents/policies/step-ppo/s0"), "default", "test")
+    budget = setup.budget
     _LOOPS.clear()
     cyc = TASKS["cycle"](setup)
     setup = replace(

@@ -111,3 +111,13 @@ def extract_actor(model, model_path: Path) -> tuple[list, str]:
     if getattr(policy, "squash_output", False):
         raise ValueError(f"{model_path}: squashed (gSDE) policies are not supported")
     return layers, activation
+
+
+def checked_actor(model, model_path: Path) -> tuple[list, str]:
+    """`extract_actor`'s layers and activation, refused unless they are an MLP's
+    (`agents.common.schema.check_layers`, a one-line error naming ``model_path``)."""
+    from .schema import check_layers
+
+    layers, activation = extract_actor(model, model_path)
+    check_layers(layers, str(model_path))
+    return layers, activation

@@ -23,7 +23,7 @@ import numpy as np
 # policies trained before v1 (agents/policies/stride-residual) name v0: they load, and act on v1
 from bound_env import STRIDE_ENV_ID, STRIDE_ENV_IDS
 
-from ..common.mlp import extract_actor, mlp_forward
+from ..common.mlp import checked_actor, mlp_forward
 from ..common.policy_files import (
     check_policy_files,
     find_policy_files,
@@ -34,7 +34,6 @@ from ..common.policy_files import (
 from ..common.schema import (
     check_base,
     check_env_kwargs,
-    check_layers,
     check_obs_stats,
     check_residual_scale,
 )
@@ -230,8 +229,7 @@ def load_stride_policy(path, gait=None, force: bool = False) -> StridePolicyCont
         if not base_path.is_file():
             raise FileNotFoundError(f"residual policy {path}: missing {base_path}")
         base = BaseGain.from_json(check_base(base_path, task.K))
-    layers, activation = extract_actor(model, model_path)
-    check_layers(layers, str(model_path))
+    layers, activation = checked_actor(model, model_path)
     ctrl = StridePolicyController(
         name=str(path),
         layers=layers,

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...common.mlp import extract_actor
+from ...common.mlp import checked_actor
 from ...common.policy_files import (
     check_base_pin,
     check_policy_files,
@@ -22,7 +22,7 @@ from ...common.policy_files import (
     refuse_privileged,
     section_env_kwargs,
 )
-from ...common.schema import check_env_kwargs, check_layers, check_obs_stats, read_fingerprint
+from ...common.schema import check_env_kwargs, check_obs_stats, read_fingerprint
 from ..controllers import MLPController, check_gait
 from .folder import PolicyFolder, resolve_policy
 
@@ -98,8 +98,7 @@ def load(folder: PolicyFolder, gait=None, force: bool = False, env_id: str | Non
         warnings += check_base_pin(files, want, base, sha, force)
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
-    layers, activation = extract_actor(model, model_path)
-    check_layers(layers, str(model_path))
+    layers, activation = checked_actor(model, model_path)
     ctrl = MLPController(
         name=str(path),
         layers=layers,
