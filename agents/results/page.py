@@ -167,8 +167,10 @@ candidates with the bytes of z, and the chaotic rough-terrain runs turned those 
 other outcomes: a fresh clone of the same commit regenerated another `mpc` r50. Across CPUs or
 math libraries (glibc's FMA variants, BLAS kernels) last bits can still differ, and a start
 near a basin edge can then go either way. Decision times are the CPU time of one process
-over fixed states, the minimum of repeats, so a rerun reproduces them closely but not bit for
-bit; run times are wall time and move with the load.
+over fixed states, the minimum of repeats, so a rerun on an idle machine reproduces them
+closely but not bit for bit (with another process busy on the other core, the learned
+students' microsecond decisions came out up to half again as long); run times are wall time
+and move with the load.
 
 """
 
